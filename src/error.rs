@@ -1,0 +1,56 @@
+//! Errors are values. Every error names what was wrong and where.
+
+use std::path::PathBuf;
+
+/// The library's error type.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The operating system refused a read or write.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file (or a message inside a log) is not what its format says it must be.
+    /// `location` says where: a byte offset, a header line, an element index, a topic.
+    #[error("{path}: {location}: {message}")]
+    Format {
+        path: PathBuf,
+        location: String,
+        message: String,
+    },
+    /// A parameter or configuration value that cannot be used (zero resolution, NaN pose...).
+    #[error("invalid {what}: {message}")]
+    Invalid { what: String, message: String },
+}
+
+impl Error {
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    pub fn format(
+        path: impl Into<PathBuf>,
+        location: impl Into<String>,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Format {
+            path: path.into(),
+            location: location.into(),
+            message: message.into(),
+        }
+    }
+
+    pub fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Invalid {
+            what: what.into(),
+            message: message.into(),
+        }
+    }
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;

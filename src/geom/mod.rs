@@ -1,0 +1,206 @@
+//! Frames, poses and point clouds (REP-103: x forward, y left, z up; metres, radians).
+//!
+//! Poses are `Isometry3<f64>`. Points are stored as `f32` *relative to their cloud's frame*
+//! (a sensor frame, or a local origin chosen by a reader), never as absolute UTM-scale
+//! coordinates in `f32`; [`PointCloud::frame_to_map`] carries the large part in `f64`.
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use crate::error::{Error, Result};
+
+/// A rigid transform; `a_to_b` maps coordinates in frame `a` to frame `b`.
+pub type Pose = Isometry3<f64>;
+
+/// A pose from a translation and roll, pitch, yaw (radians, applied as yaw·pitch·roll).
+pub fn pose_xyz_rpy(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> Pose {
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+    )
+}
+
+/// True when every component of the pose is finite and the rotation is a unit quaternion.
+pub fn pose_is_finite(p: &Pose) -> bool {
+    let q = p.rotation.coords;
+    p.translation.vector.iter().all(|v| v.is_finite())
+        && q.iter().all(|v| v.is_finite())
+        && (q.norm() - 1.0).abs() < 1e-6
+}
+
+/// A point cloud, organized (rows × cols, as a spinning lidar's rings × columns or a stereo
+/// disparity image) or not (`rows == 1`). A missing return keeps its slot, with NaN
+/// coordinates, so the beam it belongs to is still known.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointCloud {
+    pub rows: usize,
+    pub cols: usize,
+    /// Coordinates in the cloud's frame; `[NaN; 3]` for a missing return.
+    pub xyz: Vec<[f32; 3]>,
+    /// Optional per-point intensity (sensor units).
+    pub intensity: Option<Vec<f32>>,
+    /// Optional per-point calibrated reflectivity (sensor units).
+    pub reflectivity: Option<Vec<f32>>,
+    /// Optional per-point colour.
+    pub rgb: Option<Vec<[u8; 3]>>,
+    /// Pose of the cloud's frame in the map frame.
+    pub frame_to_map: Pose,
+    /// Where the rays start (the sensor's optical centre), in the cloud's frame.
+    pub sensor_origin: Point3<f64>,
+    /// Acquisition time, seconds (0 when unknown).
+    pub stamp: f64,
+}
+
+impl PointCloud {
+    /// An unorganized cloud in the map frame, sensor at the origin of that frame.
+    pub fn unorganized(xyz: Vec<[f32; 3]>) -> Self {
+        let n = xyz.len();
+        PointCloud {
+            rows: 1,
+            cols: n,
+            xyz,
+            intensity: None,
+            reflectivity: None,
+            rgb: None,
+            frame_to_map: Pose::identity(),
+            sensor_origin: Point3::origin(),
+            stamp: 0.0,
+        }
+    }
+
+    /// An organized cloud; `xyz.len()` must be `rows * cols`.
+    pub fn organized(rows: usize, cols: usize, xyz: Vec<[f32; 3]>) -> Result<Self> {
+        if rows.checked_mul(cols) != Some(xyz.len()) {
+            return Err(Error::invalid(
+                "point cloud",
+                format!("{} points do not fill {rows} rows × {cols} columns", xyz.len()),
+            ));
+        }
+        let mut c = Self::unorganized(xyz);
+        c.rows = rows;
+        c.cols = cols;
+        Ok(c)
+    }
+
+    pub fn len(&self) -> usize {
+        self.xyz.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.xyz.is_empty()
+    }
+
+    pub fn is_organized(&self) -> bool {
+        self.rows > 1
+    }
+
+    /// Index of (row, col) in an organized cloud.
+    #[inline]
+    pub fn index(&self, row: usize, col: usize) -> usize {
+        row * self.cols + col
+    }
+
+    /// True when point `i` is a real return (all coordinates finite).
+    #[inline]
+    pub fn is_valid(&self, i: usize) -> bool {
+        self.xyz[i].iter().all(|v| v.is_finite())
+    }
+
+    /// Number of real returns.
+    pub fn valid_count(&self) -> usize {
+        (0..self.len()).filter(|&i| self.is_valid(i)).count()
+    }
+
+    /// The sensor's optical centre in the map frame.
+    pub fn sensor_origin_in_map(&self) -> Point3<f64> {
+        self.frame_to_map * self.sensor_origin
+    }
+
+    /// Point `i` in the map frame (f64). Missing returns give NaN.
+    #[inline]
+    pub fn point_in_map(&self, i: usize) -> Point3<f64> {
+        let [x, y, z] = self.xyz[i];
+        self.frame_to_map * Point3::new(x as f64, y as f64, z as f64)
+    }
+
+    /// Checks internal consistency: lengths of optional channels, finite pose.
+    pub fn validate(&self) -> Result<()> {
+        let n = self.len();
+        if self.rows.checked_mul(self.cols) != Some(n) {
+            return Err(Error::invalid(
+                "point cloud",
+                format!("{n} points do not fill {} × {}", self.rows, self.cols),
+            ));
+        }
+        for (name, len) in [
+            ("intensity", self.intensity.as_ref().map(|v| v.len())),
+            ("reflectivity", self.reflectivity.as_ref().map(|v| v.len())),
+            ("rgb", self.rgb.as_ref().map(|v| v.len())),
+        ] {
+            if let Some(l) = len {
+                if l != n {
+                    return Err(Error::invalid(
+                        "point cloud",
+                        format!("{name} has {l} values for {n} points"),
+                    ));
+                }
+            }
+        }
+        if !pose_is_finite(&self.frame_to_map) {
+            return Err(Error::invalid(
+                "point cloud pose",
+                "frame_to_map is not finite",
+            ));
+        }
+        if !self.sensor_origin.coords.iter().all(|v| v.is_finite()) {
+            return Err(Error::invalid(
+                "point cloud",
+                "sensor origin is not finite",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Unit vector helper: direction from `a` to `b`.
+pub fn direction(a: &Point3<f64>, b: &Point3<f64>) -> Option<Vector3<f64>> {
+    let d = b - a;
+    let n = d.norm();
+    (n > 0.0 && n.is_finite()).then(|| d / n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn organized_rejects_wrong_size() {
+        assert!(PointCloud::organized(2, 3, vec![[0.0; 3]; 5]).is_err());
+        assert!(PointCloud::organized(2, 3, vec![[0.0; 3]; 6]).is_ok());
+    }
+
+    #[test]
+    fn missing_returns_keep_their_slot() {
+        let c = PointCloud::organized(1, 3, vec![[1.0, 0.0, 0.0], [f32::NAN; 3], [2.0, 0.0, 0.0]])
+            .unwrap();
+        assert_eq!(c.len(), 3);
+        assert_eq!(c.valid_count(), 2);
+        assert!(!c.is_valid(1));
+    }
+
+    #[test]
+    fn far_pose_keeps_centimetres() {
+        // 5,000 km from the origin: f32 alone would have metre-level steps there.
+        let mut c = PointCloud::unorganized(vec![[0.013, -0.021, 0.5]]);
+        c.frame_to_map = pose_xyz_rpy(5.0e6, 4.0e6, 100.0, 0.0, 0.0, 0.0);
+        let p = c.point_in_map(0);
+        assert!((p.x - 5.0e6 - 0.013).abs() < 1e-6);
+        assert!((p.y - 4.0e6 + 0.021).abs() < 1e-6);
+    }
+
+    #[test]
+    fn nan_pose_is_rejected() {
+        let mut c = PointCloud::unorganized(vec![[0.0; 3]]);
+        c.frame_to_map.translation.vector.x = f64::NAN;
+        assert!(c.validate().is_err());
+    }
+}

@@ -1,0 +1,15 @@
+//! # tarn
+//!
+//! 2.5-D terrain maps for off-road ground vehicles from stereo and lidar, and the water
+//! hazards in them (after Matthies, Bellutta & McHenry, "Detecting water hazards for
+//! autonomous off-road navigation", SPIE 2003).
+//!
+//! Data flows one way: `geom` → `grid` → (cues, water) → `io` exports. A module imports
+//! only from modules to its left; `geom` and `optics` are the ground floor.
+
+pub mod error;
+pub mod geom;
+pub mod grid;
+pub mod io;
+
+pub use error::{Error, Result};
