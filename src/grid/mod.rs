@@ -1,1 +1,436 @@
-//! The rolling elevation grid.
+//! The rolling elevation grid and the global tiled map.
+//!
+//! [`RollingGrid`] is a square window of cells that follows the vehicle. Its layers are
+//! structure-of-arrays over a circular buffer: a cell with global key `(kx, ky)` lives at
+//! buffer position `(kx mod N, ky mod N)`, so moving the window only changes which keys
+//! are in view and clears the rows and columns that wrap; nothing is copied. Users address
+//! cells by world position or by [`CellKey`], never by buffer index.
+//!
+//! Cells that leave the window are handed to a [`CellSink`]; the offline builder's sink is
+//! [`TileMap`], a sparse global map of fixed-size tiles. All statistics are exact integer
+//! sums ([`CellStats`]), so grids and tile maps merge exactly.
+
+mod cell;
+mod ingest;
+mod tiles;
+
+pub use cell::{quantize_mm, quantize_weight, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
+pub use ingest::{IngestStats, RangeNoise};
+pub use tiles::{TileMap, TILE_CELLS};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Global integer address of a cell: `floor(x / resolution)`, `floor(y / resolution)` in the
+/// map frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct CellKey {
+    pub x: i64,
+    pub y: i64,
+}
+
+impl CellKey {
+    pub const fn new(x: i64, y: i64) -> Self {
+        CellKey { x, y }
+    }
+}
+
+/// Geometry and gating parameters of a grid.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GridConfig {
+    /// Cell edge length, metres.
+    pub resolution: f64,
+    /// Cells per side of the rolling window.
+    pub size_cells: usize,
+    /// Reference height of the fixed-point elevations, metres (map frame). Elevations are
+    /// stored in millimetres relative to it, so keep it within a few kilometres of the terrain.
+    pub z_ref: f64,
+    /// Mahalanobis gate: a point more than `gate_sigma` standard deviations (of the cell's
+    /// spread and the point's own noise together) below the cell's surface is not fused but
+    /// counted as below-surface.
+    pub gate_sigma: f64,
+    /// Smallest distance below the surface that can count as below-surface, metres; keeps
+    /// rough but real ground from being split.
+    pub gate_min_m: f64,
+    /// Fused points a cell needs before its surface is trusted to gate new points.
+    pub min_support: u32,
+}
+
+impl Default for GridConfig {
+    fn default() -> Self {
+        GridConfig {
+            resolution: 0.10,
+            size_cells: 400,
+            z_ref: 0.0,
+            gate_sigma: 3.0,
+            gate_min_m: 0.15,
+            min_support: 3,
+        }
+    }
+}
+
+impl GridConfig {
+    /// Rejects values no grid can be built with.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |what: &str, msg: String| Err(Error::invalid(format!("grid {what}"), msg));
+        if !(self.resolution.is_finite() && self.resolution > 0.0) {
+            return bad(
+                "resolution",
+                format!("{} m (must be a positive number)", self.resolution),
+            );
+        }
+        if self.resolution < 0.005 {
+            return bad(
+                "resolution",
+                format!(
+                    "{} m is below the 5 mm the fixed-point cells support",
+                    self.resolution
+                ),
+            );
+        }
+        if !(2..=32768).contains(&self.size_cells) {
+            return bad(
+                "size",
+                format!("{} cells per side (must be 2..=32768)", self.size_cells),
+            );
+        }
+        if !self.z_ref.is_finite() {
+            return bad("z_ref", format!("{}", self.z_ref));
+        }
+        if !(self.gate_sigma.is_finite() && self.gate_sigma > 0.0) {
+            return bad("gate_sigma", format!("{}", self.gate_sigma));
+        }
+        if !(self.gate_min_m.is_finite() && self.gate_min_m >= 0.0) {
+            return bad("gate_min_m", format!("{}", self.gate_min_m));
+        }
+        Ok(())
+    }
+}
+
+/// Receives cells that leave the rolling window.
+pub trait CellSink {
+    fn accept(&mut self, key: CellKey, cell: &CellStats);
+}
+
+/// A sink that forgets (an online mapper that only needs the window).
+pub struct DiscardSink;
+
+impl CellSink for DiscardSink {
+    fn accept(&mut self, _key: CellKey, _cell: &CellStats) {}
+}
+
+/// Structure-of-arrays storage of [`CellStats`].
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Layers {
+    pub hits: Vec<u32>,
+    pub below: Vec<u32>,
+    pub sw: Vec<u64>,
+    pub swz: Vec<i128>,
+    pub swzz: Vec<i128>,
+    pub zmin: Vec<i32>,
+    pub zmax: Vec<i32>,
+}
+
+impl Layers {
+    fn new(n: usize) -> Self {
+        let e = CellStats::default();
+        Layers {
+            hits: vec![e.hits; n],
+            below: vec![e.below; n],
+            sw: vec![e.sw; n],
+            swz: vec![e.swz; n],
+            swzz: vec![e.swzz; n],
+            zmin: vec![e.zmin; n],
+            zmax: vec![e.zmax; n],
+        }
+    }
+
+    /// Bytes of layer storage per cell.
+    pub const BYTES_PER_CELL: usize = 4 + 4 + 8 + 16 + 16 + 4 + 4;
+
+    #[inline]
+    pub fn get(&self, i: usize) -> CellStats {
+        CellStats {
+            hits: self.hits[i],
+            below: self.below[i],
+            sw: self.sw[i],
+            swz: self.swz[i],
+            swzz: self.swzz[i],
+            zmin: self.zmin[i],
+            zmax: self.zmax[i],
+        }
+    }
+
+    #[inline]
+    pub fn set(&mut self, i: usize, c: &CellStats) {
+        self.hits[i] = c.hits;
+        self.below[i] = c.below;
+        self.sw[i] = c.sw;
+        self.swz[i] = c.swz;
+        self.swzz[i] = c.swzz;
+        self.zmin[i] = c.zmin;
+        self.zmax[i] = c.zmax;
+    }
+
+    #[inline]
+    pub fn merge_at(&mut self, i: usize, c: &CellStats) {
+        let mut m = self.get(i);
+        m.merge(c);
+        self.set(i, &m);
+    }
+
+    #[inline]
+    pub fn is_empty_at(&self, i: usize) -> bool {
+        self.hits[i] == 0 && self.below[i] == 0
+    }
+}
+
+/// A square window of cells on a circular buffer. See the module documentation.
+#[derive(Debug, Clone)]
+pub struct RollingGrid {
+    cfg: GridConfig,
+    n: usize,
+    /// Key of the window's lower-left cell.
+    origin: CellKey,
+    pub(crate) layers: Layers,
+    pub(crate) scratch: ingest::Scratch,
+}
+
+impl PartialEq for RollingGrid {
+    fn eq(&self, o: &Self) -> bool {
+        self.cfg == o.cfg && self.origin == o.origin && self.layers == o.layers
+    }
+}
+
+impl RollingGrid {
+    /// A grid whose window is centred on `(cx, cy)` (map frame, metres).
+    pub fn new(cfg: GridConfig, cx: f64, cy: f64) -> Result<Self> {
+        cfg.validate()?;
+        if !(cx.is_finite() && cy.is_finite()) {
+            return Err(Error::invalid(
+                "grid centre",
+                format!("({cx}, {cy}) is not finite"),
+            ));
+        }
+        let n = cfg.size_cells;
+        let mut g = RollingGrid {
+            origin: CellKey::new(0, 0),
+            n,
+            layers: Layers::new(n * n),
+            scratch: ingest::Scratch::default(),
+            cfg,
+        };
+        g.origin = g.origin_for_centre(cx, cy);
+        Ok(g)
+    }
+
+    pub fn config(&self) -> &GridConfig {
+        &self.cfg
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.cfg.resolution
+    }
+
+    /// Cells per side.
+    pub fn size(&self) -> usize {
+        self.n
+    }
+
+    /// Key of the lower-left cell of the window.
+    pub fn origin(&self) -> CellKey {
+        self.origin
+    }
+
+    /// Bytes of cell storage per cell (all layers).
+    pub fn bytes_per_cell() -> usize {
+        Layers::BYTES_PER_CELL
+    }
+
+    /// The key of the cell containing the map point `(x, y)`.
+    #[inline]
+    pub fn key_of(&self, x: f64, y: f64) -> CellKey {
+        key_of(self.cfg.resolution, x, y)
+    }
+
+    /// Centre of a cell in the map frame.
+    pub fn centre_of(&self, k: CellKey) -> (f64, f64) {
+        centre_of(self.cfg.resolution, k)
+    }
+
+    /// True when the key is inside the window.
+    #[inline]
+    pub fn contains(&self, k: CellKey) -> bool {
+        let dx = k.x.wrapping_sub(self.origin.x);
+        let dy = k.y.wrapping_sub(self.origin.y);
+        (0..self.n as i64).contains(&dx) && (0..self.n as i64).contains(&dy)
+    }
+
+    /// Buffer index of an in-window key.
+    #[inline]
+    pub(crate) fn index(&self, k: CellKey) -> Option<usize> {
+        self.contains(k).then(|| {
+            let n = self.n as i64;
+            (k.y.rem_euclid(n) * n + k.x.rem_euclid(n)) as usize
+        })
+    }
+
+    /// Statistics of a cell, if it is inside the window.
+    pub fn cell(&self, k: CellKey) -> Option<CellStats> {
+        self.index(k).map(|i| self.layers.get(i))
+    }
+
+    /// Statistics of the cell under the map point `(x, y)`.
+    pub fn cell_at(&self, x: f64, y: f64) -> Option<CellStats> {
+        self.cell(self.key_of(x, y))
+    }
+
+    /// Estimated terrain elevation (metres, map frame) under `(x, y)`.
+    pub fn elevation_at(&self, x: f64, y: f64) -> Option<f64> {
+        let c = self.cell_at(x, y)?;
+        c.mean_mm().map(|m| self.cfg.z_ref + m * 1e-3)
+    }
+
+    /// Every in-window cell that holds data, in key order (row by row from the window's
+    /// lower-left corner): deterministic.
+    pub fn observed(&self) -> impl Iterator<Item = (CellKey, CellStats)> + '_ {
+        let n = self.n as i64;
+        (0..n).flat_map(move |dy| {
+            (0..n).filter_map(move |dx| {
+                let k = CellKey::new(self.origin.x + dx, self.origin.y + dy);
+                let i = self.index(k)?;
+                (!self.layers.is_empty_at(i)).then(|| (k, self.layers.get(i)))
+            })
+        })
+    }
+
+    /// Number of cells holding data.
+    pub fn observed_count(&self) -> usize {
+        (0..self.n * self.n)
+            .filter(|&i| !self.layers.is_empty_at(i))
+            .count()
+    }
+
+    fn origin_for_centre(&self, cx: f64, cy: f64) -> CellKey {
+        let c = self.key_of(cx, cy);
+        let h = (self.n / 2) as i64;
+        CellKey::new(c.x - h, c.y - h)
+    }
+
+    /// Moves the window so that it is centred on `(cx, cy)`. Cells that leave go to `sink`
+    /// and their storage is cleared; every cell that stays keeps its data untouched.
+    pub fn recenter(&mut self, cx: f64, cy: f64, sink: &mut dyn CellSink) -> Result<()> {
+        if !(cx.is_finite() && cy.is_finite()) {
+            return Err(Error::invalid(
+                "grid centre",
+                format!("({cx}, {cy}) is not finite"),
+            ));
+        }
+        let o = self.origin_for_centre(cx, cy);
+        self.move_origin(o, sink);
+        Ok(())
+    }
+
+    /// Moves the window's lower-left corner to `new_origin`.
+    pub fn move_origin(&mut self, new_origin: CellKey, sink: &mut dyn CellSink) {
+        if new_origin == self.origin {
+            return;
+        }
+        let n = self.n as i64;
+        let old = self.origin;
+        let (dx, dy) = (new_origin.x - old.x, new_origin.y - old.y);
+        let leaving_x = |k: i64| k < new_origin.x || k >= new_origin.x + n;
+        let leaving_y = |k: i64| k < new_origin.y || k >= new_origin.y + n;
+        if dx.abs() >= n || dy.abs() >= n {
+            // Nothing overlaps: every cell leaves.
+            for ky in old.y..old.y + n {
+                for kx in old.x..old.x + n {
+                    self.evict(CellKey::new(kx, ky), sink);
+                }
+            }
+        } else {
+            // Columns that leave (whole height), then rows that leave (only the columns
+            // that stay, so no cell is handed over twice).
+            for kx in old.x..old.x + n {
+                if leaving_x(kx) {
+                    for ky in old.y..old.y + n {
+                        self.evict(CellKey::new(kx, ky), sink);
+                    }
+                }
+            }
+            for ky in old.y..old.y + n {
+                if leaving_y(ky) {
+                    for kx in old.x..old.x + n {
+                        if !leaving_x(kx) {
+                            self.evict(CellKey::new(kx, ky), sink);
+                        }
+                    }
+                }
+            }
+        }
+        self.origin = new_origin;
+    }
+
+    fn evict(&mut self, k: CellKey, sink: &mut dyn CellSink) {
+        let i = self.index(k).expect("evicted key is in the old window");
+        if !self.layers.is_empty_at(i) {
+            sink.accept(k, &self.layers.get(i));
+            self.layers.set(i, &CellStats::default());
+        }
+    }
+
+    /// Hands every cell with data to `sink` and clears the window (end of an offline build).
+    pub fn flush(&mut self, sink: &mut dyn CellSink) {
+        let n = self.n as i64;
+        let o = self.origin;
+        for ky in o.y..o.y + n {
+            for kx in o.x..o.x + n {
+                self.evict(CellKey::new(kx, ky), sink);
+            }
+        }
+    }
+
+    /// Adds another grid's cells into this one. Both must have the same configuration; cells
+    /// of `other` outside this window are handed to `sink` (nothing is lost).
+    pub fn merge(&mut self, other: &RollingGrid, sink: &mut dyn CellSink) -> Result<()> {
+        if other.cfg.resolution != self.cfg.resolution || other.cfg.z_ref != self.cfg.z_ref {
+            return Err(Error::invalid(
+                "grid merge",
+                format!(
+                    "resolution/z_ref differ: {} m / {} m against {} m / {} m",
+                    other.cfg.resolution, other.cfg.z_ref, self.cfg.resolution, self.cfg.z_ref
+                ),
+            ));
+        }
+        for (k, c) in other.observed() {
+            match self.index(k) {
+                Some(i) => self.layers.merge_at(i, &c),
+                None => sink.accept(k, &c),
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The key of the cell containing `(x, y)` at `resolution`.
+#[inline]
+pub fn key_of(resolution: f64, x: f64, y: f64) -> CellKey {
+    CellKey::new(
+        (x / resolution).floor() as i64,
+        (y / resolution).floor() as i64,
+    )
+}
+
+/// Centre of cell `k` at `resolution`.
+#[inline]
+pub fn centre_of(resolution: f64, k: CellKey) -> (f64, f64) {
+    (
+        (k.x as f64 + 0.5) * resolution,
+        (k.y as f64 + 0.5) * resolution,
+    )
+}
+
+#[cfg(test)]
+mod tests;

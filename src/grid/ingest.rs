@@ -1,0 +1,418 @@
+//! Fusing point clouds into the rolling grid.
+//!
+//! One call to [`RollingGrid::ingest`] is one batch (a scan, a stereo frame, a chunk of a
+//! file). Points are range-weighted (σ grows with range, [`RangeNoise`]) and fused as exact
+//! integer sums, in parallel over contiguous chunks of the cloud; since the sums are exact
+//! the result does not depend on how many threads ran.
+//!
+//! The below-surface gate. A point far below its cell's surface (a reflection seen in still
+//! water, the floor of a hole) must not drag the elevation down, and must not be lost: it
+//! is counted in the cell's `below` layer. The surface it is judged against is
+//! * the cell's fused estimate from earlier batches, when it has at least `min_support`
+//!   points: the gate is `max(gate_min, k·sqrt(spread² + σ_point²))` below its mean;
+//! * otherwise the batch's own points: when they span more than `gate_min`, they are sorted
+//!   by height and split into clusters at gaps wider than the gate; the surface is the
+//!   highest cluster holding at least a quarter of the cell's weight, and lower clusters are
+//!   counted as below-surface.
+//!
+//! Both rules depend only on what came before the batch and on the batch's multiset of
+//! points, never on their order or on the thread count. Across batches the order matters,
+//! as it does for any online mapper: a point that would be gated against a later surface
+//! is fused if it arrived first.
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::cell::{quantize_mm, quantize_weight, CellStats};
+use super::{Layers, RollingGrid};
+use crate::error::{Error, Result};
+use crate::geom::PointCloud;
+
+/// Elevation noise of a range sensor against range `r` (metres from the sensor):
+/// `σ(r) = sigma0 + per_m·r + per_m2·r²`. Lidar is close to constant (beam divergence adds a
+/// little per metre); stereo grows with the square of range.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RangeNoise {
+    pub sigma0: f64,
+    pub per_m: f64,
+    pub per_m2: f64,
+}
+
+impl RangeNoise {
+    /// A spinning lidar: 2 cm, plus 1 mm per metre.
+    pub const LIDAR: RangeNoise = RangeNoise {
+        sigma0: 0.02,
+        per_m: 0.001,
+        per_m2: 0.0,
+    };
+    /// A stereo camera (f·B ≈ 150 px·m, 0.25 px disparity noise): σ_z ≈ r²·0.25/150.
+    pub const STEREO: RangeNoise = RangeNoise {
+        sigma0: 0.005,
+        per_m: 0.0,
+        per_m2: 0.0017,
+    };
+
+    /// A range-independent noise.
+    pub const fn constant(sigma: f64) -> Self {
+        RangeNoise {
+            sigma0: sigma,
+            per_m: 0.0,
+            per_m2: 0.0,
+        }
+    }
+
+    #[inline]
+    pub fn sigma(&self, r: f64) -> f64 {
+        self.sigma0 + r * (self.per_m + r * self.per_m2)
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let ok = self.sigma0.is_finite()
+            && self.sigma0 > 0.0
+            && self.per_m.is_finite()
+            && self.per_m >= 0.0
+            && self.per_m2.is_finite()
+            && self.per_m2 >= 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "range noise",
+                format!(
+                    "sigma0 {} m, per_m {}, per_m2 {} (sigma0 must be > 0, all finite and >= 0)",
+                    self.sigma0, self.per_m, self.per_m2
+                ),
+            ))
+        }
+    }
+}
+
+impl Default for RangeNoise {
+    fn default() -> Self {
+        RangeNoise::LIDAR
+    }
+}
+
+/// What happened to the points of one or more batches.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct IngestStats {
+    /// Point slots seen (missing returns included).
+    pub points: u64,
+    /// Fused into the elevation estimates.
+    pub fused: u64,
+    /// Counted in the below-surface layer.
+    pub below: u64,
+    /// NaN or infinite coordinates (missing returns): skipped, never fused.
+    pub nonfinite: u64,
+    /// Outside the window (or beyond the fixed-point height range).
+    pub outside: u64,
+}
+
+impl IngestStats {
+    pub fn merge(&mut self, o: &IngestStats) {
+        self.points += o.points;
+        self.fused += o.fused;
+        self.below += o.below;
+        self.nonfinite += o.nonfinite;
+        self.outside += o.outside;
+    }
+}
+
+/// One chunk's private accumulator: a dense copy of the window plus the list of cells it
+/// touched, so that clearing and merging cost only what the chunk touched.
+#[derive(Debug, Clone, Default)]
+struct Partial {
+    cells: Vec<CellStats>,
+    touched: Vec<u32>,
+    stats: IngestStats,
+}
+
+impl Partial {
+    #[inline]
+    fn touch(&mut self, i: usize) -> &mut CellStats {
+        let c = &mut self.cells[i];
+        if c.is_empty() {
+            self.touched.push(i as u32);
+        }
+        c
+    }
+}
+
+/// Reusable scratch memory of a grid's ingest.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Scratch {
+    partials: Vec<Partial>,
+}
+
+/// A point reduced to what the grid needs.
+#[derive(Clone, Copy)]
+struct Sample {
+    idx: u32,
+    z_mm: i32,
+    w: u32,
+    sigma_mm: f32,
+}
+
+enum Classified {
+    Sample(Sample),
+    NonFinite,
+    Outside,
+}
+
+/// Everything the per-point work needs, read-only.
+struct Ctx<'a> {
+    cloud: &'a PointCloud,
+    rot: [[f64; 3]; 3],
+    t: [f64; 3],
+    so: [f32; 3],
+    res: f64,
+    z_ref: f64,
+    n: i64,
+    origin: (i64, i64),
+    shift: (i64, i64),
+    noise: RangeNoise,
+}
+
+impl Ctx<'_> {
+    #[inline]
+    fn classify(&self, i: usize) -> Classified {
+        let [x, y, z] = self.cloud.xyz[i];
+        if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+            return Classified::NonFinite;
+        }
+        let (xd, yd, zd) = (x as f64, y as f64, z as f64);
+        let r = &self.rot;
+        let wx = r[0][0] * xd + r[0][1] * yd + r[0][2] * zd + self.t[0];
+        let wy = r[1][0] * xd + r[1][1] * yd + r[1][2] * zd + self.t[1];
+        let wz = r[2][0] * xd + r[2][1] * yd + r[2][2] * zd + self.t[2];
+        let dx = (wx / self.res).floor() as i64 - self.origin.0;
+        let dy = (wy / self.res).floor() as i64 - self.origin.1;
+        if dx < 0 || dx >= self.n || dy < 0 || dy >= self.n {
+            return Classified::Outside;
+        }
+        let Some(z_mm) = quantize_mm(wz - self.z_ref) else {
+            return Classified::Outside;
+        };
+        let mut bx = dx + self.shift.0;
+        if bx >= self.n {
+            bx -= self.n;
+        }
+        let mut by = dy + self.shift.1;
+        if by >= self.n {
+            by -= self.n;
+        }
+        let (ex, ey, ez) = (x - self.so[0], y - self.so[1], z - self.so[2]);
+        let range = ((ex * ex + ey * ey + ez * ez) as f64).sqrt();
+        let sigma = self.noise.sigma(range);
+        Classified::Sample(Sample {
+            idx: (by * self.n + bx) as u32,
+            z_mm,
+            w: quantize_weight(sigma),
+            sigma_mm: (sigma * 1000.0) as f32,
+        })
+    }
+}
+
+/// Gate distance (mm) below a surface of spread `var_mm2` for a point of noise `sigma_mm`.
+#[inline]
+fn gate_mm(var_mm2: f64, sigma_mm: f64, k: f64, min_mm: f64) -> f64 {
+    (k * (var_mm2 + sigma_mm * sigma_mm).sqrt()).max(min_mm)
+}
+
+/// Smallest chunk handed to a thread: below this, threading costs more than it saves.
+const MIN_CHUNK: usize = 32 * 1024;
+
+impl RollingGrid {
+    /// Fuses one batch of points (see the module documentation for the gate).
+    pub fn ingest(&mut self, cloud: &PointCloud, noise: &RangeNoise) -> Result<IngestStats> {
+        cloud.validate()?;
+        noise.validate()?;
+        let npts = cloud.len();
+        if npts == 0 {
+            return Ok(IngestStats::default());
+        }
+        let n = self.n as i64;
+        let m = cloud.frame_to_map.to_homogeneous();
+        let ctx = Ctx {
+            cloud,
+            rot: [
+                [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
+                [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
+                [m[(2, 0)], m[(2, 1)], m[(2, 2)]],
+            ],
+            t: [m[(0, 3)], m[(1, 3)], m[(2, 3)]],
+            so: [
+                cloud.sensor_origin.x as f32,
+                cloud.sensor_origin.y as f32,
+                cloud.sensor_origin.z as f32,
+            ],
+            res: self.cfg.resolution,
+            z_ref: self.cfg.z_ref,
+            n,
+            origin: (self.origin.x, self.origin.y),
+            shift: (self.origin.x.rem_euclid(n), self.origin.y.rem_euclid(n)),
+            noise: *noise,
+        };
+        let k = self.cfg.gate_sigma;
+        let min_mm = self.cfg.gate_min_m * 1000.0;
+        let support = self.cfg.min_support.max(1);
+
+        let chunks = npts
+            .div_ceil(MIN_CHUNK)
+            .clamp(1, rayon::current_num_threads().max(1));
+        let ncells = self.n * self.n;
+        let RollingGrid {
+            layers, scratch, ..
+        } = self;
+        if scratch.partials.len() < chunks {
+            scratch.partials.resize_with(chunks, Partial::default);
+        }
+        for p in &mut scratch.partials[..chunks] {
+            if p.cells.len() != ncells {
+                p.cells = vec![CellStats::default(); ncells];
+                p.touched.clear();
+            }
+        }
+        let step = npts.div_ceil(chunks);
+        let prior: &Layers = layers;
+
+        // Pass 1: classify every point, gate it against the prior surface, accumulate.
+        scratch.partials[..chunks]
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(ci, p)| {
+                let lo = ci * step;
+                let hi = ((ci + 1) * step).min(npts);
+                p.stats = IngestStats {
+                    points: (hi - lo) as u64,
+                    ..Default::default()
+                };
+                for i in lo..hi {
+                    let s = match ctx.classify(i) {
+                        Classified::Sample(s) => s,
+                        Classified::NonFinite => {
+                            p.stats.nonfinite += 1;
+                            continue;
+                        }
+                        Classified::Outside => {
+                            p.stats.outside += 1;
+                            continue;
+                        }
+                    };
+                    let idx = s.idx as usize;
+                    if prior.hits[idx] >= support {
+                        let sw = prior.sw[idx] as f64;
+                        let mean = prior.swz[idx] as f64 / sw;
+                        let var = (prior.swzz[idx] as f64 / sw - mean * mean).max(0.0);
+                        if (s.z_mm as f64) < mean - gate_mm(var, s.sigma_mm as f64, k, min_mm) {
+                            p.touch(idx).below += 1;
+                            p.stats.below += 1;
+                            continue;
+                        }
+                    }
+                    p.touch(idx).add(s.z_mm, s.w);
+                    p.stats.fused += 1;
+                }
+            });
+
+        // Reduce the partials into the first one (integer sums: order does not matter).
+        let (first, rest) = scratch.partials[..chunks]
+            .split_first_mut()
+            .expect("chunks >= 1");
+        for p in rest {
+            for &i in &p.touched {
+                let c = p.cells[i as usize];
+                first.touch(i as usize).merge(&c);
+                p.cells[i as usize] = CellStats::default();
+            }
+            p.touched.clear();
+            let st = p.stats;
+            first.stats.merge(&st);
+        }
+
+        // Decide each touched cell: merge, or split the batch's points at height gaps.
+        let mut flagged: Vec<u32> = Vec::new();
+        for &i in &first.touched {
+            let iu = i as usize;
+            let b = first.cells[iu];
+            let needs_split = layers.hits[iu] < support
+                && b.hits >= 2
+                && (b.zmax as f64 - b.zmin as f64) > min_mm;
+            if needs_split {
+                flagged.push(i);
+            } else {
+                layers.merge_at(iu, &b);
+                first.cells[iu] = CellStats::default();
+            }
+        }
+        let mut stats = first.stats;
+        if !flagged.is_empty() {
+            flagged.sort_unstable();
+            let mut groups: Vec<Vec<Sample>> = vec![Vec::new(); flagged.len()];
+            for i in 0..npts {
+                if let Classified::Sample(s) = ctx.classify(i) {
+                    if let Ok(g) = flagged.binary_search(&s.idx) {
+                        groups[g].push(s);
+                    }
+                }
+            }
+            for (g, &i) in groups.iter_mut().zip(&flagged) {
+                let iu = i as usize;
+                let (kept, below) = split_cell(g, k, min_mm);
+                stats.fused -= below as u64;
+                stats.below += below as u64;
+                // No point of a flagged cell was gated in pass 1 (its prior was
+                // unsupported), so the batch's statistics are exactly `kept` and `below`.
+                let mut c = kept;
+                c.below += below;
+                layers.merge_at(iu, &c);
+                first.cells[iu] = CellStats::default();
+            }
+        }
+        first.touched.clear();
+        Ok(stats)
+    }
+}
+
+/// Splits one cell's batch points at height gaps; returns the fused statistics of the
+/// surface cluster and everything above it, and the number of points below it.
+fn split_cell(pts: &mut [Sample], k: f64, min_mm: f64) -> (CellStats, u32) {
+    pts.sort_unstable_by_key(|s| (s.z_mm, s.w));
+    // Cluster boundaries: a gap wider than the gate of the two points on either side.
+    let mut starts = vec![0usize];
+    for j in 1..pts.len() {
+        let gap = (pts[j].z_mm as f64) - (pts[j - 1].z_mm as f64);
+        let sig = pts[j].sigma_mm.max(pts[j - 1].sigma_mm) as f64;
+        if gap > gate_mm(0.0, sig, k, min_mm) {
+            starts.push(j);
+        }
+    }
+    let weight = |a: usize, b: usize| pts[a..b].iter().map(|s| s.w as u64).sum::<u64>();
+    let total = weight(0, pts.len());
+    let bounds: Vec<(usize, usize)> = starts
+        .iter()
+        .enumerate()
+        .map(|(c, &s)| (s, starts.get(c + 1).copied().unwrap_or(pts.len())))
+        .collect();
+    // The highest cluster with at least a quarter of the weight; else the heaviest
+    // (the highest among equals).
+    let surface = bounds
+        .iter()
+        .rposition(|&(a, b)| 4 * weight(a, b) >= total)
+        .unwrap_or_else(|| {
+            let mut best = 0;
+            for (c, &(a, b)) in bounds.iter().enumerate() {
+                if weight(a, b) >= weight(bounds[best].0, bounds[best].1) {
+                    best = c;
+                }
+            }
+            best
+        });
+    let first_kept = bounds[surface].0;
+    let mut c = CellStats::default();
+    for s in &pts[first_kept..] {
+        c.add(s.z_mm, s.w);
+    }
+    (c, first_kept as u32)
+}

@@ -1,0 +1,186 @@
+//! The sparse global map: fixed-size tiles of cells, created only where something was
+//! observed.
+
+use std::collections::BTreeMap;
+
+use super::{centre_of, CellKey, CellSink, CellStats, GridConfig, RollingGrid};
+use crate::error::{Error, Result};
+
+/// Cells per tile side.
+pub const TILE_CELLS: i64 = 64;
+
+/// A tile: `TILE_CELLS²` cells, row-major.
+#[derive(Debug, Clone, PartialEq)]
+struct Tile {
+    cells: Vec<CellStats>,
+    observed: u32,
+}
+
+impl Tile {
+    fn new() -> Self {
+        Tile {
+            cells: vec![CellStats::default(); (TILE_CELLS * TILE_CELLS) as usize],
+            observed: 0,
+        }
+    }
+}
+
+/// A sparse global map of cells at one resolution and reference height. Keys are
+/// unbounded; memory grows with the observed area only.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TileMap {
+    resolution: f64,
+    z_ref: f64,
+    tiles: BTreeMap<(i64, i64), Tile>,
+}
+
+#[inline]
+fn split(k: CellKey) -> ((i64, i64), usize) {
+    let (tx, ty) = (k.x.div_euclid(TILE_CELLS), k.y.div_euclid(TILE_CELLS));
+    let (cx, cy) = (k.x.rem_euclid(TILE_CELLS), k.y.rem_euclid(TILE_CELLS));
+    ((tx, ty), (cy * TILE_CELLS + cx) as usize)
+}
+
+impl TileMap {
+    pub fn new(resolution: f64, z_ref: f64) -> Result<Self> {
+        GridConfig {
+            resolution,
+            z_ref,
+            ..GridConfig::default()
+        }
+        .validate()?;
+        Ok(TileMap {
+            resolution,
+            z_ref,
+            tiles: BTreeMap::new(),
+        })
+    }
+
+    /// An empty map matching a grid's resolution and reference height.
+    pub fn for_grid(grid: &RollingGrid) -> Self {
+        TileMap {
+            resolution: grid.resolution(),
+            z_ref: grid.config().z_ref,
+            tiles: BTreeMap::new(),
+        }
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.resolution
+    }
+
+    pub fn z_ref(&self) -> f64 {
+        self.z_ref
+    }
+
+    /// Adds a cell's statistics at `k`.
+    pub fn add(&mut self, k: CellKey, c: &CellStats) {
+        if c.is_empty() {
+            return;
+        }
+        let (tk, i) = split(k);
+        let t = self.tiles.entry(tk).or_insert_with(Tile::new);
+        if t.cells[i].is_empty() {
+            t.observed += 1;
+        }
+        t.cells[i].merge(c);
+    }
+
+    pub fn get(&self, k: CellKey) -> Option<CellStats> {
+        let (tk, i) = split(k);
+        self.tiles
+            .get(&tk)
+            .map(|t| t.cells[i])
+            .filter(|c| !c.is_empty())
+    }
+
+    /// Merges another map (same resolution and reference height) into this one.
+    pub fn merge(&mut self, other: &TileMap) -> Result<()> {
+        if other.resolution != self.resolution || other.z_ref != self.z_ref {
+            return Err(Error::invalid(
+                "tile map merge",
+                format!(
+                    "resolution/z_ref differ: {} m / {} m against {} m / {} m",
+                    other.resolution, other.z_ref, self.resolution, self.z_ref
+                ),
+            ));
+        }
+        for (k, c) in other.observed() {
+            self.add(k, &c);
+        }
+        Ok(())
+    }
+
+    /// Copies every observed cell of a grid's window in (the grid is not changed).
+    pub fn absorb_window(&mut self, grid: &RollingGrid) -> Result<()> {
+        if grid.resolution() != self.resolution || grid.config().z_ref != self.z_ref {
+            return Err(Error::invalid(
+                "tile map",
+                "grid resolution or z_ref differs from the map's",
+            ));
+        }
+        for (k, c) in grid.observed() {
+            self.add(k, &c);
+        }
+        Ok(())
+    }
+
+    /// Observed cells in a fixed order (tile by tile, row by row): deterministic.
+    pub fn observed(&self) -> impl Iterator<Item = (CellKey, CellStats)> + '_ {
+        self.tiles.iter().flat_map(|(&(tx, ty), t)| {
+            t.cells.iter().enumerate().filter_map(move |(i, c)| {
+                (!c.is_empty()).then(|| {
+                    let i = i as i64;
+                    (
+                        CellKey::new(
+                            tx * TILE_CELLS + i % TILE_CELLS,
+                            ty * TILE_CELLS + i / TILE_CELLS,
+                        ),
+                        *c,
+                    )
+                })
+            })
+        })
+    }
+
+    pub fn observed_count(&self) -> usize {
+        self.tiles.values().map(|t| t.observed as usize).sum()
+    }
+
+    pub fn tile_count(&self) -> usize {
+        self.tiles.len()
+    }
+
+    /// Bytes held by cell storage.
+    pub fn cell_bytes(&self) -> usize {
+        self.tiles.len() * (TILE_CELLS * TILE_CELLS) as usize * std::mem::size_of::<CellStats>()
+    }
+
+    /// Elevation of a cell in metres (map frame).
+    pub fn elevation(&self, c: &CellStats) -> Option<f64> {
+        c.mean_mm().map(|m| self.z_ref + m * 1e-3)
+    }
+
+    /// Centre of a cell in the map frame.
+    pub fn centre_of(&self, k: CellKey) -> (f64, f64) {
+        centre_of(self.resolution, k)
+    }
+
+    /// Inclusive key bounds of the observed cells, if any.
+    pub fn key_bounds(&self) -> Option<(CellKey, CellKey)> {
+        let mut it = self.observed().map(|(k, _)| k);
+        let first = it.next()?;
+        let (mut lo, mut hi) = (first, first);
+        for k in it {
+            lo = CellKey::new(lo.x.min(k.x), lo.y.min(k.y));
+            hi = CellKey::new(hi.x.max(k.x), hi.y.max(k.y));
+        }
+        Some((lo, hi))
+    }
+}
+
+impl CellSink for TileMap {
+    fn accept(&mut self, key: CellKey, cell: &CellStats) {
+        self.add(key, cell);
+    }
+}
