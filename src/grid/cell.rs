@@ -17,18 +17,25 @@ pub const W_MAX: u32 = 1 << 24;
 /// Quantized inverse-variance weight of a measurement with standard deviation `sigma_m`.
 #[inline]
 pub fn quantize_weight(sigma_m: f64) -> u32 {
-    let w = W_UNIT * (SIGMA_REF_M / sigma_m).powi(2);
-    if w.is_nan() {
-        return 1;
+    let r = SIGMA_REF_M / sigma_m;
+    let w = W_UNIT * r * r;
+    if !(w >= 1.0) {
+        return 1; // NaN, or a σ so large its weight rounds below one unit
     }
-    w.round().clamp(1.0, W_MAX as f64) as u32
+    // Round half up; `as` saturates, and the clamp bounds it anyway.
+    ((w + 0.5) as u64).min(W_MAX as u64) as u32
 }
 
 /// Elevation in whole millimetres (relative to the grid's reference height).
 #[inline]
 pub fn quantize_mm(dz_m: f64) -> Option<i32> {
-    let mm = (dz_m * 1000.0).round();
-    (mm.is_finite() && mm.abs() < i32::MAX as f64).then_some(mm as i32)
+    let mm = dz_m * 1000.0 + 0.5;
+    // In range (NaN fails both comparisons); then floor without a libm call.
+    if !(mm > -(i32::MAX as f64) && mm < i32::MAX as f64) {
+        return None;
+    }
+    let t = mm as i64;
+    Some((t - ((t as f64) > mm) as i64) as i32)
 }
 
 /// The statistics of one cell. `Default` is the empty cell ("never observed").
@@ -74,11 +81,12 @@ impl CellStats {
     /// Fuses one quantized measurement.
     #[inline]
     pub fn add(&mut self, z_mm: i32, w: u32) {
-        let wz = w as i128 * z_mm as i128;
+        // |w·z| < 2^55 fits i64; the square needs one widening multiply.
+        let wz = w as i64 * z_mm as i64;
         self.hits += 1;
         self.sw += w as u64;
-        self.swz += wz;
-        self.swzz += wz * z_mm as i128;
+        self.swz += wz as i128;
+        self.swzz += wz as i128 * z_mm as i128;
         self.zmin = self.zmin.min(z_mm);
         self.zmax = self.zmax.max(z_mm);
     }

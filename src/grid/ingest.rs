@@ -125,6 +125,9 @@ impl IngestStats {
 struct Partial {
     cells: Vec<CellStats>,
     touched: Vec<u32>,
+    /// Gate reference of each touched cell from the prior surface, computed once per cell
+    /// and batch: (mean mm, spread variance mm²), or NaN mean when the prior cannot gate.
+    gate: Vec<(f32, f32)>,
     stats: IngestStats,
 }
 
@@ -137,6 +140,29 @@ impl Partial {
         }
         c
     }
+
+    /// The prior's gate reference for cell `i` (cached for the batch).
+    #[inline]
+    fn gate_ref(&mut self, i: usize, prior: &Layers, support: u32) -> (f32, f32) {
+        if self.cells[i].is_empty() {
+            self.gate[i] = if prior.hits[i] >= support {
+                let sw = prior.sw[i] as f64;
+                let mean = prior.swz[i] as f64 / sw;
+                let var = (prior.swzz[i] as f64 / sw - mean * mean).max(0.0);
+                (mean as f32, var as f32)
+            } else {
+                (f32::NAN, 0.0)
+            };
+        }
+        self.gate[i]
+    }
+}
+
+/// `floor(v)` as an integer without a libm call (baseline x86-64 has no SSE4.1 `roundsd`).
+#[inline]
+fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    t - ((t as f64) > v) as i64
 }
 
 /// Reusable scratch memory of a grid's ingest.
@@ -186,8 +212,8 @@ impl Ctx<'_> {
         let wx = r[0][0] * xd + r[0][1] * yd + r[0][2] * zd + self.t[0];
         let wy = r[1][0] * xd + r[1][1] * yd + r[1][2] * zd + self.t[1];
         let wz = r[2][0] * xd + r[2][1] * yd + r[2][2] * zd + self.t[2];
-        let dx = (wx / self.res).floor() as i64 - self.origin.0;
-        let dy = (wy / self.res).floor() as i64 - self.origin.1;
+        let dx = floor_i64(wx / self.res) - self.origin.0;
+        let dy = floor_i64(wy / self.res) - self.origin.1;
         if dx < 0 || dx >= self.n || dy < 0 || dy >= self.n {
             return Classified::Outside;
         }
@@ -271,6 +297,7 @@ impl RollingGrid {
         for p in &mut scratch.partials[..chunks] {
             if p.cells.len() != ncells {
                 p.cells = vec![CellStats::default(); ncells];
+                p.gate = vec![(f32::NAN, 0.0); ncells];
                 p.touched.clear();
             }
         }
@@ -301,15 +328,14 @@ impl RollingGrid {
                         }
                     };
                     let idx = s.idx as usize;
-                    if prior.hits[idx] >= support {
-                        let sw = prior.sw[idx] as f64;
-                        let mean = prior.swz[idx] as f64 / sw;
-                        let var = (prior.swzz[idx] as f64 / sw - mean * mean).max(0.0);
-                        if (s.z_mm as f64) < mean - gate_mm(var, s.sigma_mm as f64, k, min_mm) {
-                            p.touch(idx).below += 1;
-                            p.stats.below += 1;
-                            continue;
-                        }
+                    let (mean, var) = p.gate_ref(idx, prior, support);
+                    if !mean.is_nan()
+                        && (s.z_mm as f64)
+                            < mean as f64 - gate_mm(var as f64, s.sigma_mm as f64, k, min_mm)
+                    {
+                        p.touch(idx).below += 1;
+                        p.stats.below += 1;
+                        continue;
                     }
                     p.touch(idx).add(s.z_mm, s.w);
                     p.stats.fused += 1;
