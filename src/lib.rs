@@ -13,3 +13,5 @@ pub mod grid;
 pub mod io;
 
 pub use error::{Error, Result};
+pub mod build;
+pub mod hazard;

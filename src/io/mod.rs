@@ -1,1 +1,3 @@
 //! Reading and writing the outside world's files: point clouds, logs, exports.
+
+pub mod export;

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# Every test of tarn: the Rust unit, property and integration tests, then the Python checks
+# that read tarn's outputs with Open3D, trimesh and the official MCAP readers.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+tools/setup.sh
+cargo build --bins
+cargo test
+TARN_BIN="$PWD/target/debug/tarn" .venv/bin/python -m pytest -q tools
