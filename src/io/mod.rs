@@ -1,3 +1,110 @@
 //! Reading and writing the outside world's files: point clouds, logs, exports.
 
 pub mod export;
+pub mod kitti;
+pub mod ply;
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::geom::PointCloud;
+
+/// Reads a point cloud, choosing the reader by the file's extension (case-insensitive):
+/// `.ply` → [`ply::read`], `.bin` → [`kitti::read`] (an unorganized KITTI scan).
+pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("ply") => ply::read(path),
+        Some("bin") => kitti::read(path),
+        _ => Err(Error::format(
+            path,
+            "file name",
+            "unknown point cloud format: the extension must be .ply or .bin (KITTI)",
+        )),
+    }
+}
+
+/// Rearranges a column-major lidar scan (point `column * rings + ring`, as the Ouster and
+/// RELLIS-3D files store it) into an organized cloud of `rings` rows × `n / rings` columns
+/// (row = ring, so row 0 is ring 0). Every per-point channel moves with its point; the pose,
+/// sensor origin and stamp are kept.
+pub fn organize_column_major(cloud: &PointCloud, rings: usize) -> Result<PointCloud> {
+    let n = cloud.len();
+    if rings == 0 || n % rings != 0 {
+        return Err(Error::invalid(
+            "lidar ring count",
+            format!("{n} points cannot be split into {rings} rings of equal length"),
+        ));
+    }
+    let cols = n / rings;
+    // Point (ring r, column c) of the result comes from index c * rings + r.
+    fn permute<T: Copy>(v: &[T], rings: usize, cols: usize) -> Vec<T> {
+        let mut out = Vec::with_capacity(v.len());
+        for r in 0..rings {
+            out.extend((0..cols).map(|c| v[c * rings + r]));
+        }
+        out
+    }
+    let mut out = PointCloud::organized(rings, cols, permute(&cloud.xyz, rings, cols))?;
+    out.intensity = cloud.intensity.as_deref().map(|v| permute(v, rings, cols));
+    out.reflectivity = cloud
+        .reflectivity
+        .as_deref()
+        .map(|v| permute(v, rings, cols));
+    out.rgb = cloud.rgb.as_deref().map(|v| permute(v, rings, cols));
+    out.frame_to_map = cloud.frame_to_map;
+    out.sensor_origin = cloud.sensor_origin;
+    out.stamp = cloud.stamp;
+    out.validate()?;
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dispatch_by_extension() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = dir.path().join("a.PLY");
+        std::fs::write(
+            &ply,
+            "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+             property float z\nend_header\n1 2 3\n",
+        )
+        .unwrap();
+        assert_eq!(read_point_cloud(&ply).unwrap().xyz, vec![[1.0, 2.0, 3.0]]);
+        let bin = dir.path().join("scan.bin");
+        let pts: Vec<u8> = [4.0f32, 5.0, 6.0, 0.5]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        std::fs::write(&bin, pts).unwrap();
+        assert_eq!(read_point_cloud(&bin).unwrap().xyz, vec![[4.0, 5.0, 6.0]]);
+        for name in ["cloud.pcd", "cloud"] {
+            let e = read_point_cloud(&dir.path().join(name)).unwrap_err();
+            assert!(e.to_string().contains(".ply or .bin"), "{e}");
+            assert!(e.to_string().contains(name), "{e}");
+        }
+    }
+
+    #[test]
+    fn organize_moves_every_channel_and_keeps_the_pose() {
+        let mut c = PointCloud::unorganized((0..6).map(|i| [i as f32, 0.0, 0.0]).collect());
+        c.intensity = Some((0..6).map(|i| i as f32).collect());
+        c.rgb = Some((0..6).map(|i| [i as u8; 3]).collect());
+        c.frame_to_map = crate::geom::pose_xyz_rpy(1.0, 2.0, 3.0, 0.0, 0.0, 0.5);
+        let o = organize_column_major(&c, 2).unwrap();
+        assert_eq!((o.rows, o.cols), (2, 3));
+        // Ring 1, column 2 was point 2*2 + 1 = 5.
+        assert_eq!(o.xyz[o.index(1, 2)], [5.0, 0.0, 0.0]);
+        assert_eq!(o.intensity.as_ref().unwrap()[o.index(0, 1)], 2.0);
+        assert_eq!(o.rgb.as_ref().unwrap()[o.index(1, 0)], [1; 3]);
+        assert_eq!(o.frame_to_map, c.frame_to_map);
+        assert!(organize_column_major(&c, 4).is_err());
+        assert!(organize_column_major(&c, 0).is_err());
+    }
+}
