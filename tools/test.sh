@@ -6,4 +6,4 @@ cd "$(dirname "$0")/.."
 tools/setup.sh
 cargo build --bins
 cargo test
-TARN_BIN="$PWD/target/debug/tarn" .venv/bin/python -m pytest -q tools
+TARN_BIN="$PWD/target/debug/tarn" .venv/bin/python -m pytest -q -p no:dash tools

@@ -249,21 +249,33 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
 
     let elev: HashMap<CellKey, f64> = map.cells.iter().map(|c| (c.key, c.z)).collect();
     let res = map.resolution;
+    let (zlo, zhi) = elevation_range(&map.cells).unwrap_or((0.0, 1.0));
+    let zspan = (zhi - zlo).max(1e-6);
     // Light from the upper left (north-west), 45° up.
     let l = nalgebra::Vector3::new(-1.0, 1.0, 2f64.sqrt()).normalize();
     for c in &map.cells {
+        // Slopes over two cells each way (where observed) to keep per-cell noise down.
         let z = |dx: i64, dy: i64| elev.get(&CellKey::new(c.key.x + dx, c.key.y + dy)).copied();
-        let slope = |m: Option<f64>, p: Option<f64>| match (m, p) {
-            (Some(m), Some(p)) => (p - m) / (2.0 * res),
-            (Some(m), None) => (c.z - m) / res,
-            (None, Some(p)) => (p - c.z) / res,
-            (None, None) => 0.0,
+        let slope = |pts: [(i64, Option<f64>); 4]| {
+            let (mut num, mut den) = (0.0, 0.0);
+            for (d, v) in pts {
+                if let Some(v) = v {
+                    num += (v - c.z) * d as f64;
+                    den += (d * d) as f64;
+                }
+            }
+            if den > 0.0 {
+                num / (den * res)
+            } else {
+                0.0
+            }
         };
-        let gx = slope(z(-1, 0), z(1, 0));
-        let gy = slope(z(0, -1), z(0, 1));
+        let gx = slope([(-2, z(-2, 0)), (-1, z(-1, 0)), (1, z(1, 0)), (2, z(2, 0))]);
+        let gy = slope([(-2, z(0, -2)), (-1, z(0, -1)), (1, z(0, 1)), (2, z(0, 2))]);
         let n = nalgebra::Vector3::new(-gx, -gy, 1.0).normalize();
-        // Flat ground has shade 1; slopes facing the light are brighter, others darker.
-        let shade = 0.45 + 0.55 * n.dot(&l).max(0.0) / l.z;
+        // Flat ground has shade 1; slopes facing the light are brighter, others darker;
+        // higher ground is a little lighter.
+        let shade = (0.45 + 0.55 * n.dot(&l).max(0.0) / l.z) * (0.8 + 0.35 * (c.z - zlo) / zspan);
         let base = c.class.colour();
         let col = base.map(|v| (v as f64 * shade.clamp(0.0, 1.2)).min(255.0) as u8);
         let px = (c.key.x - lo.x) as u32 * s;
@@ -284,7 +296,7 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
     let ly = mh + 8;
     let mut lx = 8;
     for class in Class::ALL.into_iter().skip(1) {
-        if counts[class as usize] == 0 && class != Class::Ground && class != Class::Water {
+        if counts[class as usize] == 0 {
             continue;
         }
         fill_rect(&mut img, lx, ly, 12, 12, class.colour());
