@@ -4,6 +4,8 @@
 //! (a sensor frame, or a local origin chosen by a reader), never as absolute UTM-scale
 //! coordinates in `f32`; [`PointCloud::frame_to_map`] carries the large part in `f64`.
 
+pub mod camera;
+
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::error::{Error, Result};
@@ -72,7 +74,10 @@ impl PointCloud {
         if rows.checked_mul(cols) != Some(xyz.len()) {
             return Err(Error::invalid(
                 "point cloud",
-                format!("{} points do not fill {rows} rows × {cols} columns", xyz.len()),
+                format!(
+                    "{} points do not fill {rows} rows × {cols} columns",
+                    xyz.len()
+                ),
             ));
         }
         let mut c = Self::unorganized(xyz);
@@ -152,10 +157,7 @@ impl PointCloud {
             ));
         }
         if !self.sensor_origin.coords.iter().all(|v| v.is_finite()) {
-            return Err(Error::invalid(
-                "point cloud",
-                "sensor origin is not finite",
-            ));
+            return Err(Error::invalid("point cloud", "sensor origin is not finite"));
         }
         Ok(())
     }
