@@ -1,2 +1,4 @@
 //! Reading and writing the outside world's files: point clouds, logs, exports.
+pub mod mcap_log;
 pub mod ros;
+pub mod tf;
