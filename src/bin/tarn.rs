@@ -3,7 +3,11 @@
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "tarn", version, about = "Terrain maps and water hazards for off-road vehicles")]
+#[command(
+    name = "tarn",
+    version,
+    about = "Terrain maps and water hazards for off-road vehicles"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,

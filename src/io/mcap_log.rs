@@ -281,6 +281,8 @@ pub struct WriteOptions {
     pub compression: LogCompression,
     /// Chunked (with message indexes and a summary) as `ros2 bag` writes; unchunked otherwise.
     pub chunked: bool,
+    /// Uncompressed bytes per chunk (`None`: 768 KiB, the `ros2 bag record` default).
+    pub chunk_size: Option<u64>,
     /// CDR byte order of the payloads (ROS 2 writes little endian).
     pub endian: Endian,
 }
@@ -290,6 +292,7 @@ impl Default for WriteOptions {
         WriteOptions {
             compression: LogCompression::Zstd,
             chunked: true,
+            chunk_size: None,
             endian: Endian::Little,
         }
     }
@@ -330,6 +333,7 @@ impl LogWriter {
             .library(concat!("tarn/", env!("CARGO_PKG_VERSION")))
             .compression(compression)
             .use_chunks(opts.chunked)
+            .chunk_size(opts.chunk_size.or(Some(1024 * 768)))
             .create(BufWriter::new(file))
             .map_err(|e| Error::format(&path, "header", e.to_string()))?;
         Ok(LogWriter {
