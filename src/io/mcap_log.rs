@@ -495,3 +495,68 @@ impl LogWriter {
         Ok(())
     }
 }
+
+/// What [`recode`] did.
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RecodeStats {
+    pub written: u64,
+    /// Messages of types tarn does not read, by topic; not copied.
+    pub skipped_unknown: BTreeMap<String, u64>,
+}
+
+/// Reads every TF, PointCloud2, Image and CameraInfo message of `input`, decodes it and
+/// writes it again with tarn's encoder into `output` (with `opts`' compression, chunking
+/// and byte order). Messages of other types are skipped and counted.
+pub fn recode(
+    input: impl AsRef<Path>,
+    output: impl AsRef<Path>,
+    opts: &WriteOptions,
+) -> Result<RecodeStats> {
+    let mut r = LogReader::open(input)?;
+    let mut w = LogWriter::create(output, opts)?;
+    let mut stats = RecodeStats::default();
+    while let Some(m) = r.next_message() {
+        let m = m?;
+        let ch = &m.channel;
+        let loc = || {
+            format!(
+                "topic {} ({}), log time {} ns",
+                ch.topic, ch.schema, m.log_time
+            )
+        };
+        let bad = |e: super::ros::CdrError| Error::format(r.path(), loc(), e.to_string());
+        if ch.message_encoding != "cdr" {
+            *stats.skipped_unknown.entry(ch.topic.clone()).or_insert(0) += 1;
+            continue;
+        }
+        match ch.schema.as_str() {
+            schema_name::TF_MESSAGE => w.write_tf(
+                &ch.topic,
+                &TfMessage::decode(&m.data).map_err(bad)?,
+                m.log_time,
+            )?,
+            schema_name::POINT_CLOUD2 => w.write_pointcloud2(
+                &ch.topic,
+                &PointCloud2Msg::decode(&m.data).map_err(bad)?,
+                m.log_time,
+            )?,
+            schema_name::IMAGE => w.write_image_msg(
+                &ch.topic,
+                &ImageMsg::decode(&m.data).map_err(bad)?,
+                m.log_time,
+            )?,
+            schema_name::CAMERA_INFO => w.write_camera_info_msg(
+                &ch.topic,
+                &CameraInfoMsg::decode(&m.data).map_err(bad)?,
+                m.log_time,
+            )?,
+            _ => {
+                *stats.skipped_unknown.entry(ch.topic.clone()).or_insert(0) += 1;
+                continue;
+            }
+        }
+        stats.written += 1;
+    }
+    w.finish()?;
+    Ok(stats)
+}

@@ -108,7 +108,13 @@ impl TfMessage {
                 child_frame_id,
                 child_to_parent: Pose::from_parts(
                     Translation3::new(t[0], t[1], t[2]),
-                    UnitQuaternion::from_quaternion(q),
+                    // Keep the bits of an already-unit quaternion (so a decode/encode
+                    // round trip is exact); normalize one that is only nearly unit.
+                    if (norm - 1.0).abs() < 1e-12 {
+                        UnitQuaternion::new_unchecked(q)
+                    } else {
+                        UnitQuaternion::from_quaternion(q)
+                    },
                 ),
             });
         }
