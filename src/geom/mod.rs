@@ -4,6 +4,8 @@
 //! (a sensor frame, or a local origin chosen by a reader), never as absolute UTM-scale
 //! coordinates in `f32`; [`PointCloud::frame_to_map`] carries the large part in `f64`.
 
+pub mod camera;
+
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::error::{Error, Result};

@@ -1,8 +1,12 @@
 //! Reading and writing the outside world's files: point clouds, logs, exports.
 
 pub mod export;
+pub mod frames;
 pub mod kitti;
+pub mod mcap_log;
 pub mod ply;
+pub mod ros;
+pub mod tf;
 
 use std::path::Path;
 

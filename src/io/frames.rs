@@ -1,0 +1,497 @@
+//! A time-synchronized stream of [`Frame`]s from a ROS 2 log: each scan of the frame topic
+//! (the lidar by default, or the stereo cloud) with the vehicle pose at its own stamp, and
+//! the other clouds and images nearest in time within a tolerance.
+//!
+//! The stream reads the log once, front to back. It holds back a scan only until the log
+//! has moved `tolerance + lookahead` seconds past it (so that transforms and images stamped
+//! after it have arrived), then emits it and forgets what is older: memory depends on the
+//! message rate and those two durations, never on the length of the log.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::path::Path;
+
+use nalgebra::Point3;
+
+use super::mcap_log::{LogReader, RawMessage};
+use super::ros::{
+    camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, Image,
+    ImageMsg, PointCloud2Msg, TfMessage,
+};
+use super::tf::TfBuffer;
+use crate::error::{Error, Result};
+use crate::geom::camera::CameraModel;
+use crate::geom::{PointCloud, Pose};
+
+/// Topic names, frame names and timing for reading a log. Defaults follow DESIGN.md.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct LogConfig {
+    pub tf_topic: String,
+    pub tf_static_topic: String,
+    pub lidar_topic: String,
+    pub stereo_topic: String,
+    pub image_topic: String,
+    pub camera_info_topic: String,
+    pub swir_topic: String,
+    pub swir_info_topic: String,
+    pub mwir_topic: String,
+    pub mwir_info_topic: String,
+    /// Which cloud topic makes a frame: the lidar (default) or the stereo topic.
+    pub frame_topic: String,
+    pub map_frame: String,
+    pub base_frame: String,
+    /// Largest time difference between a frame's scan and a matched cloud or image, s.
+    pub tolerance_s: f64,
+    /// How far past a scan's stamp the log must have advanced before the scan is
+    /// emitted (waiting for late transforms and images), s.
+    pub lookahead_s: f64,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        LogConfig {
+            tf_topic: "/tf".into(),
+            tf_static_topic: "/tf_static".into(),
+            lidar_topic: "/lidar/points".into(),
+            stereo_topic: "/stereo/points".into(),
+            image_topic: "/camera/image".into(),
+            camera_info_topic: "/camera/camera_info".into(),
+            swir_topic: "/swir/image".into(),
+            swir_info_topic: "/swir/camera_info".into(),
+            mwir_topic: "/mwir/image".into(),
+            mwir_info_topic: "/mwir/camera_info".into(),
+            frame_topic: "/lidar/points".into(),
+            map_frame: "map".into(),
+            base_frame: "base_link".into(),
+            tolerance_s: 0.05,
+            lookahead_s: 0.5,
+        }
+    }
+}
+
+impl LogConfig {
+    fn validate(&self) -> Result<()> {
+        if !(self.tolerance_s >= 0.0 && self.tolerance_s.is_finite()) {
+            return Err(Error::invalid(
+                "log config",
+                format!("tolerance_s {} must be ≥ 0", self.tolerance_s),
+            ));
+        }
+        if !(self.lookahead_s >= 0.0 && self.lookahead_s.is_finite()) {
+            return Err(Error::invalid(
+                "log config",
+                format!("lookahead_s {} must be ≥ 0", self.lookahead_s),
+            ));
+        }
+        if self.frame_topic != self.lidar_topic && self.frame_topic != self.stereo_topic {
+            return Err(Error::invalid(
+                "log config",
+                format!(
+                    "frame_topic {:?} must be the lidar or the stereo topic",
+                    self.frame_topic
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// An image with what is needed to project it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorImage {
+    pub image: Image,
+    /// Latest `CameraInfo` seen on the matching info topic.
+    pub camera: Option<CameraModel>,
+    /// Pose of the image's (optical) frame in the map at the image's stamp; `None` when
+    /// the transform was missing.
+    pub frame_to_map: Option<Pose>,
+}
+
+/// One time step of the vehicle.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// Stamp of the frame's scan, seconds.
+    pub stamp: f64,
+    /// `base_link → map` at `stamp`.
+    pub base_to_map: Pose,
+    /// Clouds with `frame_to_map` at their own stamps and `sensor_origin` at their frame's
+    /// origin.
+    pub lidar: Option<PointCloud>,
+    pub stereo: Option<PointCloud>,
+    pub image: Option<SensorImage>,
+    pub swir: Option<SensorImage>,
+    pub mwir: Option<SensorImage>,
+}
+
+/// What happened while streaming.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct FrameStats {
+    pub messages: u64,
+    pub frames_built: u64,
+    /// Frames whose scan had no transform to the map at its stamp.
+    pub frames_skipped_no_tf: u64,
+    /// Reasons for the first skipped frames (up to 20).
+    pub skip_reasons: Vec<String>,
+    /// Matched clouds or images dropped for want of a transform.
+    pub secondary_dropped_no_tf: u64,
+    /// Messages whose type tarn does not read, by `topic (type)`.
+    pub unknown_type: BTreeMap<String, u64>,
+    /// Messages of known type that could not be decoded (each also yielded as an error).
+    pub decode_errors: u64,
+}
+
+impl FrameStats {
+    pub fn unknown_type_total(&self) -> u64 {
+        self.unknown_type.values().sum()
+    }
+}
+
+const MAX_REASONS: usize = 20;
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Slot {
+    Lidar,
+    Stereo,
+    Image,
+    Swir,
+    Mwir,
+}
+
+struct Pending<T> {
+    ns: i64,
+    item: T,
+}
+
+/// The frame stream. Iterate for `Result<Frame>`; an `Err` for one bad message does not
+/// end the stream, a damaged or truncated file does (after everything before it).
+pub struct FrameStream {
+    cfg: LogConfig,
+    reader: LogReader,
+    tf: TfBuffer,
+    /// Scans of the frame topic waiting for the log to move past them.
+    scans: VecDeque<Pending<(PointCloud, String)>>,
+    other_clouds: VecDeque<Pending<(PointCloud, String)>>,
+    images: [VecDeque<Pending<Image>>; 3],
+    infos: [Option<CameraModel>; 3],
+    /// Latest log time seen, ns.
+    now_ns: i64,
+    stats: FrameStats,
+    ended: bool,
+    out: VecDeque<Result<Frame>>,
+}
+
+fn secs(ns: i64) -> f64 {
+    ns as f64 * 1e-9
+}
+
+impl FrameStream {
+    pub fn open(path: impl AsRef<Path>, cfg: &LogConfig) -> Result<Self> {
+        cfg.validate()?;
+        Ok(FrameStream {
+            cfg: cfg.clone(),
+            reader: LogReader::open(path)?,
+            tf: TfBuffer::new(),
+            scans: VecDeque::new(),
+            other_clouds: VecDeque::new(),
+            images: Default::default(),
+            infos: Default::default(),
+            now_ns: i64::MIN,
+            stats: FrameStats::default(),
+            ended: false,
+            out: VecDeque::new(),
+        })
+    }
+
+    pub fn stats(&self) -> &FrameStats {
+        &self.stats
+    }
+
+    /// Bytes of the log read so far and the log's size, for a progress bar.
+    pub fn progress(&self) -> (u64, u64) {
+        (self.reader.bytes_read(), self.reader.total_bytes())
+    }
+
+    /// Messages held in memory waiting to be matched (for memory checks).
+    pub fn buffered(&self) -> usize {
+        self.scans.len()
+            + self.other_clouds.len()
+            + self.images.iter().map(|q| q.len()).sum::<usize>()
+            + self.tf.len()
+    }
+
+    fn slot(&self, topic: &str) -> Option<Slot> {
+        let c = &self.cfg;
+        if topic == c.lidar_topic {
+            Some(Slot::Lidar)
+        } else if topic == c.stereo_topic {
+            Some(Slot::Stereo)
+        } else if topic == c.image_topic {
+            Some(Slot::Image)
+        } else if topic == c.swir_topic {
+            Some(Slot::Swir)
+        } else if topic == c.mwir_topic {
+            Some(Slot::Mwir)
+        } else {
+            None
+        }
+    }
+
+    fn bad(&mut self, m: &RawMessage, e: impl std::fmt::Display) -> Error {
+        self.stats.decode_errors += 1;
+        Error::format(
+            self.reader.path(),
+            format!(
+                "topic {} ({}), message {} at log time {:.9} s",
+                m.channel.topic,
+                m.channel.schema,
+                self.reader.messages_read() - 1,
+                m.log_time as f64 * 1e-9
+            ),
+            e.to_string(),
+        )
+    }
+
+    /// Takes one message in; returns an error for a message that cannot be decoded.
+    fn ingest(&mut self, m: RawMessage) -> Result<()> {
+        self.stats.messages += 1;
+        self.now_ns = self.now_ns.max(m.log_time as i64);
+        let ch = m.channel.clone();
+        let known = ch.message_encoding == "cdr"
+            && matches!(
+                ch.schema.as_str(),
+                schema_name::TF_MESSAGE
+                    | schema_name::POINT_CLOUD2
+                    | schema_name::IMAGE
+                    | schema_name::CAMERA_INFO
+            );
+        if !known {
+            *self
+                .stats
+                .unknown_type
+                .entry(format!(
+                    "{} ({})",
+                    ch.topic,
+                    if ch.schema.is_empty() {
+                        &ch.message_encoding
+                    } else {
+                        &ch.schema
+                    }
+                ))
+                .or_insert(0) += 1;
+            return Ok(());
+        }
+        let stamp_or_log = |ns: i64| if ns == 0 { m.log_time as i64 } else { ns };
+        match ch.schema.as_str() {
+            schema_name::TF_MESSAGE => {
+                let is_static = ch.topic == self.cfg.tf_static_topic;
+                if is_static || ch.topic == self.cfg.tf_topic {
+                    let tf = TfMessage::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                    for t in &tf.transforms {
+                        self.tf.insert(t, is_static);
+                    }
+                }
+            }
+            schema_name::CAMERA_INFO => {
+                let k = if ch.topic == self.cfg.camera_info_topic {
+                    0
+                } else if ch.topic == self.cfg.swir_info_topic {
+                    1
+                } else if ch.topic == self.cfg.mwir_info_topic {
+                    2
+                } else {
+                    return Ok(());
+                };
+                let info = CameraInfoMsg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                self.infos[k] = Some(camera_from_info(&info).map_err(|e| self.bad(&m, e))?);
+            }
+            schema_name::POINT_CLOUD2 => {
+                if !matches!(self.slot(&ch.topic), Some(Slot::Lidar | Slot::Stereo)) {
+                    return Ok(());
+                }
+                let msg = PointCloud2Msg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                let mut cloud = pointcloud2_to_cloud(&msg).map_err(|e| self.bad(&m, e))?;
+                let ns = stamp_or_log(msg.header.stamp.to_nanos());
+                cloud.stamp = secs(ns);
+                cloud.sensor_origin = Point3::origin();
+                let entry = Pending {
+                    ns,
+                    item: (cloud, msg.header.frame_id),
+                };
+                if ch.topic == self.cfg.frame_topic {
+                    self.scans.push_back(entry);
+                } else {
+                    self.other_clouds.push_back(entry);
+                }
+            }
+            _ => {
+                let k = match self.slot(&ch.topic) {
+                    Some(Slot::Image) => 0,
+                    Some(Slot::Swir) => 1,
+                    Some(Slot::Mwir) => 2,
+                    _ => return Ok(()),
+                };
+                let msg = ImageMsg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                let img = decode_image(&msg).map_err(|e| self.bad(&m, e))?;
+                let ns = stamp_or_log(msg.header.stamp.to_nanos());
+                self.images[k].push_back(Pending {
+                    ns,
+                    item: Image {
+                        stamp: secs(ns),
+                        ..img
+                    },
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+impl FrameStream {
+    fn horizon_ns(&self) -> i64 {
+        ((self.cfg.tolerance_s + self.cfg.lookahead_s) * 1e9) as i64
+    }
+
+    fn tol_ns(&self) -> i64 {
+        (self.cfg.tolerance_s * 1e9) as i64
+    }
+
+    /// Pose of `frame` in the map at `ns`.
+    fn to_map(&self, frame: &str, ns: i64) -> std::result::Result<Pose, String> {
+        self.tf
+            .lookup(&self.cfg.map_frame, frame, ns)
+            .map_err(|e| e.to_string())
+    }
+
+    fn nearest<T: Clone>(q: &VecDeque<Pending<T>>, ns: i64, tol: i64) -> Option<&Pending<T>> {
+        q.iter()
+            .filter(|p| (p.ns - ns).abs() <= tol)
+            .min_by_key(|p| ((p.ns - ns).abs(), p.ns))
+    }
+
+    fn matched_image(&mut self, k: usize, ns: i64) -> Option<SensorImage> {
+        let p = Self::nearest(&self.images[k], ns, self.tol_ns())?;
+        let image = p.item.clone();
+        let pose = self.to_map(&image.frame_id, p.ns);
+        if pose.is_err() {
+            self.stats.secondary_dropped_no_tf += 1;
+        }
+        Some(SensorImage {
+            camera: self.infos[k].clone(),
+            frame_to_map: pose.ok(),
+            image,
+        })
+    }
+
+    fn build(&mut self, scan: Pending<(PointCloud, String)>) -> Option<Frame> {
+        let ns = scan.ns;
+        let (mut cloud, frame_id) = scan.item;
+        let poses = self
+            .to_map(&self.cfg.base_frame, ns)
+            .and_then(|b| self.to_map(&frame_id, ns).map(|c| (b, c)));
+        let (base_to_map, cloud_to_map) = match poses {
+            Ok(p) => p,
+            Err(e) => {
+                self.stats.frames_skipped_no_tf += 1;
+                if self.stats.skip_reasons.len() < MAX_REASONS {
+                    self.stats.skip_reasons.push(format!(
+                        "{} at {:.9} s (frame {frame_id:?}): {e}",
+                        self.cfg.frame_topic,
+                        secs(ns)
+                    ));
+                }
+                return None;
+            }
+        };
+        cloud.frame_to_map = cloud_to_map;
+        let other =
+            Self::nearest(&self.other_clouds, ns, self.tol_ns()).map(|p| (p.ns, p.item.clone()));
+        let other = other.and_then(|(ons, (mut c, f))| match self.to_map(&f, ons) {
+            Ok(p) => {
+                c.frame_to_map = p;
+                Some(c)
+            }
+            Err(_) => {
+                self.stats.secondary_dropped_no_tf += 1;
+                None
+            }
+        });
+        let (lidar, stereo) = if self.cfg.frame_topic == self.cfg.lidar_topic {
+            (Some(cloud), other)
+        } else {
+            (other, Some(cloud))
+        };
+        self.stats.frames_built += 1;
+        Some(Frame {
+            stamp: secs(ns),
+            base_to_map,
+            lidar,
+            stereo,
+            image: self.matched_image(0, ns),
+            swir: self.matched_image(1, ns),
+            mwir: self.matched_image(2, ns),
+        })
+    }
+
+    /// Emits scans the log has moved far enough past (all of them when `flush`), then
+    /// forgets what no future scan can match.
+    fn emit_ready(&mut self, flush: bool) {
+        let horizon = self.horizon_ns();
+        while let Some(front) = self.scans.front() {
+            if !flush && self.now_ns < front.ns.saturating_add(horizon) {
+                break;
+            }
+            let scan = self.scans.pop_front().expect("front exists");
+            if let Some(f) = self.build(scan) {
+                self.out.push_back(Ok(f));
+            }
+        }
+        // A future scan has a stamp ≥ min(oldest pending scan, now − horizon) (older ones
+        // are emitted at once); it matches nothing older than that minus the tolerance.
+        let oldest = self.scans.front().map_or(i64::MAX, |p| p.ns);
+        let keep_from = oldest
+            .min(self.now_ns.saturating_sub(horizon))
+            .saturating_sub(self.tol_ns());
+        while self.other_clouds.front().is_some_and(|p| p.ns < keep_from) {
+            self.other_clouds.pop_front();
+        }
+        for q in self.images.iter_mut() {
+            while q.front().is_some_and(|p| p.ns < keep_from) {
+                q.pop_front();
+            }
+        }
+        self.tf.prune_before(keep_from);
+    }
+}
+
+impl Iterator for FrameStream {
+    type Item = Result<Frame>;
+
+    fn next(&mut self) -> Option<Result<Frame>> {
+        loop {
+            if let Some(f) = self.out.pop_front() {
+                return Some(f);
+            }
+            if self.ended {
+                return None;
+            }
+            match self.reader.next_message() {
+                None => {
+                    self.emit_ready(true);
+                    self.ended = true;
+                }
+                Some(Err(e)) => {
+                    // Everything before the damage still makes frames; then the error.
+                    self.emit_ready(true);
+                    self.out.push_back(Err(e));
+                    self.ended = true;
+                }
+                Some(Ok(m)) => {
+                    if let Err(e) = self.ingest(m) {
+                        self.out.push_back(Err(e));
+                    }
+                    self.emit_ready(false);
+                }
+            }
+        }
+    }
+}

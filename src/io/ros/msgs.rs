@@ -1,0 +1,555 @@
+//! The ROS 2 messages tarn reads and writes, with their CDR decoding and encoding and
+//! their `ros2msg` definitions as `ros2 bag` stores them in an MCAP schema.
+
+use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+
+use super::cdr::{CdrReader, CdrResult, CdrWriter, Endian};
+use crate::geom::Pose;
+
+/// `builtin_interfaces/msg/Time`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+pub struct Time {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+impl Time {
+    /// Nanoseconds since the epoch.
+    pub fn to_nanos(self) -> i64 {
+        self.sec as i64 * 1_000_000_000 + self.nanosec as i64
+    }
+
+    pub fn from_nanos(ns: i64) -> Self {
+        Time {
+            sec: ns.div_euclid(1_000_000_000) as i32,
+            nanosec: ns.rem_euclid(1_000_000_000) as u32,
+        }
+    }
+
+    pub fn to_sec(self) -> f64 {
+        self.sec as f64 + self.nanosec as f64 * 1e-9
+    }
+
+    fn read(r: &mut CdrReader) -> CdrResult<Self> {
+        Ok(Time {
+            sec: r.i32()?,
+            nanosec: r.u32()?,
+        })
+    }
+
+    fn write(&self, w: &mut CdrWriter) {
+        w.i32(self.sec);
+        w.u32(self.nanosec);
+    }
+}
+
+/// `std_msgs/msg/Header`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Header {
+    pub stamp: Time,
+    pub frame_id: String,
+}
+
+impl Header {
+    fn read(r: &mut CdrReader) -> CdrResult<Self> {
+        Ok(Header {
+            stamp: Time::read(r)?,
+            frame_id: r.string()?,
+        })
+    }
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.stamp.write(w);
+        w.string(&self.frame_id);
+    }
+}
+
+/// `geometry_msgs/msg/TransformStamped`: the pose of `child_frame_id` in `header.frame_id`
+/// (maps child coordinates to parent coordinates).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransformStamped {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub child_to_parent: Pose,
+}
+
+/// `tf2_msgs/msg/TFMessage`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TfMessage {
+    pub transforms: Vec<TransformStamped>,
+}
+
+impl TfMessage {
+    pub fn decode(buf: &[u8]) -> CdrResult<Self> {
+        let mut r = CdrReader::new(buf)?;
+        // Each TransformStamped is at least 4+4+4+4+7*8 bytes.
+        let n = r.seq_len(72, "transforms")?;
+        let mut transforms = Vec::with_capacity(n);
+        for _ in 0..n {
+            let header = Header::read(&mut r)?;
+            let child_frame_id = r.string()?;
+            let at = r.position();
+            let t = [r.f64()?, r.f64()?, r.f64()?];
+            let [x, y, z, w] = [r.f64()?, r.f64()?, r.f64()?, r.f64()?];
+            let q = Quaternion::new(w, x, y, z);
+            let norm = q.norm();
+            if !(norm.is_finite() && (norm - 1.0).abs() < 1e-3) || t.iter().any(|v| !v.is_finite())
+            {
+                return Err(super::cdr::CdrError {
+                    offset: at,
+                    message: format!(
+                        "transform {} → {child_frame_id} is not finite or its quaternion is not unit (norm {norm})",
+                        header.frame_id
+                    ),
+                });
+            }
+            transforms.push(TransformStamped {
+                header,
+                child_frame_id,
+                child_to_parent: Pose::from_parts(
+                    Translation3::new(t[0], t[1], t[2]),
+                    // Keep the bits of an already-unit quaternion (so a decode/encode
+                    // round trip is exact); normalize one that is only nearly unit.
+                    if (norm - 1.0).abs() < 1e-12 {
+                        UnitQuaternion::new_unchecked(q)
+                    } else {
+                        UnitQuaternion::from_quaternion(q)
+                    },
+                ),
+            });
+        }
+        Ok(TfMessage { transforms })
+    }
+
+    pub fn encode(&self, endian: Endian) -> Vec<u8> {
+        let mut w = CdrWriter::new(endian);
+        w.u32(self.transforms.len() as u32);
+        for t in &self.transforms {
+            t.header.write(&mut w);
+            w.string(&t.child_frame_id);
+            let v = t.child_to_parent.translation.vector;
+            let q = t.child_to_parent.rotation.quaternion().coords; // x y z w
+            for x in [v.x, v.y, v.z, q.x, q.y, q.z, q.w] {
+                w.f64(x);
+            }
+        }
+        w.finish()
+    }
+}
+
+/// `sensor_msgs/msg/PointField` datatypes.
+pub mod datatype {
+    pub const INT8: u8 = 1;
+    pub const UINT8: u8 = 2;
+    pub const INT16: u8 = 3;
+    pub const UINT16: u8 = 4;
+    pub const INT32: u8 = 5;
+    pub const UINT32: u8 = 6;
+    pub const FLOAT32: u8 = 7;
+    pub const FLOAT64: u8 = 8;
+
+    /// Size in bytes of one element, `None` for an unknown datatype.
+    pub fn size(dt: u8) -> Option<usize> {
+        match dt {
+            INT8 | UINT8 => Some(1),
+            INT16 | UINT16 => Some(2),
+            INT32 | UINT32 | FLOAT32 => Some(4),
+            FLOAT64 => Some(8),
+            _ => None,
+        }
+    }
+}
+
+/// `sensor_msgs/msg/PointField`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PointField {
+    pub name: String,
+    pub offset: u32,
+    pub datatype: u8,
+    pub count: u32,
+}
+
+/// `sensor_msgs/msg/PointCloud2`, with its raw data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointCloud2Msg {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    pub fields: Vec<PointField>,
+    pub is_bigendian: bool,
+    pub point_step: u32,
+    pub row_step: u32,
+    pub data: Vec<u8>,
+    pub is_dense: bool,
+}
+
+impl PointCloud2Msg {
+    pub fn decode(buf: &[u8]) -> CdrResult<Self> {
+        let mut r = CdrReader::new(buf)?;
+        let header = Header::read(&mut r)?;
+        let height = r.u32()?;
+        let width = r.u32()?;
+        let n = r.seq_len(13, "fields")?;
+        let mut fields = Vec::with_capacity(n);
+        for _ in 0..n {
+            fields.push(PointField {
+                name: r.string()?,
+                offset: r.u32()?,
+                datatype: r.u8()?,
+                count: r.u32()?,
+            });
+        }
+        let is_bigendian = r.bool()?;
+        let point_step = r.u32()?;
+        let row_step = r.u32()?;
+        let data = r.bytes("data")?.to_vec();
+        let is_dense = r.bool()?;
+        Ok(PointCloud2Msg {
+            header,
+            height,
+            width,
+            fields,
+            is_bigendian,
+            point_step,
+            row_step,
+            data,
+            is_dense,
+        })
+    }
+
+    pub fn encode(&self, endian: Endian) -> Vec<u8> {
+        let mut w = CdrWriter::with_capacity(endian, self.data.len() + 256);
+        self.header.write(&mut w);
+        w.u32(self.height);
+        w.u32(self.width);
+        w.u32(self.fields.len() as u32);
+        for f in &self.fields {
+            w.string(&f.name);
+            w.u32(f.offset);
+            w.u8(f.datatype);
+            w.u32(f.count);
+        }
+        w.bool(self.is_bigendian);
+        w.u32(self.point_step);
+        w.u32(self.row_step);
+        w.bytes(&self.data);
+        w.bool(self.is_dense);
+        w.finish()
+    }
+}
+
+/// `sensor_msgs/msg/Image`, with its raw data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImageMsg {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    pub encoding: String,
+    pub is_bigendian: u8,
+    pub step: u32,
+    pub data: Vec<u8>,
+}
+
+impl ImageMsg {
+    pub fn decode(buf: &[u8]) -> CdrResult<Self> {
+        let mut r = CdrReader::new(buf)?;
+        Ok(ImageMsg {
+            header: Header::read(&mut r)?,
+            height: r.u32()?,
+            width: r.u32()?,
+            encoding: r.string()?,
+            is_bigendian: r.u8()?,
+            step: r.u32()?,
+            data: r.bytes("data")?.to_vec(),
+        })
+    }
+
+    pub fn encode(&self, endian: Endian) -> Vec<u8> {
+        let mut w = CdrWriter::with_capacity(endian, self.data.len() + 128);
+        self.header.write(&mut w);
+        w.u32(self.height);
+        w.u32(self.width);
+        w.string(&self.encoding);
+        w.u8(self.is_bigendian);
+        w.u32(self.step);
+        w.bytes(&self.data);
+        w.finish()
+    }
+}
+
+/// `sensor_msgs/msg/RegionOfInterest`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RegionOfInterest {
+    pub x_offset: u32,
+    pub y_offset: u32,
+    pub height: u32,
+    pub width: u32,
+    pub do_rectify: bool,
+}
+
+/// `sensor_msgs/msg/CameraInfo`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraInfoMsg {
+    pub header: Header,
+    pub height: u32,
+    pub width: u32,
+    pub distortion_model: String,
+    pub d: Vec<f64>,
+    pub k: [f64; 9],
+    pub r: [f64; 9],
+    pub p: [f64; 12],
+    pub binning_x: u32,
+    pub binning_y: u32,
+    pub roi: RegionOfInterest,
+}
+
+impl CameraInfoMsg {
+    pub fn decode(buf: &[u8]) -> CdrResult<Self> {
+        let mut r = CdrReader::new(buf)?;
+        Ok(CameraInfoMsg {
+            header: Header::read(&mut r)?,
+            height: r.u32()?,
+            width: r.u32()?,
+            distortion_model: r.string()?,
+            d: r.f64_seq("d")?,
+            k: r.f64_array()?,
+            r: r.f64_array()?,
+            p: r.f64_array()?,
+            binning_x: r.u32()?,
+            binning_y: r.u32()?,
+            roi: RegionOfInterest {
+                x_offset: r.u32()?,
+                y_offset: r.u32()?,
+                height: r.u32()?,
+                width: r.u32()?,
+                do_rectify: r.bool()?,
+            },
+        })
+    }
+
+    pub fn encode(&self, endian: Endian) -> Vec<u8> {
+        let mut w = CdrWriter::new(endian);
+        self.header.write(&mut w);
+        w.u32(self.height);
+        w.u32(self.width);
+        w.string(&self.distortion_model);
+        w.f64_seq(&self.d);
+        w.f64_array(&self.k);
+        w.f64_array(&self.r);
+        w.f64_array(&self.p);
+        w.u32(self.binning_x);
+        w.u32(self.binning_y);
+        w.u32(self.roi.x_offset);
+        w.u32(self.roi.y_offset);
+        w.u32(self.roi.height);
+        w.u32(self.roi.width);
+        w.bool(self.roi.do_rectify);
+        w.finish()
+    }
+}
+
+/// MCAP schema names (as `ros2 bag` writes them).
+pub mod schema_name {
+    pub const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
+    pub const POINT_CLOUD2: &str = "sensor_msgs/msg/PointCloud2";
+    pub const IMAGE: &str = "sensor_msgs/msg/Image";
+    pub const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
+}
+
+const SEP: &str =
+    "================================================================================\n";
+
+const TIME_DEF: &str = "int32 sec\nuint32 nanosec\n";
+const HEADER_DEF: &str = "builtin_interfaces/Time stamp\nstring frame_id\n";
+
+fn with_deps(main: &str, deps: &[(&str, &str)]) -> String {
+    let mut s = String::from(main);
+    for (name, def) in deps {
+        s.push_str(SEP);
+        s.push_str("MSG: ");
+        s.push_str(name);
+        s.push('\n');
+        s.push_str(def);
+    }
+    s
+}
+
+/// The `ros2msg` schema text for one of the four message types: the main definition, then
+/// each dependency after a line of 80 `=` and a `MSG: pkg/Type` line, as `ros2 bag` writes.
+pub fn schema_text(schema: &str) -> Option<String> {
+    let header = ("std_msgs/Header", HEADER_DEF);
+    let time = ("builtin_interfaces/Time", TIME_DEF);
+    Some(match schema {
+        schema_name::TF_MESSAGE => with_deps(
+            "geometry_msgs/TransformStamped[] transforms\n",
+            &[
+                (
+                    "geometry_msgs/TransformStamped",
+                    "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n",
+                ),
+                header,
+                time,
+                (
+                    "geometry_msgs/Transform",
+                    "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n",
+                ),
+                ("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"),
+                (
+                    "geometry_msgs/Quaternion",
+                    "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+                ),
+            ],
+        ),
+        schema_name::POINT_CLOUD2 => with_deps(
+            "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n",
+            &[
+                header,
+                time,
+                (
+                    "sensor_msgs/PointField",
+                    "uint8 INT8    = 1\nuint8 UINT8   = 2\nuint8 INT16   = 3\nuint8 UINT16  = 4\nuint8 INT32   = 5\nuint8 UINT32  = 6\nuint8 FLOAT32 = 7\nuint8 FLOAT64 = 8\nstring name\nuint32 offset\nuint8 datatype\nuint32 count\n",
+                ),
+            ],
+        ),
+        schema_name::IMAGE => with_deps(
+            "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n",
+            &[header, time],
+        ),
+        schema_name::CAMERA_INFO => with_deps(
+            "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\nfloat64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\nsensor_msgs/RegionOfInterest roi\n",
+            &[
+                header,
+                time,
+                (
+                    "sensor_msgs/RegionOfInterest",
+                    "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n",
+                ),
+            ],
+        ),
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::pose_xyz_rpy;
+    use proptest::prelude::*;
+
+    fn hdr(ns: i64, f: &str) -> Header {
+        Header {
+            stamp: Time::from_nanos(ns),
+            frame_id: f.into(),
+        }
+    }
+
+    #[test]
+    fn time_nanos_round_trip() {
+        for ns in [
+            0i64,
+            1,
+            999_999_999,
+            1_000_000_000,
+            1_700_000_000_123_456_789,
+        ] {
+            assert_eq!(Time::from_nanos(ns).to_nanos(), ns);
+        }
+    }
+
+    #[test]
+    fn tf_round_trip_both_endians() {
+        let m = TfMessage {
+            transforms: vec![
+                TransformStamped {
+                    header: hdr(5, "map"),
+                    child_frame_id: "base_link".into(),
+                    child_to_parent: pose_xyz_rpy(1.0, -2.0, 3.0, 0.1, -0.2, 0.3),
+                },
+                TransformStamped {
+                    header: hdr(6, "base_link"),
+                    child_frame_id: "lidar".into(),
+                    child_to_parent: pose_xyz_rpy(0.5, 0.0, 1.8, 0.0, 0.0, 0.0),
+                },
+            ],
+        };
+        for e in [Endian::Little, Endian::Big] {
+            let d = TfMessage::decode(&m.encode(e)).unwrap();
+            assert_eq!(d.transforms.len(), 2);
+            for (a, b) in d.transforms.iter().zip(&m.transforms) {
+                assert_eq!(a.header, b.header);
+                assert_eq!(a.child_frame_id, b.child_frame_id);
+                assert!(
+                    (a.child_to_parent.to_homogeneous() - b.child_to_parent.to_homogeneous())
+                        .norm()
+                        < 1e-12
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn tf_with_non_unit_quaternion_is_rejected() {
+        let mut w = CdrWriter::new(Endian::Little);
+        w.u32(1);
+        hdr(0, "map").write(&mut w);
+        w.string("base_link");
+        for x in [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0] {
+            w.f64(x);
+        }
+        assert!(TfMessage::decode(&w.finish()).is_err());
+    }
+
+    #[test]
+    fn camera_info_round_trip() {
+        let m = CameraInfoMsg {
+            header: hdr(42, "camera_optical"),
+            height: 480,
+            width: 640,
+            distortion_model: "plumb_bob".into(),
+            d: vec![0.1, -0.01, 0.001, 0.002, 0.0],
+            k: [500.0, 0.0, 320.0, 0.0, 501.0, 240.0, 0.0, 0.0, 1.0],
+            r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            p: [
+                500.0, 0.0, 320.0, 0.0, 0.0, 501.0, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+            ],
+            binning_x: 1,
+            binning_y: 2,
+            roi: RegionOfInterest {
+                x_offset: 1,
+                y_offset: 2,
+                height: 3,
+                width: 4,
+                do_rectify: true,
+            },
+        };
+        for e in [Endian::Little, Endian::Big] {
+            assert_eq!(CameraInfoMsg::decode(&m.encode(e)).unwrap(), m);
+        }
+    }
+
+    #[test]
+    fn schema_texts_exist_and_name_dependencies() {
+        let s = schema_text(schema_name::POINT_CLOUD2).unwrap();
+        assert!(s.contains("\nMSG: sensor_msgs/PointField\n"));
+        assert!(s.contains("\nMSG: builtin_interfaces/Time\n"));
+        assert!(schema_text("foo_msgs/msg/Bar").is_none());
+    }
+
+    proptest! {
+        #[test]
+        fn image_and_cloud_round_trip(
+            big in any::<bool>(), h in 0u32..4, w in 0u32..5, frame in "[a-z_]{0,10}",
+            ns in 0i64..2_000_000_000_000_000_000, data in proptest::collection::vec(any::<u8>(), 0..64),
+        ) {
+            let e = if big { Endian::Big } else { Endian::Little };
+            let im = ImageMsg { header: hdr(ns, &frame), height: h, width: w, encoding: "mono8".into(),
+                is_bigendian: big as u8, step: w, data: data.clone() };
+            prop_assert_eq!(ImageMsg::decode(&im.encode(e)).unwrap(), im);
+            let pc = PointCloud2Msg { header: hdr(ns, &frame), height: h, width: w,
+                fields: vec![PointField { name: "x".into(), offset: 0, datatype: datatype::FLOAT32, count: 1 },
+                             PointField { name: "i".into(), offset: 4, datatype: datatype::UINT16, count: 1 }],
+                is_bigendian: big, point_step: 6, row_step: 6 * w, data, is_dense: !big };
+            prop_assert_eq!(PointCloud2Msg::decode(&pc.encode(e)).unwrap(), pc);
+        }
+    }
+}
