@@ -51,6 +51,7 @@
 use std::path::Path;
 
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::geom::{PointCloud, Pose};
@@ -668,28 +669,44 @@ impl Builder {
         }
     }
 
+    /// A missing return: a non-finite coordinate, or (with a `range` property) zero range
+    /// or all-zero coordinates.
+    #[inline]
+    fn is_missing(&self, v: &RawVertex) -> bool {
+        let p = v.xyz;
+        !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite())
+            || (self.zero_is_missing && (v.range == 0.0 || p == [0.0; 3]))
+    }
+
+    /// The local origin chosen from the first real return `p`.
+    fn choose_origin(&self, p: [f64; 3]) -> [f64; 3] {
+        let far = p.iter().any(|c| c.abs() > FAR_FROM_ORIGIN_M);
+        if self.always_shift || far {
+            p.map(f64::round)
+        } else {
+            [0.0; 3]
+        }
+    }
+
+    #[inline]
+    fn relative(p: [f64; 3], o: [f64; 3]) -> [f32; 3] {
+        [
+            (p[0] - o[0]) as f32,
+            (p[1] - o[1]) as f32,
+            (p[2] - o[2]) as f32,
+        ]
+    }
+
     #[inline]
     fn push(&mut self, v: &RawVertex) {
-        let p = v.xyz;
-        let missing = !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite())
-            || (self.zero_is_missing && (v.range == 0.0 || p == [0.0; 3]));
-        if missing {
+        if self.is_missing(v) {
             self.xyz.push([f32::NAN; 3]);
         } else {
-            let always = self.always_shift;
-            let o = *self.origin.get_or_insert_with(|| {
-                let far = p.iter().any(|c| c.abs() > FAR_FROM_ORIGIN_M);
-                if always || far {
-                    p.map(f64::round)
-                } else {
-                    [0.0; 3]
-                }
-            });
-            self.xyz.push([
-                (p[0] - o[0]) as f32,
-                (p[1] - o[1]) as f32,
-                (p[2] - o[2]) as f32,
-            ]);
+            let o = match self.origin {
+                Some(o) => o,
+                None => *self.origin.insert(self.choose_origin(v.xyz)),
+            };
+            self.xyz.push(Self::relative(v.xyz, o));
         }
         if let Some(i) = &mut self.intensity {
             i.push(v.intensity as f32);
@@ -705,6 +722,93 @@ impl Builder {
                 k[2].apply(v.rgb[2]),
             ]);
         }
+    }
+
+    /// Decodes all vertices of fixed size `stride` from `recs` (the builder must be empty),
+    /// in parallel: each output value depends only on its record and on the origin, which
+    /// is chosen first, sequentially, so the result does not depend on the thread count.
+    fn fill_fixed(
+        &mut self,
+        recs: &[u8],
+        stride: usize,
+        fields: &[(usize, Scalar, Role)],
+        big: bool,
+    ) {
+        debug_assert!(self.xyz.is_empty() && stride > 0);
+        let field = |role: Role| fields.iter().find(|f| f.2 == role).map(|f| (f.0, f.1));
+        let geometry: Vec<_> = fields
+            .iter()
+            .filter(|f| matches!(f.2, Role::X | Role::Y | Role::Z | Role::Range))
+            .copied()
+            .collect();
+        let decode = |rec: &[u8]| {
+            let mut v = RawVertex::default();
+            for &(off, s, r) in &geometry {
+                v.set(r, s.decode(&rec[off..], big));
+            }
+            v
+        };
+        if self.origin.is_none() {
+            if let Some(v) = recs
+                .chunks_exact(stride)
+                .map(decode)
+                .find(|v| !self.is_missing(v))
+            {
+                self.origin = Some(self.choose_origin(v.xyz));
+            }
+        }
+        // Without a real return every point is missing and the origin is never used.
+        let o = self.origin.unwrap_or([0.0; 3]);
+        let this = &*self;
+        let mut xyz = Vec::new();
+        recs.par_chunks_exact(stride)
+            .map(|rec| {
+                let v = decode(rec);
+                if this.is_missing(&v) {
+                    [f32::NAN; 3]
+                } else {
+                    Self::relative(v.xyz, o)
+                }
+            })
+            .collect_into_vec(&mut xyz);
+        let column = |(off, s): (usize, Scalar)| {
+            let mut out = Vec::new();
+            recs.par_chunks_exact(stride)
+                .map(|rec| s.decode(&rec[off..], big) as f32)
+                .collect_into_vec(&mut out);
+            out
+        };
+        let intensity = self
+            .intensity
+            .is_some()
+            .then(|| field(Role::Intensity))
+            .flatten();
+        let reflectivity = self
+            .reflectivity
+            .is_some()
+            .then(|| field(Role::Reflectivity))
+            .flatten();
+        self.intensity = intensity.map(column);
+        self.reflectivity = reflectivity.map(column);
+        if self.rgb.is_some() {
+            if let (Some(r), Some(g), Some(b)) =
+                (field(Role::Red), field(Role::Green), field(Role::Blue))
+            {
+                let k = self.rgb_conv;
+                let mut rgb = Vec::new();
+                recs.par_chunks_exact(stride)
+                    .map(|rec| {
+                        [
+                            k[0].apply(r.1.decode(&rec[r.0..], big)),
+                            k[1].apply(g.1.decode(&rec[g.0..], big)),
+                            k[2].apply(b.1.decode(&rec[b.0..], big)),
+                        ]
+                    })
+                    .collect_into_vec(&mut rgb);
+                self.rgb = Some(rgb);
+            }
+        }
+        self.xyz = xyz;
     }
 
     fn finish(self, layout: Option<(usize, usize)>) -> Result<PointCloud> {
@@ -861,13 +965,7 @@ fn read_binary(
                         }
                         f
                     };
-                    let mut v = RawVertex::default();
-                    for rec in bytes[pos..end].chunks_exact(stride) {
-                        for &(off, s, r) in &fields {
-                            v.set(r, s.decode(&rec[off..], big));
-                        }
-                        builder.push(&v);
-                    }
+                    builder.fill_fixed(&bytes[pos..end], stride, &fields, big);
                 }
                 pos = end;
             }
