@@ -72,7 +72,10 @@ impl PointCloud {
         if rows.checked_mul(cols) != Some(xyz.len()) {
             return Err(Error::invalid(
                 "point cloud",
-                format!("{} points do not fill {rows} rows × {cols} columns", xyz.len()),
+                format!(
+                    "{} points do not fill {rows} rows × {cols} columns",
+                    xyz.len()
+                ),
             ));
         }
         let mut c = Self::unorganized(xyz);
@@ -152,10 +155,7 @@ impl PointCloud {
             ));
         }
         if !self.sensor_origin.coords.iter().all(|v| v.is_finite()) {
-            return Err(Error::invalid(
-                "point cloud",
-                "sensor origin is not finite",
-            ));
+            return Err(Error::invalid("point cloud", "sensor origin is not finite"));
         }
         Ok(())
     }

@@ -349,7 +349,12 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
         let loc = || format!("header line {line_no}");
         let (raw, next) = line_at(pos);
         pos = next;
-        let text = std::str::from_utf8(&raw[..strip_cr(raw)]).map_err(|_| {
+        let line = &raw[..strip_cr(raw)];
+        if line.starts_with(b"comment") && std::str::from_utf8(line).is_err() {
+            // A comment in a legacy encoding (Latin-1...) says nothing we read.
+            continue;
+        }
+        let text = std::str::from_utf8(line).map_err(|_| {
             Error::format(
                 path,
                 loc(),

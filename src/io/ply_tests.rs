@@ -515,6 +515,16 @@ fn the_result_does_not_depend_on_the_thread_count() {
     assert_eq!(one.2.translation.vector.x, 100_025.0);
 }
 
+#[test]
+fn a_comment_that_is_not_utf8_is_skipped() {
+    let mut b = b"ply\nformat ascii 1.0\ncomment scanned in M\xfcnchen\n".to_vec();
+    b.extend_from_slice(
+        b"element vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+          end_header\n1 2 3\n",
+    );
+    assert_eq!(read(&b).unwrap().xyz, vec![[1.0, 2.0, 3.0]]);
+}
+
 // ------------------------------------------------------------------------------------
 // Bad input
 
