@@ -776,13 +776,7 @@ impl Builder {
                 }
             })
             .collect_into_vec(&mut xyz);
-        let column = |(off, s): (usize, Scalar)| {
-            let mut out = Vec::new();
-            recs.par_chunks_exact(stride)
-                .map(|rec| s.decode(&rec[off..], big) as f32)
-                .collect_into_vec(&mut out);
-            out
-        };
+        let column = |(off, s): (usize, Scalar)| column_f32(recs, stride, off, s, big);
         let intensity = self
             .intensity
             .is_some()
@@ -829,6 +823,40 @@ impl Builder {
         cloud.sensor_origin = Point3::new(-o[0], -o[1], -o[2]);
         Ok(cloud)
     }
+}
+
+/// One scalar property of every fixed-size record, as `f32`; the type dispatch sits outside
+/// the loop so that each loop is specialised to one type and byte order.
+fn column_f32(recs: &[u8], stride: usize, off: usize, s: Scalar, big: bool) -> Vec<f32> {
+    let mut out = Vec::new();
+    macro_rules! go {
+        ($t:ty, $n:expr, $from:ident) => {
+            recs.par_chunks_exact(stride)
+                .map(|rec| {
+                    let mut a = [0u8; $n];
+                    a.copy_from_slice(&rec[off..off + $n]);
+                    <$t>::$from(a) as f32
+                })
+                .collect_into_vec(&mut out)
+        };
+    }
+    match (s, big) {
+        (Scalar::I8, _) => go!(i8, 1, from_le_bytes),
+        (Scalar::U8, _) => go!(u8, 1, from_le_bytes),
+        (Scalar::I16, false) => go!(i16, 2, from_le_bytes),
+        (Scalar::I16, true) => go!(i16, 2, from_be_bytes),
+        (Scalar::U16, false) => go!(u16, 2, from_le_bytes),
+        (Scalar::U16, true) => go!(u16, 2, from_be_bytes),
+        (Scalar::I32, false) => go!(i32, 4, from_le_bytes),
+        (Scalar::I32, true) => go!(i32, 4, from_be_bytes),
+        (Scalar::U32, false) => go!(u32, 4, from_le_bytes),
+        (Scalar::U32, true) => go!(u32, 4, from_be_bytes),
+        (Scalar::F32, false) => go!(f32, 4, from_le_bytes),
+        (Scalar::F32, true) => go!(f32, 4, from_be_bytes),
+        (Scalar::F64, false) => go!(f64, 8, from_le_bytes),
+        (Scalar::F64, true) => go!(f64, 8, from_be_bytes),
+    }
+    out
 }
 
 // ------------------------------------------------------------------------------------
