@@ -7,6 +7,8 @@
 
 use std::path::Path;
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
 
@@ -37,16 +39,24 @@ pub fn read_from_bytes(bytes: &[u8], name: impl AsRef<Path>) -> Result<PointClou
             ),
         ));
     }
-    let n = bytes.len() / POINT_BYTES;
-    let mut xyz = Vec::with_capacity(n);
-    let mut intensity = Vec::with_capacity(n);
-    for rec in bytes.chunks_exact(POINT_BYTES) {
-        let f = |k: usize| f32::from_le_bytes([rec[k], rec[k + 1], rec[k + 2], rec[k + 3]]);
-        let p = [f(0), f(4), f(8)];
-        let missing = p == [0.0; 3] || !p.iter().all(|c| c.is_finite());
-        xyz.push(if missing { [f32::NAN; 3] } else { p });
-        intensity.push(f(12));
-    }
+    let f = |rec: &[u8], k: usize| f32::from_le_bytes([rec[k], rec[k + 1], rec[k + 2], rec[k + 3]]);
+    let (mut xyz, mut intensity) = (Vec::new(), Vec::new());
+    bytes
+        .par_chunks_exact(POINT_BYTES)
+        .map(|rec| {
+            let p = [f(rec, 0), f(rec, 4), f(rec, 8)];
+            let missing = p == [0.0; 3] || !p.iter().all(|c| c.is_finite());
+            if missing {
+                [f32::NAN; 3]
+            } else {
+                p
+            }
+        })
+        .collect_into_vec(&mut xyz);
+    bytes
+        .par_chunks_exact(POINT_BYTES)
+        .map(|rec| f(rec, 12))
+        .collect_into_vec(&mut intensity);
     let mut cloud = PointCloud::unorganized(xyz);
     cloud.intensity = Some(intensity);
     Ok(cloud)

@@ -51,6 +51,7 @@
 use std::path::Path;
 
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::geom::{PointCloud, Pose};
@@ -348,7 +349,12 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
         let loc = || format!("header line {line_no}");
         let (raw, next) = line_at(pos);
         pos = next;
-        let text = std::str::from_utf8(&raw[..strip_cr(raw)]).map_err(|_| {
+        let line = &raw[..strip_cr(raw)];
+        if line.starts_with(b"comment") && std::str::from_utf8(line).is_err() {
+            // A comment in a legacy encoding (Latin-1...) says nothing we read.
+            continue;
+        }
+        let text = std::str::from_utf8(line).map_err(|_| {
             Error::format(
                 path,
                 loc(),
@@ -668,28 +674,44 @@ impl Builder {
         }
     }
 
+    /// A missing return: a non-finite coordinate, or (with a `range` property) zero range
+    /// or all-zero coordinates.
+    #[inline]
+    fn is_missing(&self, v: &RawVertex) -> bool {
+        let p = v.xyz;
+        !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite())
+            || (self.zero_is_missing && (v.range == 0.0 || p == [0.0; 3]))
+    }
+
+    /// The local origin chosen from the first real return `p`.
+    fn choose_origin(&self, p: [f64; 3]) -> [f64; 3] {
+        let far = p.iter().any(|c| c.abs() > FAR_FROM_ORIGIN_M);
+        if self.always_shift || far {
+            p.map(f64::round)
+        } else {
+            [0.0; 3]
+        }
+    }
+
+    #[inline]
+    fn relative(p: [f64; 3], o: [f64; 3]) -> [f32; 3] {
+        [
+            (p[0] - o[0]) as f32,
+            (p[1] - o[1]) as f32,
+            (p[2] - o[2]) as f32,
+        ]
+    }
+
     #[inline]
     fn push(&mut self, v: &RawVertex) {
-        let p = v.xyz;
-        let missing = !(p[0].is_finite() && p[1].is_finite() && p[2].is_finite())
-            || (self.zero_is_missing && (v.range == 0.0 || p == [0.0; 3]));
-        if missing {
+        if self.is_missing(v) {
             self.xyz.push([f32::NAN; 3]);
         } else {
-            let always = self.always_shift;
-            let o = *self.origin.get_or_insert_with(|| {
-                let far = p.iter().any(|c| c.abs() > FAR_FROM_ORIGIN_M);
-                if always || far {
-                    p.map(f64::round)
-                } else {
-                    [0.0; 3]
-                }
-            });
-            self.xyz.push([
-                (p[0] - o[0]) as f32,
-                (p[1] - o[1]) as f32,
-                (p[2] - o[2]) as f32,
-            ]);
+            let o = match self.origin {
+                Some(o) => o,
+                None => *self.origin.insert(self.choose_origin(v.xyz)),
+            };
+            self.xyz.push(Self::relative(v.xyz, o));
         }
         if let Some(i) = &mut self.intensity {
             i.push(v.intensity as f32);
@@ -707,6 +729,87 @@ impl Builder {
         }
     }
 
+    /// Decodes all vertices of fixed size `stride` from `recs` (the builder must be empty),
+    /// in parallel: each output value depends only on its record and on the origin, which
+    /// is chosen first, sequentially, so the result does not depend on the thread count.
+    fn fill_fixed(
+        &mut self,
+        recs: &[u8],
+        stride: usize,
+        fields: &[(usize, Scalar, Role)],
+        big: bool,
+    ) {
+        debug_assert!(self.xyz.is_empty() && stride > 0);
+        let field = |role: Role| fields.iter().find(|f| f.2 == role).map(|f| (f.0, f.1));
+        let geometry: Vec<_> = fields
+            .iter()
+            .filter(|f| matches!(f.2, Role::X | Role::Y | Role::Z | Role::Range))
+            .copied()
+            .collect();
+        let decode = |rec: &[u8]| {
+            let mut v = RawVertex::default();
+            for &(off, s, r) in &geometry {
+                v.set(r, s.decode(&rec[off..], big));
+            }
+            v
+        };
+        if self.origin.is_none() {
+            if let Some(v) = recs
+                .chunks_exact(stride)
+                .map(decode)
+                .find(|v| !self.is_missing(v))
+            {
+                self.origin = Some(self.choose_origin(v.xyz));
+            }
+        }
+        // Without a real return every point is missing and the origin is never used.
+        let o = self.origin.unwrap_or([0.0; 3]);
+        let this = &*self;
+        let mut xyz = Vec::new();
+        recs.par_chunks_exact(stride)
+            .map(|rec| {
+                let v = decode(rec);
+                if this.is_missing(&v) {
+                    [f32::NAN; 3]
+                } else {
+                    Self::relative(v.xyz, o)
+                }
+            })
+            .collect_into_vec(&mut xyz);
+        let column = |(off, s): (usize, Scalar)| column_f32(recs, stride, off, s, big);
+        let intensity = self
+            .intensity
+            .is_some()
+            .then(|| field(Role::Intensity))
+            .flatten();
+        let reflectivity = self
+            .reflectivity
+            .is_some()
+            .then(|| field(Role::Reflectivity))
+            .flatten();
+        self.intensity = intensity.map(column);
+        self.reflectivity = reflectivity.map(column);
+        if self.rgb.is_some() {
+            if let (Some(r), Some(g), Some(b)) =
+                (field(Role::Red), field(Role::Green), field(Role::Blue))
+            {
+                let k = self.rgb_conv;
+                let mut rgb = Vec::new();
+                recs.par_chunks_exact(stride)
+                    .map(|rec| {
+                        [
+                            k[0].apply(r.1.decode(&rec[r.0..], big)),
+                            k[1].apply(g.1.decode(&rec[g.0..], big)),
+                            k[2].apply(b.1.decode(&rec[b.0..], big)),
+                        ]
+                    })
+                    .collect_into_vec(&mut rgb);
+                self.rgb = Some(rgb);
+            }
+        }
+        self.xyz = xyz;
+    }
+
     fn finish(self, layout: Option<(usize, usize)>) -> Result<PointCloud> {
         let mut cloud = match layout {
             Some((rows, cols)) => PointCloud::organized(rows, cols, self.xyz)?,
@@ -720,6 +823,40 @@ impl Builder {
         cloud.sensor_origin = Point3::new(-o[0], -o[1], -o[2]);
         Ok(cloud)
     }
+}
+
+/// One scalar property of every fixed-size record, as `f32`; the type dispatch sits outside
+/// the loop so that each loop is specialised to one type and byte order.
+fn column_f32(recs: &[u8], stride: usize, off: usize, s: Scalar, big: bool) -> Vec<f32> {
+    let mut out = Vec::new();
+    macro_rules! go {
+        ($t:ty, $n:expr, $from:ident) => {
+            recs.par_chunks_exact(stride)
+                .map(|rec| {
+                    let mut a = [0u8; $n];
+                    a.copy_from_slice(&rec[off..off + $n]);
+                    <$t>::$from(a) as f32
+                })
+                .collect_into_vec(&mut out)
+        };
+    }
+    match (s, big) {
+        (Scalar::I8, _) => go!(i8, 1, from_le_bytes),
+        (Scalar::U8, _) => go!(u8, 1, from_le_bytes),
+        (Scalar::I16, false) => go!(i16, 2, from_le_bytes),
+        (Scalar::I16, true) => go!(i16, 2, from_be_bytes),
+        (Scalar::U16, false) => go!(u16, 2, from_le_bytes),
+        (Scalar::U16, true) => go!(u16, 2, from_be_bytes),
+        (Scalar::I32, false) => go!(i32, 4, from_le_bytes),
+        (Scalar::I32, true) => go!(i32, 4, from_be_bytes),
+        (Scalar::U32, false) => go!(u32, 4, from_le_bytes),
+        (Scalar::U32, true) => go!(u32, 4, from_be_bytes),
+        (Scalar::F32, false) => go!(f32, 4, from_le_bytes),
+        (Scalar::F32, true) => go!(f32, 4, from_be_bytes),
+        (Scalar::F64, false) => go!(f64, 8, from_le_bytes),
+        (Scalar::F64, true) => go!(f64, 8, from_be_bytes),
+    }
+    out
 }
 
 // ------------------------------------------------------------------------------------
@@ -861,13 +998,7 @@ fn read_binary(
                         }
                         f
                     };
-                    let mut v = RawVertex::default();
-                    for rec in bytes[pos..end].chunks_exact(stride) {
-                        for &(off, s, r) in &fields {
-                            v.set(r, s.decode(&rec[off..], big));
-                        }
-                        builder.push(&v);
-                    }
+                    builder.fill_fixed(&bytes[pos..end], stride, &fields, big);
                 }
                 pos = end;
             }

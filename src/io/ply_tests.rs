@@ -479,6 +479,52 @@ fn crlf_header_and_ascii_body() {
     assert_eq!(c.xyz, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
 }
 
+#[test]
+fn the_result_does_not_depend_on_the_thread_count() {
+    let pts: Vec<[f64; 3]> = (0..50_000)
+        .map(|i| {
+            let t = i as f64;
+            if i % 11 == 0 {
+                [f64::NAN, 0.0, 0.0]
+            } else {
+                [1.0e5 + t.sin() * 30.0, t * 1e-3, (t * 0.37).cos()]
+            }
+        })
+        .collect();
+    let mut vertex = xyz_element("double", &pts);
+    vertex.props.push(p("intensity", "float"));
+    for (k, row) in vertex.rows.iter_mut().enumerate() {
+        row.push(V::S(k as f64 * 0.25));
+    }
+    let bytes = write_ply("binary_little_endian", &[], &[vertex]);
+    let bits = |c: &PointCloud| {
+        let xyz: Vec<u32> = c.xyz.iter().flatten().map(|v| v.to_bits()).collect();
+        (xyz, c.intensity.clone(), c.frame_to_map)
+    };
+    let with = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| bits(&read(&bytes).unwrap()))
+    };
+    let one = with(1);
+    assert_eq!(one, with(3));
+    assert_eq!(one, with(8));
+    // Point 0 is missing; point 1 (x = 1e5 + 30 sin 1) sets the origin.
+    assert_eq!(one.2.translation.vector.x, 100_025.0);
+}
+
+#[test]
+fn a_comment_that_is_not_utf8_is_skipped() {
+    let mut b = b"ply\nformat ascii 1.0\ncomment scanned in M\xfcnchen\n".to_vec();
+    b.extend_from_slice(
+        b"element vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+          end_header\n1 2 3\n",
+    );
+    assert_eq!(read(&b).unwrap().xyz, vec![[1.0, 2.0, 3.0]]);
+}
+
 // ------------------------------------------------------------------------------------
 // Bad input
 

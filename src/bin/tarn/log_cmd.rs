@@ -1,0 +1,141 @@
+//! `tarn info LOG.mcap` and `tarn recode`: what a ROS 2 log holds.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use serde_json::{json, Value};
+use tarn::io::frames::{FrameStream, LogConfig};
+use tarn::io::mcap_log::{self, LogReader};
+use tarn::io::ros::{self, schema_name};
+
+fn f64s(v: &[f64]) -> Value {
+    json!(v)
+}
+
+fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
+    let ch = &m.channel;
+    let base = |body: Value| {
+        let mut o = json!({"topic": ch.topic, "type": ch.schema, "log_time": m.log_time});
+        o.as_object_mut()
+            .expect("object")
+            .extend(body.as_object().expect("object").clone());
+        o
+    };
+    let stamp = |h: &ros::Header| json!([h.stamp.sec, h.stamp.nanosec]);
+    let at = || format!("{} at log time {} ns", ch.topic, m.log_time);
+    Ok(Some(match ch.schema.as_str() {
+        schema_name::TF_MESSAGE => {
+            let tf = ros::TfMessage::decode(&m.data).with_context(at)?;
+            base(json!({"transforms": tf.transforms.iter().map(|t| {
+                let v = t.child_to_parent.translation.vector;
+                let q = t.child_to_parent.rotation.quaternion().coords;
+                json!({"stamp": stamp(&t.header), "parent": t.header.frame_id, "child": t.child_frame_id,
+                       "translation": [v.x, v.y, v.z], "rotation": [q.x, q.y, q.z, q.w]})
+            }).collect::<Vec<_>>()}))
+        }
+        schema_name::POINT_CLOUD2 => {
+            let msg = ros::PointCloud2Msg::decode(&m.data).with_context(at)?;
+            let c = ros::pointcloud2_to_cloud(&msg)
+                .map_err(anyhow::Error::msg)
+                .with_context(at)?;
+            base(
+                json!({"stamp": stamp(&msg.header), "frame_id": msg.header.frame_id,
+                "height": msg.height, "width": msg.width, "rows": c.rows, "cols": c.cols,
+                "xyz": c.xyz, "intensity": c.intensity, "reflectivity": c.reflectivity}),
+            )
+        }
+        schema_name::IMAGE => {
+            let msg = ros::ImageMsg::decode(&m.data).with_context(at)?;
+            let img = ros::decode_image(&msg)
+                .map_err(anyhow::Error::msg)
+                .with_context(at)?;
+            let pixels: Value = match &img.pixels {
+                ros::Pixels::Rgb8(p) => json!(p),
+                ros::Pixels::Mono8(p) => json!(p),
+                ros::Pixels::Mono16(p) => json!(p),
+            };
+            base(
+                json!({"stamp": stamp(&msg.header), "frame_id": msg.header.frame_id,
+                "encoding": msg.encoding, "width": img.width, "height": img.height, "pixels": pixels}),
+            )
+        }
+        schema_name::CAMERA_INFO => {
+            let msg = ros::CameraInfoMsg::decode(&m.data).with_context(at)?;
+            base(
+                json!({"stamp": stamp(&msg.header), "frame_id": msg.header.frame_id,
+                "width": msg.width, "height": msg.height, "distortion_model": msg.distortion_model,
+                "d": f64s(&msg.d), "k": f64s(&msg.k), "p": f64s(&msg.p)}),
+            )
+        }
+        _ => return Ok(None),
+    }))
+}
+
+pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::Result<()> {
+    let summary = mcap_log::summarize(&log)?;
+    let mut stream = FrameStream::open(&log, &cfg)?;
+    let mut frame_errors = Vec::new();
+    for f in stream.by_ref() {
+        if let Err(e) = f {
+            frame_errors.push(e.to_string());
+        }
+    }
+    let stats = stream.stats().clone();
+    if as_json {
+        let mut out = json!({
+            "duration_s": summary.duration_s,
+            "start_ns": summary.start_ns,
+            "end_ns": summary.end_ns,
+            "messages": summary.messages,
+            "topics": summary.topics,
+            "frame_topic": cfg.frame_topic,
+            "frames": stats,
+            "errors": frame_errors,
+        });
+        if dump {
+            let mut msgs = Vec::new();
+            for m in LogReader::open(&log)? {
+                if let Some(v) = dump_message(&m?)? {
+                    msgs.push(v);
+                }
+            }
+            out["messages_decoded"] = Value::Array(msgs);
+        }
+        println!("{}", serde_json::to_string(&out)?);
+        return Ok(());
+    }
+    println!("{}", log.display());
+    println!(
+        "  {} messages over {:.3} s",
+        summary.messages, summary.duration_s
+    );
+    let w = summary
+        .topics
+        .iter()
+        .map(|t| t.topic.len())
+        .max()
+        .unwrap_or(5);
+    for t in &summary.topics {
+        println!("  {:<w$}  {:>8}  {}", t.topic, t.count, t.schema);
+    }
+    println!(
+        "  frames (from {}): {} would be built, {} skipped for want of a transform",
+        cfg.frame_topic, stats.frames_built, stats.frames_skipped_no_tf
+    );
+    for r in &stats.skip_reasons {
+        println!("    skipped: {r}");
+    }
+    if stats.secondary_dropped_no_tf > 0 {
+        println!(
+            "  {} matched images/clouds without a transform",
+            stats.secondary_dropped_no_tf
+        );
+    }
+    for (k, n) in &stats.unknown_type {
+        println!("  skipped {n} messages of unknown type on {k}");
+    }
+    for e in &frame_errors {
+        println!("  error: {e}");
+    }
+    Ok(())
+}

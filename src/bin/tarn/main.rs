@@ -1,0 +1,173 @@
+//! The `tarn` command line: parses, calls the library, prints. One file per command.
+
+mod build_cmd;
+mod cloud_cmd;
+mod log_cmd;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand, ValueEnum};
+use tarn::io::frames::LogConfig;
+use tarn::io::mcap_log::{self, LogCompression, WriteOptions};
+use tarn::io::ros::Endian;
+
+use build_cmd::BuildArgs;
+
+#[derive(Parser)]
+#[command(
+    name = "tarn",
+    version,
+    about = "Terrain maps and water hazards for off-road vehicles",
+    long_about = "Terrain maps and water hazards for off-road vehicles.\n\n\
+                  With no command, builds the default scene shipped in maps/ into out/default."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Compression {
+    Zstd,
+    Lz4,
+    None,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Build a map from a point cloud in the map frame (.ply or KITTI .bin) and write the
+    /// contract files: map.ply, terrain.ply, map.png, report.json.
+    Build(BuildArgs),
+    /// What a file holds. A ROS 2 log (.mcap): topics, types, counts, time span, frames that
+    /// would be built. A point cloud (.ply, KITTI .bin): points, returns, channels, bounds.
+    Info {
+        input: PathBuf,
+        /// (log) Print JSON: {"duration_s", "topics": [{"topic", "type", "count"}], "frames": {...}}.
+        #[arg(long)]
+        json: bool,
+        /// (log) With --json: also every TF, PointCloud2, Image and CameraInfo message, decoded.
+        #[arg(long, requires = "json")]
+        dump_messages: bool,
+        /// (log) Topic whose clouds make frames (default: the lidar topic, /lidar/points).
+        #[arg(long)]
+        frame_topic: Option<String>,
+        /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// (cloud) The file is a column-major lidar scan with this many rings (point = column ×
+        /// rings + ring, as Ouster and RELLIS-3D write it): show it organized.
+        #[arg(long)]
+        rings: Option<usize>,
+    },
+    /// Decodes the TF, PointCloud2, Image and CameraInfo messages of a log and writes them
+    /// again with tarn's encoder (other types are skipped and counted).
+    Recode {
+        input: PathBuf,
+        output: PathBuf,
+        #[arg(long, value_enum, default_value = "zstd")]
+        compression: Compression,
+        /// Write without chunks (no index, no summary of chunks).
+        #[arg(long)]
+        unchunked: bool,
+        /// Encode CDR big endian (ROS 2 itself writes little endian).
+        #[arg(long)]
+        big_endian: bool,
+    },
+}
+
+fn is_log(p: &std::path::Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        None => {
+            let a = BuildArgs {
+                input: build_cmd::default_scene(),
+                out: PathBuf::from("out/default"),
+                resolution: 0.10,
+                noise_sigma: 0.02,
+                max_window_cells: 2048,
+                json: false,
+            };
+            build_cmd::print_summary(&build_cmd::run_build(&a)?);
+            Ok(())
+        }
+        Some(Command::Build(a)) => {
+            let r = build_cmd::run_build(&a)?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                build_cmd::print_summary(&r);
+            }
+            Ok(())
+        }
+        Some(Command::Info {
+            input,
+            json,
+            dump_messages,
+            frame_topic,
+            config,
+            rings,
+        }) => {
+            if !is_log(&input) {
+                return cloud_cmd::info(&input, rings);
+            }
+            let mut cfg = match config {
+                Some(p) => {
+                    let text =
+                        std::fs::read_to_string(&p).with_context(|| p.display().to_string())?;
+                    serde_json::from_str(&text)
+                        .with_context(|| format!("{}: not a log config", p.display()))?
+                }
+                None => LogConfig::default(),
+            };
+            if let Some(t) = frame_topic {
+                cfg.frame_topic = t;
+            }
+            log_cmd::info(input, json, dump_messages, cfg)
+        }
+        Some(Command::Recode {
+            input,
+            output,
+            compression,
+            unchunked,
+            big_endian,
+        }) => {
+            let opts = WriteOptions {
+                compression: match compression {
+                    Compression::Zstd => LogCompression::Zstd,
+                    Compression::Lz4 => LogCompression::Lz4,
+                    Compression::None => LogCompression::None,
+                },
+                chunked: !unchunked,
+                endian: if big_endian {
+                    Endian::Big
+                } else {
+                    Endian::Little
+                },
+                ..Default::default()
+            };
+            let s = mcap_log::recode(&input, &output, &opts)?;
+            println!("wrote {} messages to {}", s.written, output.display());
+            for (t, n) in &s.skipped_unknown {
+                println!("skipped {n} messages of unknown type on {t}");
+            }
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("tarn: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
