@@ -11,5 +11,6 @@ pub mod error;
 pub mod geom;
 pub mod grid;
 pub mod io;
+pub mod optics;
 
 pub use error::{Error, Result};
