@@ -443,6 +443,18 @@ impl LidarWaterModel {
         )
     }
 
+    /// Lookaheads for a report when none are given: every 0.5 m from 0 to 10 % past the
+    /// dry-ground limit (at most 201 rows; evenly spaced beyond that).
+    pub fn default_lookaheads(&self) -> Vec<f64> {
+        let end = self.dry_limit().unwrap_or(self.cfg.height_m).max(1.0) * 1.1;
+        let steps = (end / 0.5).ceil() as usize;
+        if steps <= 200 {
+            (0..=steps).map(|i| i as f64 * 0.5).collect()
+        } else {
+            (0..=200).map(|i| end * i as f64 / 200.0).collect()
+        }
+    }
+
     /// The `tarn lidar-model` report for these lookaheads and one water depth.
     pub fn report(&self, lookaheads_m: &[f64], depth_m: f64) -> Result<LidarModelReport> {
         finite_non_negative("water depth (m)", depth_m)?;
