@@ -131,8 +131,23 @@ pub fn plot_lidar_model(model: &LidarWaterModel, depth_m: f64, path: &Path) -> R
         .suffix(".png")
         .tempfile_in(dir)
         .map_err(|e| Error::io(dir, e))?;
-    img.save_with_format(tmp.path(), image::ImageFormat::Png)
-        .map_err(|e| Error::io(tmp.path(), std::io::Error::other(e)))?;
+    {
+        use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+        use image::ImageEncoder;
+        use std::io::Write;
+        let mut file = std::io::BufWriter::new(tmp.as_file());
+        PngEncoder::new_with_quality(&mut file, CompressionType::Best, FilterType::Adaptive)
+            .write_image(img.as_raw(), w, h, image::ExtendedColorType::Rgb8)
+            .map_err(|e| Error::io(tmp.path(), std::io::Error::other(e)))?;
+        file.flush().map_err(|e| Error::io(tmp.path(), e))?;
+    }
+    // A temporary file is private (0600); the plot is an ordinary output file.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| Error::io(tmp.path(), e))?;
+    }
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok(())
 }
