@@ -164,7 +164,7 @@ mod tests {
             d(1550.0)
         );
         // 525 nm: the blue-green minimum is where measurements disagree most (Segelstein's
-        // value is about 1.4× the paper's implied 0.032 /m).
+        // value is 1.23× the paper's implied 0.032 /m).
         assert!((d(525.0) / 144.0 - 1.0).abs() < 0.5, "525: {}", d(525.0));
     }
 
