@@ -192,7 +192,8 @@ fn fresnel_panel(model: &LidarWaterModel, area: &DrawingArea<BitMapBackend, Shif
         .draw()?;
     let xs: Vec<f64> = (0..=500).map(|i| i as f64 * 0.02).collect();
     let fr = |x: f64| model.transmittance(x * h).unwrap_or((0.0, 0.0));
-    let series: [(&str, RGBColor, Box<dyn Fn(f64) -> f64>); 4] = [
+    type Curve<'a> = (&'static str, RGBColor, Box<dyn Fn(f64) -> f64 + 'a>);
+    let series: [Curve; 4] = [
         (
             "T horizontal (s)",
             RGBColor(0, 0, 200),
