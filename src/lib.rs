@@ -11,6 +11,7 @@ pub mod error;
 pub mod geom;
 pub mod grid;
 pub mod io;
+pub mod optics;
 
 pub use error::{Error, Result};
 pub mod build;

@@ -3,6 +3,7 @@
 mod build_cmd;
 mod cloud_cmd;
 mod log_cmd;
+mod optics_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -40,6 +41,9 @@ enum Command {
     /// Build a map from a point cloud in the map frame (.ply or KITTI .bin) and write the
     /// contract files: map.ply, terrain.ply, map.png, report.json.
     Build(BuildArgs),
+    /// Lidar propagation over water: bottom returns, maximum measurable depth, and the
+    /// lookahead interval where a missing return is diagnostic of water.
+    LidarModel(optics_cmd::LidarModelArgs),
     /// What a file holds. A ROS 2 log (.mcap): topics, types, counts, time span, frames that
     /// would be built. A point cloud (.ply, KITTI .bin): points, returns, channels, bounds.
     Info {
@@ -106,6 +110,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        Some(Command::LidarModel(a)) => optics_cmd::lidar_model(a),
         Some(Command::Info {
             input,
             json,

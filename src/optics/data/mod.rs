@@ -1,0 +1,2 @@
+//! Embedded measured tables (CC0), see `tables.rs` for their source.
+pub(crate) mod tables;
