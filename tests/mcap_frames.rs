@@ -420,6 +420,10 @@ fn truncated_file_reads_what_precedes_the_damage_then_says_where() {
         );
         assert!(r.next_message().is_none());
 
+        let sum = summarize(&q).unwrap();
+        assert_eq!(sum.messages, n);
+        assert!(sum.damage.as_ref().unwrap().contains("truncated"));
+
         let (fr, _) = frames(&q);
         let (last, good) = fr.split_last().unwrap();
         assert!(last.is_err());

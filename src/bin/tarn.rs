@@ -144,6 +144,7 @@ fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::Resu
             "frame_topic": cfg.frame_topic,
             "frames": stats,
             "errors": frame_errors,
+            "damage": summary.damage,
         });
         if dump {
             let mut msgs = Vec::new();
@@ -155,7 +156,10 @@ fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::Resu
             out["messages_decoded"] = Value::Array(msgs);
         }
         println!("{}", serde_json::to_string(&out)?);
-        return Ok(());
+        return match summary.damage {
+            Some(d) => Err(anyhow::anyhow!(d)),
+            None => Ok(()),
+        };
     }
     println!("{}", log.display());
     println!(
@@ -190,7 +194,10 @@ fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::Resu
     for e in &frame_errors {
         println!("  error: {e}");
     }
-    Ok(())
+    match summary.damage {
+        Some(d) => Err(anyhow::anyhow!(d)),
+        None => Ok(()),
+    }
 }
 
 fn main() -> anyhow::Result<()> {
