@@ -420,6 +420,10 @@ fn truncated_file_reads_what_precedes_the_damage_then_says_where() {
         );
         assert!(r.next_message().is_none());
 
+        let sum = summarize(&q).unwrap();
+        assert_eq!(sum.messages, n);
+        assert!(sum.damage.as_ref().unwrap().contains("truncated"));
+
         let (fr, _) = frames(&q);
         let (last, good) = fr.split_last().unwrap();
         assert!(last.is_err());
@@ -465,4 +469,120 @@ fn garbage_is_a_clear_error() {
         .to_string();
     assert!(e.contains("junk.mcap") && e.contains("byte"), "{e}");
     let _ = ImageMsg::decode; // (type is part of the public API)
+}
+
+#[test]
+fn stereo_can_drive_the_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("stereo.mcap");
+    write_log(&p, &Spec::default());
+    let cfg = LogConfig {
+        frame_topic: "/stereo/points".into(),
+        ..LogConfig::default()
+    };
+    let mut s = FrameStream::open(&p, &cfg).unwrap();
+    let fr: Vec<Frame> = s.by_ref().map(|f| f.unwrap()).collect();
+    assert_eq!(fr.len(), 20);
+    for (k, f) in fr.iter().enumerate() {
+        let t = 0.07 + 0.1 * k as f64;
+        assert!(close(&f.base_to_map, &base_pose(t), 1e-9));
+        let st = f.stereo.as_ref().unwrap();
+        assert!(close(&st.frame_to_map, &(base_pose(t) * cam_ext()), 1e-9));
+        // The lidar scan 20 ms earlier is matched, with its pose at its own stamp.
+        let l = f.lidar.as_ref().unwrap();
+        assert!(close(
+            &l.frame_to_map,
+            &(base_pose(t - 0.02) * lidar_ext()),
+            1e-9
+        ));
+    }
+    let bad = LogConfig {
+        frame_topic: "/nope".into(),
+        ..LogConfig::default()
+    };
+    assert!(FrameStream::open(&p, &bad).is_err());
+}
+
+#[test]
+fn log_without_summary_or_indexes_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("bare.mcap");
+    {
+        let f = std::io::BufWriter::new(std::fs::File::create(&p).unwrap());
+        let mut w = mcap::WriteOptions::new()
+            .profile("ros2")
+            .emit_summary_records(false)
+            .emit_summary_offsets(false)
+            .emit_statistics(false)
+            .emit_message_indexes(false)
+            .emit_chunk_indexes(false)
+            .create(f)
+            .unwrap();
+        let text = |s| tarn::io::ros::schema_text(s).unwrap();
+        let s_tf = w
+            .add_schema(
+                "tf2_msgs/msg/TFMessage",
+                "ros2msg",
+                text("tf2_msgs/msg/TFMessage").as_bytes(),
+            )
+            .unwrap();
+        let s_pc = w
+            .add_schema(
+                "sensor_msgs/msg/PointCloud2",
+                "ros2msg",
+                text("sensor_msgs/msg/PointCloud2").as_bytes(),
+            )
+            .unwrap();
+        let c_st = w
+            .add_channel(s_tf, "/tf_static", "cdr", &Default::default())
+            .unwrap();
+        let c_tf = w
+            .add_channel(s_tf, "/tf", "cdr", &Default::default())
+            .unwrap();
+        let c_pc = w
+            .add_channel(s_pc, "/lidar/points", "cdr", &Default::default())
+            .unwrap();
+        let mut put = |ch, ns: i64, data: Vec<u8>| {
+            let h = mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: 0,
+                log_time: ns as u64,
+                publish_time: ns as u64,
+            };
+            w.write_to_known_channel(&h, &data).unwrap();
+        };
+        put(
+            c_st,
+            T0,
+            TfMessage {
+                transforms: vec![ts("base_link", "lidar", T0, lidar_ext())],
+            }
+            .encode(Endian::Big),
+        );
+        for i in 0..3 {
+            let ns = T0 + i * NS / 10;
+            put(
+                c_tf,
+                ns,
+                TfMessage {
+                    transforms: vec![ts("map", "base_link", ns, base_pose(i as f64 * 0.1))],
+                }
+                .encode(Endian::Little),
+            );
+        }
+        put(
+            c_pc,
+            T0 + NS / 10,
+            cloud_to_pointcloud2(&scan(0), hdr(T0 + NS / 20, "lidar")).encode(Endian::Little),
+        );
+        w.finish().unwrap();
+    }
+    let (fr, stats) = frames(&p);
+    assert_eq!(fr.len(), 1);
+    assert!(close(
+        &fr[0].as_ref().unwrap().base_to_map,
+        &base_pose(0.05),
+        1e-9
+    ));
+    assert_eq!(stats.messages, 5);
 }

@@ -47,11 +47,11 @@ impl CameraModel {
             Distortion::PlumbBob(c) => c,
             Distortion::Equidistant(c) => c,
         };
-        if !(fx > 0.0 && fy > 0.0 && fx.is_finite() && fy.is_finite())
-            || !cx.is_finite()
-            || !cy.is_finite()
-            || coeffs.iter().any(|v| !v.is_finite())
-        {
+        let ok = fx > 0.0
+            && fy > 0.0
+            && [fx, fy, cx, cy].iter().all(|v| v.is_finite())
+            && coeffs.iter().all(|v| v.is_finite());
+        if !ok {
             return Err(Error::invalid(
                 "camera model",
                 format!("fx {fx}, fy {fy} must be positive and finite; cx {cx}, cy {cy} and distortion {coeffs:?} finite"),
@@ -164,7 +164,7 @@ impl CameraModel {
 
     /// Pixel of a point in the optical frame; `None` behind the camera (z ≤ 0).
     pub fn project(&self, p: &Point3<f64>) -> Option<[f64; 2]> {
-        if !(p.z > 0.0) {
+        if p.z.is_nan() || p.z <= 0.0 {
             return None;
         }
         let [xd, yd] = self.distort(p.x / p.z, p.y / p.z);

@@ -231,15 +231,27 @@ pub struct LogSummary {
     pub start_ns: Option<u64>,
     pub end_ns: Option<u64>,
     pub duration_s: f64,
+    /// Where and why reading stopped early (a truncated or damaged file); the counts are
+    /// those of the messages before that point.
+    pub damage: Option<String>,
 }
 
-/// Counts messages per topic in one streaming pass. Stops at the first container error.
+/// Counts messages per topic in one streaming pass. A truncated or damaged file gives the
+/// counts up to the damage and says where it is in [`LogSummary::damage`]; only a file that
+/// cannot be opened is an error.
 pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
     let mut r = LogReader::open(path)?;
     let mut counts: BTreeMap<String, (String, u64)> = BTreeMap::new();
     let (mut start, mut end) = (None::<u64>, None::<u64>);
+    let mut damage = None;
     while let Some(m) = r.next_message() {
-        let m = m?;
+        let m = match m {
+            Ok(m) => m,
+            Err(e) => {
+                damage = Some(e.to_string());
+                break;
+            }
+        };
         let e = counts
             .entry(m.channel.topic.clone())
             .or_insert_with(|| (m.channel.schema.clone(), 0));
@@ -263,6 +275,7 @@ pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
         },
         start_ns: start,
         end_ns: end,
+        damage,
     })
 }
 

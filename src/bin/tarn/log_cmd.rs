@@ -91,6 +91,7 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
             "frame_topic": cfg.frame_topic,
             "frames": stats,
             "errors": frame_errors,
+            "damage": summary.damage,
         });
         if dump {
             let mut msgs = Vec::new();
@@ -102,7 +103,10 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
             out["messages_decoded"] = Value::Array(msgs);
         }
         println!("{}", serde_json::to_string(&out)?);
-        return Ok(());
+        return match summary.damage {
+            Some(d) => Err(anyhow::anyhow!(d)),
+            None => Ok(()),
+        };
     }
     println!("{}", log.display());
     println!(
@@ -137,5 +141,8 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
     for e in &frame_errors {
         println!("  error: {e}");
     }
-    Ok(())
+    match summary.damage {
+        Some(d) => Err(anyhow::anyhow!(d)),
+        None => Ok(()),
+    }
 }
