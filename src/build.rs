@@ -327,3 +327,155 @@ mod tests {
         assert_eq!(b.ingest.nonfinite, 10);
     }
 }
+
+/// `report.json` of a build from a ROS 2 log.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LogBuildReport {
+    pub tarn_version: String,
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub resolution_m: f64,
+    pub window_cells: usize,
+    pub frame_topic: String,
+    pub frames_fused: u64,
+    pub log_duration_s: f64,
+    /// Log duration over build time (offline speed).
+    pub x_realtime: f64,
+    pub lidar_points: IngestStats,
+    pub stereo_points: IngestStats,
+    pub frames: crate::io::frames::FrameStats,
+    /// Messages or frames that could not be used, with where and why.
+    pub errors: Vec<String>,
+    /// Where reading stopped early (a truncated or damaged log), if it did.
+    pub damage: Option<String>,
+    pub cells_observed: usize,
+    pub tiles: usize,
+    pub elevation_range_m: Option<(f64, f64)>,
+    pub timings_s: Timings,
+}
+
+/// Settings of a log build.
+#[derive(Debug, Clone, Default)]
+pub struct LogBuildConfig {
+    pub grid: GridConfig,
+    pub log: crate::io::frames::LogConfig,
+    /// Use this topic for frames; by default the lidar topic, or the stereo topic when the
+    /// log has no lidar messages.
+    pub frame_topic: Option<String>,
+}
+
+/// Builds the elevation map of a ROS 2 log: each frame's lidar and stereo clouds are fused
+/// at their own poses into a rolling window centred on the vehicle; cells that leave it go
+/// to the global tile map. `progress(bytes_read, bytes_total)`.
+///
+/// A damaged or truncated log still gives the map of everything before the damage; the
+/// report says where reading stopped.
+pub fn build_log(
+    input: &Path,
+    out: &Path,
+    cfg: &LogBuildConfig,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<LogBuildReport> {
+    use crate::io::frames::FrameStream;
+    use crate::io::mcap_log;
+
+    let t0 = Instant::now();
+    cfg.grid.validate()?;
+    let summary = mcap_log::summarize(input)?;
+    let mut log_cfg = cfg.log.clone();
+    log_cfg.frame_topic = match &cfg.frame_topic {
+        Some(t) => t.clone(),
+        None => {
+            let count = |t: &str| {
+                summary
+                    .topics
+                    .iter()
+                    .find(|i| i.topic == t)
+                    .map_or(0, |i| i.count)
+            };
+            if count(&log_cfg.lidar_topic) == 0 && count(&log_cfg.stereo_topic) > 0 {
+                log_cfg.stereo_topic.clone()
+            } else {
+                log_cfg.lidar_topic.clone()
+            }
+        }
+    };
+    let mut stream = FrameStream::open(input, &log_cfg)?;
+    let mut grid: Option<RollingGrid> = None;
+    let mut tiles = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
+    let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
+    let mut errors = Vec::new();
+    let mut frames_fused = 0u64;
+    let mut t_fuse = 0.0;
+    while let Some(item) = stream.next() {
+        let (done, total) = stream.progress();
+        progress(done, total);
+        let frame = match item {
+            Ok(f) => f,
+            Err(e) => {
+                errors.push(e.to_string());
+                continue;
+            }
+        };
+        let t = Instant::now();
+        let c = frame.base_to_map.translation.vector;
+        let g = match grid.as_mut() {
+            Some(g) => {
+                g.recenter(c.x, c.y, &mut tiles)?;
+                g
+            }
+            None => grid.insert(RollingGrid::new(cfg.grid.clone(), c.x, c.y)?),
+        };
+        let at = |what: &str, e: Error| format!("frame at {:.6} s, {what}: {e}", frame.stamp);
+        if let Some(cloud) = &frame.lidar {
+            match g.ingest(cloud, &RangeNoise::LIDAR) {
+                Ok(s) => lidar.merge(&s),
+                Err(e) => errors.push(at("lidar", e)),
+            }
+        }
+        if let Some(cloud) = &frame.stereo {
+            match g.ingest(cloud, &RangeNoise::STEREO) {
+                Ok(s) => stereo.merge(&s),
+                Err(e) => errors.push(at("stereo", e)),
+            }
+        }
+        frames_fused += 1;
+        t_fuse += t.elapsed().as_secs_f64();
+    }
+    if let Some(g) = grid.as_mut() {
+        g.flush(&mut tiles);
+    }
+    let t_read_fuse = t0.elapsed().as_secs_f64();
+    let t2 = Instant::now();
+    let map = HazardMap::from_elevation(&tiles);
+    export::write_map_files(out, &map)?;
+    let t_export = t2.elapsed().as_secs_f64();
+    let total = t0.elapsed().as_secs_f64();
+    let report = LogBuildReport {
+        tarn_version: env!("CARGO_PKG_VERSION").to_string(),
+        input: input.to_path_buf(),
+        output: out.to_path_buf(),
+        resolution_m: cfg.grid.resolution,
+        window_cells: cfg.grid.size_cells,
+        frame_topic: log_cfg.frame_topic.clone(),
+        frames_fused,
+        log_duration_s: summary.duration_s,
+        x_realtime: summary.duration_s / total.max(1e-9),
+        lidar_points: lidar,
+        stereo_points: stereo,
+        frames: stream.stats().clone(),
+        errors,
+        damage: summary.damage.clone(),
+        cells_observed: map.cells.len(),
+        tiles: tiles.tile_count(),
+        elevation_range_m: export::elevation_range(&map.cells),
+        timings_s: Timings {
+            read: t_read_fuse - t_fuse,
+            fuse: t_fuse,
+            export: t_export,
+            total,
+        },
+    };
+    export::write_json(&out.join("report.json"), &report)?;
+    Ok(report)
+}

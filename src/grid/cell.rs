@@ -19,8 +19,9 @@ pub const W_MAX: u32 = 1 << 24;
 pub fn quantize_weight(sigma_m: f64) -> u32 {
     let r = SIGMA_REF_M / sigma_m;
     let w = W_UNIT * r * r;
-    if !(w >= 1.0) {
-        return 1; // NaN, or a σ so large its weight rounds below one unit
+    // NaN, or a σ so large its weight is below one unit.
+    if w.is_nan() || w < 1.0 {
+        return 1;
     }
     // Round half up; `as` saturates, and the clamp bounds it anyway.
     ((w + 0.5) as u64).min(W_MAX as u64) as u32

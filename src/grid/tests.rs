@@ -84,7 +84,12 @@ fn analytic_terrain_rms_within_one_centimetre() {
     let all = |_x: f64, _y: f64| true;
     // Cells whose footprint does not straddle the step edge at x = 0.
     let off_edge = |x: f64, _y: f64| x.abs() > 0.06;
-    let cases: [(&str, &dyn Fn(f64, f64) -> f64, &dyn Fn(f64, f64) -> bool); 4] = [
+    type Case<'a> = (
+        &'a str,
+        &'a dyn Fn(f64, f64) -> f64,
+        &'a dyn Fn(f64, f64) -> bool,
+    );
+    let cases: [Case; 4] = [
         ("plane", &plane, &all),
         ("slope", &slope, &all),
         ("sinusoid", &sinus, &all),
@@ -116,7 +121,10 @@ fn step_edge_cells_take_the_upper_surface_not_the_average() {
         let (x, _) = g.centre_of(k);
         if x.abs() < 0.06 {
             let z = c.mean_mm().unwrap() * 1e-3;
-            assert!(z < 0.1 || z > 0.4, "edge cell at x={x} averaged to {z}");
+            assert!(
+                !(0.1..=0.4).contains(&z),
+                "edge cell at x={x} averaged to {z}"
+            );
         }
     }
 }

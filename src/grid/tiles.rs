@@ -128,18 +128,18 @@ impl TileMap {
     /// Observed cells in a fixed order (tile by tile, row by row): deterministic.
     pub fn observed(&self) -> impl Iterator<Item = (CellKey, CellStats)> + '_ {
         self.tiles.iter().flat_map(|(&(tx, ty), t)| {
-            t.cells.iter().enumerate().filter_map(move |(i, c)| {
-                (!c.is_empty()).then(|| {
+            t.cells
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| !c.is_empty())
+                .map(move |(i, c)| {
                     let i = i as i64;
-                    (
-                        CellKey::new(
-                            tx * TILE_CELLS + i % TILE_CELLS,
-                            ty * TILE_CELLS + i / TILE_CELLS,
-                        ),
-                        *c,
-                    )
+                    let k = CellKey::new(
+                        tx * TILE_CELLS + i % TILE_CELLS,
+                        ty * TILE_CELLS + i / TILE_CELLS,
+                    );
+                    (k, *c)
                 })
-            })
         })
     }
 

@@ -124,7 +124,7 @@ pub struct Frame {
 }
 
 /// What happened while streaming.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameStats {
     pub messages: u64,
     pub frames_built: u64,

@@ -89,27 +89,11 @@ fn is_log(p: &std::path::Path) -> bool {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        None => {
-            let a = BuildArgs {
-                input: build_cmd::default_scene(),
-                out: PathBuf::from("out/default"),
-                resolution: 0.10,
-                noise_sigma: 0.02,
-                max_window_cells: 2048,
-                json: false,
-            };
-            build_cmd::print_summary(&build_cmd::run_build(&a)?);
-            Ok(())
-        }
-        Some(Command::Build(a)) => {
-            let r = build_cmd::run_build(&a)?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
-            } else {
-                build_cmd::print_summary(&r);
-            }
-            Ok(())
-        }
+        None => build_cmd::run(&BuildArgs::defaults(
+            build_cmd::default_scene(),
+            PathBuf::from("out/default"),
+        )),
+        Some(Command::Build(a)) => build_cmd::run(&a),
         Some(Command::LidarModel(a)) => optics_cmd::lidar_model(a),
         Some(Command::Info {
             input,
