@@ -7,12 +7,17 @@
 //! Data flows one way: `geom` → `grid` → (cues, water) → `io` exports. A module imports
 //! only from modules to its left; `geom` and `optics` are the ground floor.
 
+pub mod build;
 pub mod error;
 pub mod geom;
 pub mod grid;
+pub mod hazard;
 pub mod io;
 pub mod optics;
 
 pub use error::{Error, Result};
-pub mod build;
-pub mod hazard;
+
+/// The README's example is compiled and run as a doctest, so it cannot go stale.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
