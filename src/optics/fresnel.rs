@@ -218,13 +218,16 @@ mod tests {
 
         #[test]
         fn transmittance_is_reciprocal(deg in 0.0f64..=89.999, n in 1.0001f64..2.5) {
-            // Air→water at θi and water→air at θt transmit the same fraction.
+            // Air→water at θi and water→air at θt transmit the same fraction. Coming back from
+            // the water side at grazing incidence with n → 1, θt sits just under the critical
+            // angle, where cos θ = √(1 − n² sin² θt) loses digits (a case proptest found:
+            // 89.985°, n = 1.0001): 1e-9 holds there, 1e-12 does not.
             let th = deg.to_radians();
             let tt = snell(th, n).unwrap().unwrap();
             let a = fresnel(th, n).unwrap();
             let b = fresnel(tt, 1.0 / n).unwrap();
-            prop_assert!((a.t_s - b.t_s).abs() < 1e-12);
-            prop_assert!((a.t_p - b.t_p).abs() < 1e-12);
+            prop_assert!((a.t_s - b.t_s).abs() < 1e-9, "{} vs {}", a.t_s, b.t_s);
+            prop_assert!((a.t_p - b.t_p).abs() < 1e-9, "{} vs {}", a.t_p, b.t_p);
         }
 
         #[test]
