@@ -9,7 +9,9 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use tarn::sim::{cast_fan, simulate, Scene, SimOptions, World};
 
 fn scene(name: &str) -> Scene {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("maps").join(format!("{name}.toml"));
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("maps")
+        .join(format!("{name}.toml"));
     Scene::load(&p).expect("shipped scene")
 }
 
@@ -28,7 +30,9 @@ fn default_scene(c: &mut Criterion) {
     g.sample_size(10);
     let dir = tempfile::tempdir().unwrap();
     let s = scene("default");
-    g.bench_function("default", |b| b.iter(|| simulate(&s, dir.path(), SimOptions::default()).unwrap()));
+    g.bench_function("default", |b| {
+        b.iter(|| simulate(&s, dir.path(), SimOptions::default()).unwrap())
+    });
     g.finish();
 }
 

@@ -15,6 +15,6 @@ pub mod optics;
 
 pub use error::{Error, Result};
 pub mod build;
+pub mod eval;
 pub mod hazard;
 pub mod sim;
-pub mod eval;

@@ -155,7 +155,11 @@ pub fn distance_to_path(path: &[[f64; 2]], x: f64, y: f64) -> f64 {
                 let (a, b) = (s[0], s[1]);
                 let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
                 let l2 = dx * dx + dy * dy;
-                let t = if l2 > 0.0 { (((x - a[0]) * dx + (y - a[1]) * dy) / l2).clamp(0.0, 1.0) } else { 0.0 };
+                let t = if l2 > 0.0 {
+                    (((x - a[0]) * dx + (y - a[1]) * dy) / l2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 (x - a[0] - t * dx).hypot(y - a[1] - t * dy)
             })
             .fold(f64::INFINITY, f64::min),
@@ -173,7 +177,10 @@ fn bin_name(i: usize) -> String {
 /// Scores `map` against the truth raster and the trajectory of `info`.
 pub fn evaluate(map: &HazardMap, truth: &HazardMap, info: &TruthInfo) -> Result<EvalReport> {
     if !(truth.resolution > 0.0) {
-        return Err(Error::invalid("truth", format!("resolution {} must be > 0", truth.resolution)));
+        return Err(Error::invalid(
+            "truth",
+            format!("resolution {} must be > 0", truth.resolution),
+        ));
     }
     let res = truth.resolution;
     let index: HashMap<CellKey, &MapCell> = truth.cells.iter().map(|c| (c.key, c)).collect();
@@ -184,7 +191,10 @@ pub fn evaluate(map: &HazardMap, truth: &HazardMap, info: &TruthInfo) -> Result<
         let key = CellKey::new((c.x / res).floor() as i64, (c.y / res).floor() as i64);
         let t = index.get(&key).copied();
         let d = distance_to_path(&path, c.x, c.y);
-        let b = BIN_EDGES.iter().position(|&e| d < e).unwrap_or(BIN_EDGES.len());
+        let b = BIN_EDGES
+            .iter()
+            .position(|&e| d < e)
+            .unwrap_or(BIN_EDGES.len());
         bins[b].add(c, t);
         all.add(c, t);
     }

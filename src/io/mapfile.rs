@@ -39,9 +39,12 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
     let Some(end) = bytes.windows(END.len()).position(|w| w == END) else {
         return Err(fmt(path, "header", "no `end_header` line"));
     };
-    let header = std::str::from_utf8(&bytes[..end])
-        .map_err(|_| fmt(path, "header", "not UTF-8 text"))?;
-    let mut lines = header.lines().enumerate().map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
+    let header =
+        std::str::from_utf8(&bytes[..end]).map_err(|_| fmt(path, "header", "not UTF-8 text"))?;
+    let mut lines = header
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
     let mut next = |what: &str| {
         lines
             .next()
@@ -49,11 +52,19 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
     };
     let (n, l) = next("`ply`")?;
     if l != "ply" {
-        return Err(fmt(path, format!("header line {n}"), format!("{l:?} is not `ply`")));
+        return Err(fmt(
+            path,
+            format!("header line {n}"),
+            format!("{l:?} is not `ply`"),
+        ));
     }
     let (n, l) = next("the format")?;
     if l != "format binary_little_endian 1.0" {
-        return Err(fmt(path, format!("header line {n}"), format!("{l:?}: the map contract is `format binary_little_endian 1.0`")));
+        return Err(fmt(
+            path,
+            format!("header line {n}"),
+            format!("{l:?}: the map contract is `format binary_little_endian 1.0`"),
+        ));
     }
     let mut resolution = None;
     let mut count = None;
@@ -61,9 +72,19 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
     for (n, l) in lines {
         if let Some(c) = l.strip_prefix("comment ") {
             if let Some(r) = c.strip_prefix("resolution ") {
-                let r: f64 = r.trim().parse().map_err(|_| fmt(path, format!("header line {n}"), format!("bad resolution {r:?}")))?;
+                let r: f64 = r.trim().parse().map_err(|_| {
+                    fmt(
+                        path,
+                        format!("header line {n}"),
+                        format!("bad resolution {r:?}"),
+                    )
+                })?;
                 if !(r.is_finite() && r > 0.0) {
-                    return Err(fmt(path, format!("header line {n}"), format!("resolution {r} must be > 0")));
+                    return Err(fmt(
+                        path,
+                        format!("header line {n}"),
+                        format!("resolution {r} must be > 0"),
+                    ));
                 }
                 resolution = Some(r);
             }
@@ -72,12 +93,19 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
         if let Some(e) = l.strip_prefix("element ") {
             let mut it = e.split_whitespace();
             if it.next() != Some("vertex") || count.is_some() {
-                return Err(fmt(path, format!("header line {n}"), format!("{l:?}: the map contract has one element, `vertex`")));
+                return Err(fmt(
+                    path,
+                    format!("header line {n}"),
+                    format!("{l:?}: the map contract has one element, `vertex`"),
+                ));
             }
-            let c: usize = it
-                .next()
-                .and_then(|c| c.parse().ok())
-                .ok_or_else(|| fmt(path, format!("header line {n}"), format!("bad vertex count in {l:?}")))?;
+            let c: usize = it.next().and_then(|c| c.parse().ok()).ok_or_else(|| {
+                fmt(
+                    path,
+                    format!("header line {n}"),
+                    format!("bad vertex count in {l:?}"),
+                )
+            })?;
             count = Some(c);
             continue;
         }
@@ -88,50 +116,81 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
         if l.starts_with("obj_info") {
             continue;
         }
-        return Err(fmt(path, format!("header line {n}"), format!("unexpected {l:?}")));
+        return Err(fmt(
+            path,
+            format!("header line {n}"),
+            format!("unexpected {l:?}"),
+        ));
     }
     for (i, want) in PROPS.iter().enumerate() {
         match props.get(i) {
             Some((_, got)) if got == want => {}
             Some((n, got)) => {
-                return Err(fmt(path, format!("header line {n}"), format!("{got:?} where the map contract has {want:?}")))
+                return Err(fmt(
+                    path,
+                    format!("header line {n}"),
+                    format!("{got:?} where the map contract has {want:?}"),
+                ))
             }
             None => return Err(fmt(path, "header", format!("missing {want:?}"))),
         }
     }
     if let Some((n, extra)) = props.get(PROPS.len()) {
-        return Err(fmt(path, format!("header line {n}"), format!("{extra:?} is not in the map contract")));
+        return Err(fmt(
+            path,
+            format!("header line {n}"),
+            format!("{extra:?} is not in the map contract"),
+        ));
     }
     let count = count.ok_or_else(|| fmt(path, "header", "no `element vertex N`"))?;
-    let resolution = resolution.ok_or_else(|| fmt(path, "header", "no `comment resolution R` line"))?;
+    let resolution =
+        resolution.ok_or_else(|| fmt(path, "header", "no `comment resolution R` line"))?;
     let body = &bytes[end + END.len()..];
-    let need = count.checked_mul(RECORD).ok_or_else(|| fmt(path, "header", "vertex count overflows"))?;
+    let need = count
+        .checked_mul(RECORD)
+        .ok_or_else(|| fmt(path, "header", "vertex count overflows"))?;
     if body.len() != need {
         return Err(fmt(
             path,
             format!("byte {}", end + END.len()),
-            format!("{count} vertices need {need} bytes of data, the file has {}", body.len()),
+            format!(
+                "{count} vertices need {need} bytes of data, the file has {}",
+                body.len()
+            ),
         ));
     }
     let mut cells = Vec::with_capacity(count);
     for (i, r) in body.chunks_exact(RECORD).enumerate() {
         let f = |j: usize| f32::from_le_bytes([r[4 * j], r[4 * j + 1], r[4 * j + 2], r[4 * j + 3]]);
-        let class = *Class::ALL
-            .get(r[24] as usize)
-            .ok_or_else(|| fmt(path, format!("vertex {i}"), format!("class {} is not a contract class (0..=5)", r[24])))?;
+        let class = *Class::ALL.get(r[24] as usize).ok_or_else(|| {
+            fmt(
+                path,
+                format!("vertex {i}"),
+                format!("class {} is not a contract class (0..=5)", r[24]),
+            )
+        })?;
         let hazard = match r[25] {
             0 => Hazard::Free,
             1 => Hazard::ShallowWater,
             2 => Hazard::DeepWater,
             3 => Hazard::Obstacle,
-            h => return Err(fmt(path, format!("vertex {i}"), format!("hazard {h} is not a contract hazard (0..=3)"))),
+            h => {
+                return Err(fmt(
+                    path,
+                    format!("vertex {i}"),
+                    format!("hazard {h} is not a contract hazard (0..=3)"),
+                ))
+            }
         };
         let (x, y) = (f(0) as f64, f(1) as f64);
         if !(x.is_finite() && y.is_finite()) {
             return Err(fmt(path, format!("vertex {i}"), "x or y is not finite"));
         }
         cells.push(MapCell {
-            key: CellKey::new((x / resolution).floor() as i64, (y / resolution).floor() as i64),
+            key: CellKey::new(
+                (x / resolution).floor() as i64,
+                (y / resolution).floor() as i64,
+            ),
             x,
             y,
             z: f(2) as f64,

@@ -24,8 +24,8 @@ use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 pub use render::{
-    body_to_optical, mount, pinhole, radiance, render_image, sun, Band, Light, Lidar,
-    LidarReturn, Radiance, Stereo, N_WATER,
+    body_to_optical, mount, pinhole, radiance, render_image, sun, Band, Lidar, LidarReturn, Light,
+    Radiance, Stereo, N_WATER,
 };
 pub use rng::{hash, normal, unit_f64};
 pub use scene::*;
@@ -73,7 +73,10 @@ pub struct SimReport {
 pub fn trajectory(w: &World) -> Vec<TruthPose> {
     let tr = &w.scene.trajectory;
     let pts = &tr.waypoints;
-    let seg: Vec<f64> = pts.windows(2).map(|p| (p[1][0] - p[0][0]).hypot(p[1][1] - p[0][1])).collect();
+    let seg: Vec<f64> = pts
+        .windows(2)
+        .map(|p| (p[1][0] - p[0][0]).hypot(p[1][1] - p[0][1]))
+        .collect();
     let total: f64 = seg.iter().sum();
     let step = tr.speed / tr.rate_hz;
     let n_max = (total / step).floor() as usize + 1;
@@ -87,7 +90,11 @@ pub fn trajectory(w: &World) -> Vec<TruthPose> {
                 k += 1;
             }
             let (a, b) = (pts[k], pts[k + 1]);
-            let f = if seg[k] > 0.0 { (s / seg[k]).min(1.0) } else { 0.0 };
+            let f = if seg[k] > 0.0 {
+                (s / seg[k]).min(1.0)
+            } else {
+                0.0
+            };
             let (x, y) = (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]));
             TruthPose {
                 stamp: tr.start_time + i as f64 / tr.rate_hz,
@@ -110,11 +117,18 @@ fn stamp_ns(t: f64) -> i64 {
 }
 
 fn header(t: f64, frame: &str) -> Header {
-    Header { stamp: Time::from_nanos(stamp_ns(t)), frame_id: frame.into() }
+    Header {
+        stamp: Time::from_nanos(stamp_ns(t)),
+        frame_id: frame.into(),
+    }
 }
 
 fn tf(t: f64, parent: &str, child: &str, pose: Pose) -> TransformStamped {
-    TransformStamped { header: header(t, parent), child_frame_id: child.into(), child_to_parent: pose }
+    TransformStamped {
+        header: header(t, parent),
+        child_frame_id: child.into(),
+        child_to_parent: pose,
+    }
 }
 
 /// Frame names of the simulated sensors.
@@ -128,9 +142,20 @@ pub fn write_scene_mesh(w: &World, path: &Path) -> Result<()> {
     let verts: Vec<_> = w
         .vertices
         .iter()
-        .map(|v| ([v[0] as f32, v[1] as f32, v[2] as f32], [150u8, 140, 120], 1u8))
+        .map(|v| {
+            (
+                [v[0] as f32, v[1] as f32, v[2] as f32],
+                [150u8, 140, 120],
+                1u8,
+            )
+        })
         .collect();
-    crate::io::export::write_mesh_ply(path, "tarn simulator scene mesh (terrain and objects)", &verts, &w.triangles)
+    crate::io::export::write_mesh_ply(
+        path,
+        "tarn simulator scene mesh (terrain and objects)",
+        &verts,
+        &w.triangles,
+    )
 }
 
 /// Simulates `scene` into `out_dir` (created if missing).
@@ -142,10 +167,22 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
     let rig = &scene.rig;
     let lidar = rig.lidar.as_ref().map(Lidar::new).transpose()?;
     let stereo = rig.stereo.as_ref().map(Stereo::new).transpose()?;
-    let swir = rig.swir.as_ref().map(|c| render::camera_of(c, SWIR_FRAME)).transpose()?;
-    let mwir = rig.mwir.as_ref().map(|c| render::camera_of(c, MWIR_FRAME)).transpose()?;
+    let swir = rig
+        .swir
+        .as_ref()
+        .map(|c| render::camera_of(c, SWIR_FRAME))
+        .transpose()?;
+    let mwir = rig
+        .mwir
+        .as_ref()
+        .map(|c| render::camera_of(c, MWIR_FRAME))
+        .transpose()?;
     let light = Light::new(&w);
-    let mut rep = SimReport { scene: scene.name.clone(), frames: poses.len(), ..Default::default() };
+    let mut rep = SimReport {
+        scene: scene.name.clone(),
+        frames: poses.len(),
+        ..Default::default()
+    };
     rep.build_s = t0.elapsed().as_secs_f64();
 
     let mut topics = Vec::new();
@@ -169,14 +206,26 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         topics.extend(["/mwir/image", "/mwir/camera_info"].map(String::from));
     }
     let ns0 = stamp_ns(start) as u64;
-    log.write_tf("/tf_static", &TfMessage { transforms: statics }, ns0)?;
+    log.write_tf(
+        "/tf_static",
+        &TfMessage {
+            transforms: statics,
+        },
+        ns0,
+    )?;
     let (mut render_s, mut write_s) = (0.0, 0.0);
     for (fi, p) in poses.iter().enumerate() {
         let base = pose_of(p);
         let ns = stamp_ns(p.stamp) as u64;
         let f = fi as u64;
         let tw = Instant::now();
-        log.write_tf("/tf", &TfMessage { transforms: vec![tf(p.stamp, "map", "base_link", base)] }, ns)?;
+        log.write_tf(
+            "/tf",
+            &TfMessage {
+                transforms: vec![tf(p.stamp, "map", "base_link", base)],
+            },
+            ns,
+        )?;
         write_s += tw.elapsed().as_secs_f64();
         if let Some(l) = &lidar {
             let tr = Instant::now();
@@ -192,29 +241,80 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             let tr = Instant::now();
             let opt = base * s.optical_mount;
             let cloud = s.cloud(&w, &opt, f, opts.noise)?;
-            let px = render_image(&w, &light, &s.camera, &opt, Band::Rgb, s.spec.image_noise, f, opts.noise);
+            let px = render_image(
+                &w,
+                &light,
+                &s.camera,
+                &opt,
+                Band::Rgb,
+                s.spec.image_noise,
+                f,
+                opts.noise,
+            );
             render_s += tr.elapsed().as_secs_f64();
             rep.stereo_rays += cloud.len() as u64;
             rep.stereo_points += cloud.valid_count() as u64;
             rep.image_pixels += (s.camera.width * s.camera.height) as u64;
             let tw = Instant::now();
             log.write_cloud("/stereo/points", &cloud, header(p.stamp, CAMERA_FRAME), ns)?;
-            let img = Image { width: s.camera.width, height: s.camera.height, pixels: px, frame_id: CAMERA_FRAME.into(), stamp: p.stamp };
+            let img = Image {
+                width: s.camera.width,
+                height: s.camera.height,
+                pixels: px,
+                frame_id: CAMERA_FRAME.into(),
+                stamp: p.stamp,
+            };
             log.write_image("/camera/image", &img, header(p.stamp, CAMERA_FRAME), ns)?;
-            log.write_camera("/camera/camera_info", &s.camera, header(p.stamp, CAMERA_FRAME), ns)?;
+            log.write_camera(
+                "/camera/camera_info",
+                &s.camera,
+                header(p.stamp, CAMERA_FRAME),
+                ns,
+            )?;
             write_s += tw.elapsed().as_secs_f64();
         }
         for (cam, band, topic, info, frame, spec) in [
-            (&swir, Band::Swir, "/swir/image", "/swir/camera_info", SWIR_FRAME, &rig.swir),
-            (&mwir, Band::Mwir, "/mwir/image", "/mwir/camera_info", MWIR_FRAME, &rig.mwir),
+            (
+                &swir,
+                Band::Swir,
+                "/swir/image",
+                "/swir/camera_info",
+                SWIR_FRAME,
+                &rig.swir,
+            ),
+            (
+                &mwir,
+                Band::Mwir,
+                "/mwir/image",
+                "/mwir/camera_info",
+                MWIR_FRAME,
+                &rig.mwir,
+            ),
         ] {
-            let (Some((model, m)), Some(spec)) = (cam, spec) else { continue };
+            let (Some((model, m)), Some(spec)) = (cam, spec) else {
+                continue;
+            };
             let tr = Instant::now();
-            let px = render_image(&w, &light, model, &(base * m), band, spec.image_noise, f, opts.noise);
+            let px = render_image(
+                &w,
+                &light,
+                model,
+                &(base * m),
+                band,
+                spec.image_noise,
+                f,
+                opts.noise,
+            );
             render_s += tr.elapsed().as_secs_f64();
             rep.image_pixels += (model.width * model.height) as u64;
             let tw = Instant::now();
-            let img = Image { width: model.width, height: model.height, pixels: px, frame_id: frame.into(), stamp: p.stamp };
+            let img = Image {
+                width: model.width,
+                height: model.height,
+                pixels: px,
+                frame_id: frame.into(),
+                stamp: p.stamp,
+            };
             log.write_image(topic, &img, header(p.stamp, frame), ns)?;
             log.write_camera(info, model, header(p.stamp, frame), ns)?;
             write_s += tw.elapsed().as_secs_f64();

@@ -49,7 +49,12 @@ pub fn pinhole(width: usize, height: usize, hfov_deg: f64, frame: &str) -> Resul
     CameraModel::new(
         width,
         height,
-        [f, f, 0.5 * (width as f64 - 1.0), 0.5 * (height as f64 - 1.0)],
+        [
+            f,
+            f,
+            0.5 * (width as f64 - 1.0),
+            0.5 * (height as f64 - 1.0),
+        ],
         Distortion::None,
         frame,
     )
@@ -108,7 +113,8 @@ impl Lidar {
         let el = if s.rings == 1 {
             s.elevation_deg[0]
         } else {
-            s.elevation_deg[0] + (s.elevation_deg[1] - s.elevation_deg[0]) * r as f64 / (s.rings - 1) as f64
+            s.elevation_deg[0]
+                + (s.elevation_deg[1] - s.elevation_deg[0]) * r as f64 / (s.rings - 1) as f64
         }
         .to_radians();
         let span = s.azimuth_deg[1] - s.azimuth_deg[0];
@@ -138,13 +144,24 @@ impl Lidar {
             Surface::Solid { .. } => {
                 let alb = w.materials[hit.material].spec.lidar;
                 let ok = self.lambert(alb, hit.normal.dot(&-d), hit.t) >= self.min_power_ratio;
-                Ok(if ok { LidarReturn::Solid { point: hit.point } } else { LidarReturn::None })
+                Ok(if ok {
+                    LidarReturn::Solid { point: hit.point }
+                } else {
+                    LidarReturn::None
+                })
             }
             Surface::Water { body } => self.trace_water(w, o, d, &hit, body),
         }
     }
 
-    fn trace_water(&self, w: &World, o: &Point3<f64>, d: &Vector3<f64>, hit: &Hit, body: usize) -> Result<LidarReturn> {
+    fn trace_water(
+        &self,
+        w: &World,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        hit: &Hit,
+        body: usize,
+    ) -> Result<LidarReturn> {
         let b = &w.water[body];
         let level = hit.point.z;
         let height = o.z - level;
@@ -170,7 +187,12 @@ impl Lidar {
                 })?;
                 if model.return_ratio(lookahead, depth)? >= self.min_power_ratio {
                     let point = apparent_bottom_point(*o, bot.point, level, N_WATER)?;
-                    return Ok(LidarReturn::Bottom { point, bottom: bot.point, lookahead, depth });
+                    return Ok(LidarReturn::Bottom {
+                        point,
+                        bottom: bot.point,
+                        lookahead,
+                        depth,
+                    });
                 }
             }
         }
@@ -180,16 +202,25 @@ impl Lidar {
             let fr = fresnel(cos_i.clamp(0.0, 1.0).acos(), N_WATER)?;
             let refl = 0.5 * (fr.r_s + fr.r_p);
             let total = hit.t + EPS + s.t;
-            let p = refl * self.lambert(w.materials[s.material].spec.lidar, s.normal.dot(&-r), total);
+            let p =
+                refl * self.lambert(w.materials[s.material].spec.lidar, s.normal.dot(&-r), total);
             if p >= self.min_power_ratio {
-                return Ok(LidarReturn::Specular { point: o + d * total });
+                return Ok(LidarReturn::Specular {
+                    point: o + d * total,
+                });
             }
         }
         Ok(LidarReturn::None)
     }
 
     /// One organized scan (rings × columns, ring 0 lowest on row 0) in the lidar frame.
-    pub fn scan(&self, w: &World, lidar_to_map: &Pose, frame: u64, noise: bool) -> Result<PointCloud> {
+    pub fn scan(
+        &self,
+        w: &World,
+        lidar_to_map: &Pose,
+        frame: u64,
+        noise: bool,
+    ) -> Result<PointCloud> {
         let (rows, cols) = (self.spec.rings, self.spec.columns);
         let o = lidar_to_map.translation.vector.into();
         let map_to_lidar = lidar_to_map.inverse();
@@ -200,7 +231,9 @@ impl Lidar {
                 let (r, c) = (i / cols, i % cols);
                 let d = lidar_to_map.rotation * self.beam(r, c);
                 let p = match self.trace(w, &o, &d)? {
-                    LidarReturn::Solid { point } | LidarReturn::Bottom { point, .. } | LidarReturn::Specular { point } => point,
+                    LidarReturn::Solid { point }
+                    | LidarReturn::Bottom { point, .. }
+                    | LidarReturn::Specular { point } => point,
                     LidarReturn::None => return Ok([f32::NAN; 3]),
                 };
                 let mut q = map_to_lidar * p;
@@ -249,7 +282,13 @@ impl Light {
             SkyKind::PartlyCloudy => (0.7 * day, 0.3 * day + 0.01),
             SkyKind::Overcast => (0.0, 0.55 * day + 0.01),
         };
-        Light { sun: d, direct, ambient, kind: s.kind, hours: s.time_of_day }
+        Light {
+            sun: d,
+            direct,
+            ambient,
+            kind: s.kind,
+            hours: s.time_of_day,
+        }
     }
 
     /// Sky radiance in a direction: visible RGB (0..1, before exposure).
@@ -301,7 +340,12 @@ fn cloud_noise(seed: u64, x: f64, y: f64) -> f64 {
     let (xi, yi) = (x.floor(), y.floor());
     let (fx, fy) = (x - xi, y - yi);
     let h = |a: f64, b: f64| unit_f64(hash(seed, &[31, a as i64 as u64, b as i64 as u64]));
-    let (a, b, c, d) = (h(xi, yi), h(xi + 1.0, yi), h(xi, yi + 1.0), h(xi + 1.0, yi + 1.0));
+    let (a, b, c, d) = (
+        h(xi, yi),
+        h(xi + 1.0, yi),
+        h(xi, yi + 1.0),
+        h(xi + 1.0, yi + 1.0),
+    );
     let s = |t: f64| t * t * (3.0 - 2.0 * t);
     let (u, v) = (s(fx), s(fy));
     a + (b - a) * u + (c - a) * v + (a - b - c + d) * u * v
@@ -321,7 +365,10 @@ fn shade_solid(w: &World, light: &Light, hit: &Hit) -> Radiance {
     let mut direct = 0.0;
     if light.direct > 0.0 {
         let c = hit.normal.dot(&light.sun);
-        if c > 0.0 && w.cast_solid(&(hit.point + hit.normal * 1e-3), &light.sun, 200.0).is_none() {
+        if c > 0.0
+            && w.cast_solid(&(hit.point + hit.normal * 1e-3), &light.sun, 200.0)
+                .is_none()
+        {
             direct = light.direct * c;
         }
     }
@@ -334,7 +381,11 @@ fn shade_solid(w: &World, light: &Light, hit: &Hit) -> Radiance {
 }
 
 fn sky_radiance(w: &World, light: &Light, d: &Vector3<f64>) -> Radiance {
-    Radiance { rgb: light.sky_rgb(w.scene.seed, d), swir: light.sky_swir(d), mwir: light.sky_temperature(d) }
+    Radiance {
+        rgb: light.sky_rgb(w.scene.seed, d),
+        swir: light.sky_swir(d),
+        mwir: light.sky_temperature(d),
+    }
 }
 
 /// Radiance along a camera ray: solids shaded with sun and sky; water as a Fresnel mix of
@@ -359,9 +410,13 @@ pub fn radiance(w: &World, light: &Light, o: &Point3<f64>, d: &Vector3<f64>, max
                     None => sky_radiance(w, light, &r),
                 }
             };
-            let fr = fresnel(cos_i.acos(), N_WATER).map(|f| 0.5 * (f.r_s + f.r_p)).unwrap_or(1.0);
+            let fr = fresnel(cos_i.acos(), N_WATER)
+                .map(|f| 0.5 * (f.r_s + f.r_p))
+                .unwrap_or(1.0);
             let b = &w.water[body].spec;
-            let body_rgb = b.colour.map(|c| c * (light.direct * light.sun.z.max(0.0) + light.ambient));
+            let body_rgb = b
+                .colour
+                .map(|c| c * (light.direct * light.sun.z.max(0.0) + light.ambient));
             let t_water = light.surface_temperature(b.temperature, b.temperature_swing);
             Radiance {
                 rgb: [0, 1, 2].map(|i| fr * refl.rgb[i] + (1.0 - fr) * body_rgb[i]),
@@ -385,7 +440,12 @@ pub struct Stereo {
 impl Stereo {
     pub fn new(spec: &StereoSpec) -> Result<Stereo> {
         Ok(Stereo {
-            camera: pinhole(spec.width, spec.height, spec.hfov_deg, "camera_left_optical")?,
+            camera: pinhole(
+                spec.width,
+                spec.height,
+                spec.hfov_deg,
+                "camera_left_optical",
+            )?,
             optical_mount: mount(spec.position, spec.rpy_deg) * body_to_optical(),
             spec: spec.clone(),
         })
@@ -413,7 +473,13 @@ impl Stereo {
     }
 
     /// The binned organized cloud in the left optical frame (NaN: no match).
-    pub fn cloud(&self, w: &World, optical_to_map: &Pose, frame: u64, noise: bool) -> Result<PointCloud> {
+    pub fn cloud(
+        &self,
+        w: &World,
+        optical_to_map: &Pose,
+        frame: u64,
+        noise: bool,
+    ) -> Result<PointCloud> {
         let k = self.spec.bin;
         let (rows, cols) = (self.spec.height / k, self.spec.width / k);
         let o: Point3<f64> = optical_to_map.translation.vector.into();
@@ -425,10 +491,14 @@ impl Stereo {
             .map(|i| {
                 let (r, c) = (i / cols, i % cols);
                 let (u, v) = ((k * c) as f64 + half, (k * r) as f64 + half);
-                let Some(ray) = self.camera.pixel_ray(u, v) else { return [f32::NAN; 3] };
+                let Some(ray) = self.camera.pixel_ray(u, v) else {
+                    return [f32::NAN; 3];
+                };
                 let ray = ray.normalize();
                 let d = optical_to_map.rotation * ray;
-                let Some((t, mat)) = self.trace(w, &o, &d) else { return [f32::NAN; 3] };
+                let Some((t, mat)) = self.trace(w, &o, &d) else {
+                    return [f32::NAN; 3];
+                };
                 let mut t = t;
                 if noise {
                     let tex = w.materials[mat].spec.texture;
@@ -479,8 +549,18 @@ pub fn render_image(
         .map(|i| {
             let (u, v) = ((i % camera.width) as f64, (i / camera.width) as f64);
             match camera.pixel_ray(u, v) {
-                Some(ray) => radiance(w, light, &o, &(optical_to_map.rotation * ray.normalize()), 300.0),
-                None => Radiance { rgb: [0.0; 3], swir: 0.0, mwir: 0.0 },
+                Some(ray) => radiance(
+                    w,
+                    light,
+                    &o,
+                    &(optical_to_map.rotation * ray.normalize()),
+                    300.0,
+                ),
+                None => Radiance {
+                    rgb: [0.0; 3],
+                    swir: 0.0,
+                    mwir: 0.0,
+                },
             }
         })
         .collect();
@@ -496,7 +576,13 @@ pub fn render_image(
         Band::Rgb => Pixels::Rgb8(
             rad.iter()
                 .enumerate()
-                .map(|(i, r)| [0, 1, 2].map(|c| (r.rgb[c] * exposure + jitter(i, c as u64)).round().clamp(0.0, 255.0) as u8))
+                .map(|(i, r)| {
+                    [0, 1, 2].map(|c| {
+                        (r.rgb[c] * exposure + jitter(i, c as u64))
+                            .round()
+                            .clamp(0.0, 255.0) as u8
+                    })
+                })
                 .collect(),
         ),
         Band::Swir => Pixels::Mono8(

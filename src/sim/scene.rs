@@ -244,18 +244,54 @@ pub fn builtin_materials() -> BTreeMap<String, MaterialSpec> {
         class,
     };
     [
-        ("grass", m([0.18, 0.30, 0.10], 0.30, 0.35, 0.95, 286.0, 6.0, Ground)),
-        ("soil", m([0.30, 0.24, 0.17], 0.35, 0.30, 0.95, 287.0, 8.0, Ground)),
-        ("mud", m([0.20, 0.16, 0.12], 0.20, 0.20, 0.85, 287.0, 7.0, Ground)),
-        ("wet_soil", m([0.10, 0.08, 0.06], 0.12, 0.12, 0.80, 285.0, 5.0, Ground)),
-        ("gravel", m([0.38, 0.36, 0.33], 0.40, 0.35, 0.95, 288.0, 9.0, Ground)),
-        ("pale_rock", m([0.75, 0.74, 0.70], 0.60, 0.60, 0.60, 288.0, 9.0, Ground)),
-        ("rock", m([0.40, 0.38, 0.36], 0.40, 0.40, 0.90, 288.0, 8.0, Obstacle)),
-        ("snow", m([0.90, 0.92, 0.95], 0.15, 0.80, 0.40, 271.0, 2.0, SnowIce)),
-        ("ice", m([0.55, 0.62, 0.68], 0.05, 0.30, 0.30, 271.0, 1.0, SnowIce)),
-        ("bark", m([0.25, 0.18, 0.12], 0.35, 0.30, 0.95, 285.0, 5.0, Vegetation)),
-        ("foliage", m([0.10, 0.25, 0.08], 0.25, 0.40, 0.90, 284.0, 5.0, Vegetation)),
-        ("concrete", m([0.55, 0.53, 0.50], 0.45, 0.45, 0.90, 289.0, 7.0, Obstacle)),
+        (
+            "grass",
+            m([0.18, 0.30, 0.10], 0.30, 0.35, 0.95, 286.0, 6.0, Ground),
+        ),
+        (
+            "soil",
+            m([0.30, 0.24, 0.17], 0.35, 0.30, 0.95, 287.0, 8.0, Ground),
+        ),
+        (
+            "mud",
+            m([0.20, 0.16, 0.12], 0.20, 0.20, 0.85, 287.0, 7.0, Ground),
+        ),
+        (
+            "wet_soil",
+            m([0.10, 0.08, 0.06], 0.12, 0.12, 0.80, 285.0, 5.0, Ground),
+        ),
+        (
+            "gravel",
+            m([0.38, 0.36, 0.33], 0.40, 0.35, 0.95, 288.0, 9.0, Ground),
+        ),
+        (
+            "pale_rock",
+            m([0.75, 0.74, 0.70], 0.60, 0.60, 0.60, 288.0, 9.0, Ground),
+        ),
+        (
+            "rock",
+            m([0.40, 0.38, 0.36], 0.40, 0.40, 0.90, 288.0, 8.0, Obstacle),
+        ),
+        (
+            "snow",
+            m([0.90, 0.92, 0.95], 0.15, 0.80, 0.40, 271.0, 2.0, SnowIce),
+        ),
+        (
+            "ice",
+            m([0.55, 0.62, 0.68], 0.05, 0.30, 0.30, 271.0, 1.0, SnowIce),
+        ),
+        (
+            "bark",
+            m([0.25, 0.18, 0.12], 0.35, 0.30, 0.95, 285.0, 5.0, Vegetation),
+        ),
+        (
+            "foliage",
+            m([0.10, 0.25, 0.08], 0.25, 0.40, 0.90, 284.0, 5.0, Vegetation),
+        ),
+        (
+            "concrete",
+            m([0.55, 0.53, 0.50], 0.45, 0.45, 0.90, 289.0, 7.0, Obstacle),
+        ),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
@@ -486,9 +522,7 @@ impl Scene {
             Error::format(path, loc, e.message().to_string())
         })?;
         scene.validate().map_err(|e| match e {
-            Error::Invalid { what, message } => {
-                Error::format(path, what, message)
-            }
+            Error::Invalid { what, message } => Error::format(path, what, message),
             e => e,
         })?;
         Ok(scene)
@@ -546,7 +580,10 @@ impl Scene {
         if verts > 4.0e6 {
             return Err(bad(
                 "terrain.resolution",
-                format!("{} gives {verts:.0} heightfield vertices (at most 4 million)", t.resolution),
+                format!(
+                    "{} gives {verts:.0} heightfield vertices (at most 4 million)",
+                    t.resolution
+                ),
             ));
         }
         finite("terrain.elevation", t.elevation)?;
@@ -611,7 +648,10 @@ impl Scene {
             }
             non_negative(&w("ripple"), b.ripple)?;
             if b.ripple > 0.5 {
-                return Err(bad(w("ripple"), format!("{} rad RMS slope is not a ripple (≤ 0.5)", b.ripple)));
+                return Err(bad(
+                    w("ripple"),
+                    format!("{} rad RMS slope is not a ripple (≤ 0.5)", b.ripple),
+                ));
             }
             if let Some(a) = b.attenuation {
                 non_negative(&w("attenuation"), a)?;
@@ -651,11 +691,17 @@ impl Scene {
         }
         let s = &self.sky;
         if !(0.0..24.0).contains(&s.time_of_day) {
-            return Err(bad("sky.time_of_day", format!("{} must be in 0..24 (hours)", s.time_of_day)));
+            return Err(bad(
+                "sky.time_of_day",
+                format!("{} must be in 0..24 (hours)", s.time_of_day),
+            ));
         }
         let tr = &self.trajectory;
         if tr.waypoints.len() < 2 {
-            return Err(bad("trajectory.waypoints", format!("{} given, at least 2 needed", tr.waypoints.len())));
+            return Err(bad(
+                "trajectory.waypoints",
+                format!("{} given, at least 2 needed", tr.waypoints.len()),
+            ));
         }
         for (i, p) in tr.waypoints.iter().enumerate() {
             all_finite(&format!("trajectory.waypoints[{i}]"), p)?;
@@ -664,7 +710,10 @@ impl Scene {
                 && p[1] >= t.origin[1]
                 && p[1] <= t.origin[1] + t.size[1];
             if !inside {
-                return Err(bad(format!("trajectory.waypoints[{i}]"), format!("{p:?} is outside the terrain")));
+                return Err(bad(
+                    format!("trajectory.waypoints[{i}]"),
+                    format!("{p:?} is outside the terrain"),
+                ));
             }
         }
         positive("trajectory.speed", tr.speed)?;
@@ -675,7 +724,10 @@ impl Scene {
         }
         let r = &self.rig;
         if r.lidar.is_none() && r.stereo.is_none() && r.swir.is_none() && r.mwir.is_none() {
-            return Err(bad("rig", "configures no sensor (lidar, stereo, swir, mwir)"));
+            return Err(bad(
+                "rig",
+                "configures no sensor (lidar, stereo, swir, mwir)",
+            ));
         }
         if let Some(l) = &r.lidar {
             let w = |k: &str| format!("rig.lidar.{k}");
@@ -685,15 +737,24 @@ impl Scene {
                 return Err(bad(w("rings"), format!("{} must be in 1..=512", l.rings)));
             }
             if l.columns == 0 || l.columns > 8192 {
-                return Err(bad(w("columns"), format!("{} must be in 1..=8192", l.columns)));
+                return Err(bad(
+                    w("columns"),
+                    format!("{} must be in 1..=8192", l.columns),
+                ));
             }
             let [lo, hi] = l.elevation_deg;
             if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo >= -90.0 && hi <= 90.0) {
-                return Err(bad(w("elevation_deg"), format!("{:?} must be [low, high] within ±90", l.elevation_deg)));
+                return Err(bad(
+                    w("elevation_deg"),
+                    format!("{:?} must be [low, high] within ±90", l.elevation_deg),
+                ));
             }
             let [a0, a1] = l.azimuth_deg;
             if !(a0.is_finite() && a1.is_finite() && a0 <= a1 && a1 - a0 <= 360.0) {
-                return Err(bad(w("azimuth_deg"), format!("{:?} must be [from, to] spanning ≤ 360", l.azimuth_deg)));
+                return Err(bad(
+                    w("azimuth_deg"),
+                    format!("{:?} must be [from, to] spanning ≤ 360", l.azimuth_deg),
+                ));
             }
             positive(&w("wavelength_nm"), l.wavelength_nm)?;
             positive(&w("aperture_m"), l.aperture_m)?;
@@ -706,11 +767,21 @@ impl Scene {
                 return Err(bad(w("position"), "z must be above the ground (> 0)"));
             }
         }
-        let cam = |w: &dyn Fn(&str) -> String, pos: &[f64; 3], rpy: &[f64; 3], width: usize, height: usize, hfov: f64, noise: f64| -> Result<()> {
+        let cam = |w: &dyn Fn(&str) -> String,
+                   pos: &[f64; 3],
+                   rpy: &[f64; 3],
+                   width: usize,
+                   height: usize,
+                   hfov: f64,
+                   noise: f64|
+         -> Result<()> {
             all_finite(&w("position"), pos)?;
             all_finite(&w("rpy_deg"), rpy)?;
             if width == 0 || height == 0 || width > 4096 || height > 4096 {
-                return Err(bad(w("width"), format!("{width} × {height} must be within 1..=4096")));
+                return Err(bad(
+                    w("width"),
+                    format!("{width} × {height} must be within 1..=4096"),
+                ));
             }
             if !(hfov > 1.0 && hfov < 170.0) {
                 return Err(bad(w("hfov_deg"), format!("{hfov} must be in (1, 170)")));
@@ -719,18 +790,40 @@ impl Scene {
         };
         if let Some(s) = &r.stereo {
             let w = |k: &str| format!("rig.stereo.{k}");
-            cam(&w, &s.position, &s.rpy_deg, s.width, s.height, s.hfov_deg, s.image_noise)?;
+            cam(
+                &w,
+                &s.position,
+                &s.rpy_deg,
+                s.width,
+                s.height,
+                s.hfov_deg,
+                s.image_noise,
+            )?;
             positive(&w("baseline_m"), s.baseline_m)?;
             non_negative(&w("disparity_noise_px"), s.disparity_noise_px)?;
             if s.bin == 0 || s.width % s.bin != 0 || s.height % s.bin != 0 {
-                return Err(bad(w("bin"), format!("{} must be ≥ 1 and divide {} × {}", s.bin, s.width, s.height)));
+                return Err(bad(
+                    w("bin"),
+                    format!(
+                        "{} must be ≥ 1 and divide {} × {}",
+                        s.bin, s.width, s.height
+                    ),
+                ));
             }
             positive(&w("max_range_m"), s.max_range_m)?;
         }
         for (name, c) in [("swir", &r.swir), ("mwir", &r.mwir)] {
             if let Some(c) = c {
                 let w = |k: &str| format!("rig.{name}.{k}");
-                cam(&w, &c.position, &c.rpy_deg, c.width, c.height, c.hfov_deg, c.image_noise)?;
+                cam(
+                    &w,
+                    &c.position,
+                    &c.rpy_deg,
+                    c.width,
+                    c.height,
+                    c.hfov_deg,
+                    c.image_noise,
+                )?;
             }
         }
         Ok(())

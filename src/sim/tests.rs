@@ -5,7 +5,10 @@ use nalgebra::{Point3, Vector3};
 
 use super::*;
 use crate::hazard::Class;
-use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig, LidarWaterModel, Sensitivity, SolidAngleForm};
+use crate::optics::{
+    apparent_bottom_point, Attenuation, LidarModelConfig, LidarWaterModel, Sensitivity,
+    SolidAngleForm,
+};
 
 /// A small flat scene: a flat-bottomed pond (depth `depth` under level −0.2) 15 m ahead, a
 /// building beyond it; lidar at 1.5 m, a small stereo camera.
@@ -90,33 +93,76 @@ fn bad(extra_replace: (&str, &str)) -> String {
 #[test]
 fn bad_scenes_name_the_key() {
     let cases: &[((&str, &str), &str)] = &[
-        (("seed = 7", "seed = 7\ncolour = 3"), "unknown field `colour`"),
-        (("resolution = 0.5", "resolution = -0.5"), "terrain.resolution"),
-        (("resolution = 0.5", "resolution = 0.0001"), "terrain.resolution"),
-        (("material = \"soil\"", "material = \"cheese\""), "unknown material \"cheese\""),
+        (
+            ("seed = 7", "seed = 7\ncolour = 3"),
+            "unknown field `colour`",
+        ),
+        (
+            ("resolution = 0.5", "resolution = -0.5"),
+            "terrain.resolution",
+        ),
+        (
+            ("resolution = 0.5", "resolution = 0.0001"),
+            "terrain.resolution",
+        ),
+        (
+            ("material = \"soil\"", "material = \"cheese\""),
+            "unknown material \"cheese\"",
+        ),
         (("level = -0.2\n", ""), "water[0].level"),
         (("radius = 9.0", "radius = 0.0"), "water[0].radius"),
-        (("attenuation = 0.8", "attenuation = -1.0"), "water[0].attenuation"),
-        (("kind = \"level\"", "kind = \"lake\""), "unknown variant `lake`"),
+        (
+            ("attenuation = 0.8", "attenuation = -1.0"),
+            "water[0].attenuation",
+        ),
+        (
+            ("kind = \"level\"", "kind = \"lake\""),
+            "unknown variant `lake`",
+        ),
         (("flat = 0.75", "flat = 1.5"), "terrain.features[0].flat"),
         (("depth = 0.5", "depth = -0.5"), "terrain.features[0].depth"),
-        (("size = [3.0, 8.0, 6.0]", "size = [3.0, 0.0, 6.0]"), "objects[0].size[1]"),
+        (
+            ("size = [3.0, 8.0, 6.0]", "size = [3.0, 0.0, 6.0]"),
+            "objects[0].size[1]",
+        ),
         (("[2.0, 0.0]]", "[100.0, 0.0]]"), "trajectory.waypoints[1]"),
         (("speed = 2.0", "speed = 0.0"), "trajectory.speed"),
         (("rings = 16", "rings = 0"), "rig.lidar.rings"),
-        (("elevation_deg = [-20.0, 2.0]", "elevation_deg = [2.0, -20.0]"), "rig.lidar.elevation_deg"),
-        (("dry_limit_m = 25.0", "dry_limit_m = nan"), "rig.lidar.dry_limit_m"),
+        (
+            (
+                "elevation_deg = [-20.0, 2.0]",
+                "elevation_deg = [2.0, -20.0]",
+            ),
+            "rig.lidar.elevation_deg",
+        ),
+        (
+            ("dry_limit_m = 25.0", "dry_limit_m = nan"),
+            "rig.lidar.dry_limit_m",
+        ),
         (("width = 64", "width = 63"), "rig.stereo.bin"),
-        (("hfov_deg = 60.0", "hfov_deg = 180.0"), "rig.stereo.hfov_deg"),
-        (("baseline_m = 0.12", "baseline_m = 0.0"), "rig.stereo.baseline_m"),
+        (
+            ("hfov_deg = 60.0", "hfov_deg = 180.0"),
+            "rig.stereo.hfov_deg",
+        ),
+        (
+            ("baseline_m = 0.12", "baseline_m = 0.0"),
+            "rig.stereo.baseline_m",
+        ),
         (("name = \"test\"", "name = \"\""), "name"),
     ];
     for (rep, want) in cases {
         let e = bad(*rep);
-        assert!(e.contains(want), "{rep:?}: error {e:?} does not mention {want:?}");
+        assert!(
+            e.contains(want),
+            "{rep:?}: error {e:?} does not mention {want:?}"
+        );
     }
     // A rig without sensors.
-    let t = scene_text(0.5, "").split("[rig.lidar]").next().unwrap().to_string();
+    let t = scene_text(0.5, "")
+        .split("[rig.lidar]")
+        .next()
+        .unwrap()
+        .to_string();
     let e = Scene::from_toml_str(&t).unwrap_err().to_string();
     assert!(e.contains("rig"), "{e}");
 }
@@ -125,7 +171,11 @@ fn bad_scenes_name_the_key() {
 fn load_reports_the_file_and_line() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("s.toml");
-    std::fs::write(&p, scene_text(0.5, "").replacen("rings = 16", "rings = \"many\"", 1)).unwrap();
+    std::fs::write(
+        &p,
+        scene_text(0.5, "").replacen("rings = 16", "rings = \"many\"", 1),
+    )
+    .unwrap();
     let e = Scene::load(&p).unwrap_err().to_string();
     assert!(e.contains("s.toml") && e.contains("line"), "{e}");
 }
@@ -143,7 +193,11 @@ fn flat_ground_range_is_height_over_sine_of_elevation() {
         match l.trace(&w, &o, &d).unwrap() {
             LidarReturn::Solid { point } => {
                 let r = (point - o).norm();
-                assert!((r - h / e.sin()).abs() < 2e-4, "{deg}°: {r} vs {}", h / e.sin());
+                assert!(
+                    (r - h / e.sin()).abs() < 2e-4,
+                    "{deg}°: {r} vs {}",
+                    h / e.sin()
+                );
             }
             other => panic!("{deg}°: {other:?}"),
         }
@@ -155,7 +209,10 @@ fn flat_ground_range_is_height_over_sine_of_elevation() {
     assert_eq!(l.trace(&w, &o, &d).unwrap(), LidarReturn::None);
     let e = (h / 20.0f64).atan();
     let d = Vector3::new(0.0, -e.cos(), -e.sin());
-    assert!(matches!(l.trace(&w, &o, &d).unwrap(), LidarReturn::Solid { .. }));
+    assert!(matches!(
+        l.trace(&w, &o, &d).unwrap(),
+        LidarReturn::Solid { .. }
+    ));
 }
 
 fn model(w: &World, l: &Lidar, height: f64, depth_albedo: f64) -> LidarWaterModel {
@@ -179,8 +236,16 @@ fn bottom_returns_exactly_where_the_optics_model_says() {
         let o = Point3::new(0.0, 0.0, 1.5);
         let level = -0.2;
         let d_true = depth - 0.2; // bottom at −depth, surface at −0.2
-        let m = model(&w, &l, o.z - level, w.materials[w.material("soil").unwrap()].spec.lidar);
-        let limit = m.max_lookahead_for_depth(d_true).unwrap().expect("some lookahead returns");
+        let m = model(
+            &w,
+            &l,
+            o.z - level,
+            w.materials[w.material("soil").unwrap()].spec.lidar,
+        );
+        let limit = m
+            .max_lookahead_for_depth(d_true)
+            .unwrap()
+            .expect("some lookahead returns");
         let (mut bottoms, mut last_bottom, mut misses) = (0, 0.0f64, 0);
         // Beams meeting the water between 9 and 21 m ahead: the flat bottom spans 9..21 m.
         for k in 0..400 {
@@ -190,8 +255,16 @@ fn bottom_returns_exactly_where_the_optics_model_says() {
             let r = l.trace(&w, &o, &d).unwrap();
             let expect = m.return_ratio(look, d_true).unwrap() >= l.min_power_ratio;
             match r {
-                LidarReturn::Bottom { point, bottom, lookahead, depth: dd } => {
-                    assert!(expect, "bottom return at {look} m where the model says none (limit {limit})");
+                LidarReturn::Bottom {
+                    point,
+                    bottom,
+                    lookahead,
+                    depth: dd,
+                } => {
+                    assert!(
+                        expect,
+                        "bottom return at {look} m where the model says none (limit {limit})"
+                    );
                     assert!((lookahead - look).abs() < 1e-6);
                     assert!((dd - d_true).abs() < 1e-4, "depth {dd} vs {d_true}");
                     let want = apparent_bottom_point(o, bottom, level, N_WATER).unwrap();
@@ -208,8 +281,14 @@ fn bottom_returns_exactly_where_the_optics_model_says() {
                 }
             }
         }
-        assert!(bottoms > 0 && misses > 0, "depth {depth}: {bottoms} bottoms, {misses} misses, limit {limit}");
-        assert!((last_bottom - limit).abs() < 11.0 / 399.0 + 1e-9, "last bottom {last_bottom} vs limit {limit}");
+        assert!(
+            bottoms > 0 && misses > 0,
+            "depth {depth}: {bottoms} bottoms, {misses} misses, limit {limit}"
+        );
+        assert!(
+            (last_bottom - limit).abs() < 11.0 / 399.0 + 1e-9,
+            "last bottom {last_bottom} vs limit {limit}"
+        );
     }
 }
 
@@ -232,7 +311,11 @@ fn specular_bounce_lands_on_the_original_ray_at_the_total_path() {
             assert!((q - mirrored).norm() < 1e-3, "{q:?} vs {mirrored:?}");
             assert!((mirrored.x - 28.5).abs() < 1e-3, "{mirrored:?}");
         }
-        other => panic!("{other:?} {:?} {:?}", w.cast(&o, &d, 100.0), w.cast_solid(&o, &d, 100.0)),
+        other => panic!(
+            "{other:?} {:?} {:?}",
+            w.cast(&o, &d, 100.0),
+            w.cast_solid(&o, &d, 100.0)
+        ),
     }
 }
 
@@ -247,7 +330,10 @@ fn stereo_on_still_water_triangulates_the_mirror_image() {
     let (t, _) = s.trace(&w, &o, &d).expect("the building is reflected");
     let p = o + d * t;
     let mirrored = Point3::new(p.x, p.y, -0.4 - p.z);
-    assert!((mirrored.x - 28.5).abs() < 1e-3 && mirrored.z > -0.2, "{mirrored:?}");
+    assert!(
+        (mirrored.x - 28.5).abs() < 1e-3 && mirrored.z > -0.2,
+        "{mirrored:?}"
+    );
     // A reflected sky gives no match.
     let d = Vector3::new(0.0, 1.0, 0.0);
     let e = (1.7f64 / 12.0).atan();
@@ -270,24 +356,51 @@ fn stereo_on_still_water_triangulates_the_mirror_image() {
 fn truth_marks_the_pond_with_its_depth() {
     let w = world(0.5);
     let t = truth_map(&w);
-    let c = t.cells.iter().find(|c| (c.x - 12.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11).unwrap();
+    let c = t
+        .cells
+        .iter()
+        .find(|c| (c.x - 12.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11)
+        .unwrap();
     assert_eq!(c.class, Class::Water);
-    assert!((c.z + 0.2).abs() < 1e-12 && (c.depth - 0.3).abs() < 1e-6, "{c:?}");
-    let dry = t.cells.iter().find(|c| (c.x - 0.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11).unwrap();
+    assert!(
+        (c.z + 0.2).abs() < 1e-12 && (c.depth - 0.3).abs() < 1e-6,
+        "{c:?}"
+    );
+    let dry = t
+        .cells
+        .iter()
+        .find(|c| (c.x - 0.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11)
+        .unwrap();
     assert_eq!((dry.class, dry.depth), (Class::Ground, 0.0));
-    let b = t.cells.iter().find(|c| (c.x - 30.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11).unwrap();
+    let b = t
+        .cells
+        .iter()
+        .find(|c| (c.x - 30.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11)
+        .unwrap();
     assert_eq!(b.class, Class::Obstacle);
     let stats = water_stats(&w, &t);
     // Flat bottom of radius 6 m at 0.3 m depth, then the rim: area between π6² and π8².
-    assert!(stats[0].area_m2 > std::f64::consts::PI * 36.0 && stats[0].area_m2 < std::f64::consts::PI * 64.0);
+    assert!(
+        stats[0].area_m2 > std::f64::consts::PI * 36.0
+            && stats[0].area_m2 < std::f64::consts::PI * 64.0
+    );
     assert!((stats[0].max_depth_m - 0.3).abs() < 1e-6);
 }
 
 fn run_sim(threads: usize, noise: bool) -> (tempfile::TempDir, SimReport) {
     let dir = tempfile::tempdir().unwrap();
-    let scene = Scene::from_toml_str(&scene_text(0.5, "[rig.mwir]\nposition = [0.0, 0.0, 1.5]\nwidth = 32\nheight = 24\nhfov_deg = 50.0\n")).unwrap();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-    let r = pool.install(|| simulate(&scene, dir.path(), SimOptions { noise })).unwrap();
+    let scene = Scene::from_toml_str(&scene_text(
+        0.5,
+        "[rig.mwir]\nposition = [0.0, 0.0, 1.5]\nwidth = 32\nheight = 24\nhfov_deg = 50.0\n",
+    ))
+    .unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let r = pool
+        .install(|| simulate(&scene, dir.path(), SimOptions { noise }))
+        .unwrap();
     (dir, r)
 }
 
@@ -296,22 +409,32 @@ fn same_seed_same_bytes_whatever_the_thread_count() {
     let (a, ra) = run_sim(1, true);
     let (b, _) = run_sim(3, true);
     for f in ["log.mcap", "truth.ply", "truth.json", "scene.ply"] {
-        let (x, y) = (std::fs::read(a.path().join(f)).unwrap(), std::fs::read(b.path().join(f)).unwrap());
+        let (x, y) = (
+            std::fs::read(a.path().join(f)).unwrap(),
+            std::fs::read(b.path().join(f)).unwrap(),
+        );
         assert!(x == y, "{f} differs between 1 and 3 threads");
     }
     assert_eq!(ra.frames, 2);
     assert!(ra.lidar_returns > 0 && ra.stereo_points > 0);
     // Noise changes the clouds.
     let (c, _) = run_sim(2, false);
-    assert_ne!(std::fs::read(a.path().join("log.mcap")).unwrap(), std::fs::read(c.path().join("log.mcap")).unwrap());
+    assert_ne!(
+        std::fs::read(a.path().join("log.mcap")).unwrap(),
+        std::fs::read(c.path().join("log.mcap")).unwrap()
+    );
 }
 
 #[test]
 fn the_frame_stream_reads_the_log_back() {
     let (dir, r) = run_sim(2, true);
-    let mut fs = crate::io::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default()).unwrap();
+    let mut fs =
+        crate::io::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default())
+            .unwrap();
     let mut n = 0;
-    let traj: TruthInfo = serde_json::from_str(&std::fs::read_to_string(dir.path().join("truth.json")).unwrap()).unwrap();
+    let traj: TruthInfo =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("truth.json")).unwrap())
+            .unwrap();
     for f in fs.by_ref() {
         let f = f.unwrap();
         let p = &traj.trajectory[n];
@@ -342,7 +465,10 @@ fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
     assert_eq!(r.all.water_recall, Some(1.0));
     assert_eq!(r.all.false_positive_rate, Some(0.0));
     assert!(r.all.water_cells > 0 && r.all.dry_cells > 0);
-    assert_eq!(r.bins.iter().map(|b| b.observed_cells).sum::<usize>(), r.all.observed_cells);
+    assert_eq!(
+        r.bins.iter().map(|b| b.observed_cells).sum::<usize>(),
+        r.all.observed_cells
+    );
 
     // Wrong: the pond's far half called ground, a dry strip called water, terrain 5 cm high.
     let mut m = crate::io::mapfile::read_map_ply(&truth_dir.join("truth.ply")).unwrap();
@@ -372,4 +498,3 @@ fn trajectory_follows_the_waypoints() {
     assert_eq!((p[0].x, p[1].x), (0.0, 0.4));
     assert!((p[1].stamp - p[0].stamp - 0.2).abs() < 1e-12);
 }
-

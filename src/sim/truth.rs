@@ -76,12 +76,20 @@ pub fn truth_map(w: &World) -> HazardMap {
             let (z, depth, class, hazard, water) = match w.water_at(x, y) {
                 Some((_, s)) => {
                     let d = s - ground;
-                    let hz = if d <= w.scene.fording_depth { Hazard::ShallowWater } else { Hazard::DeepWater };
+                    let hz = if d <= w.scene.fording_depth {
+                        Hazard::ShallowWater
+                    } else {
+                        Hazard::DeepWater
+                    };
                     (s, d as f32, Class::Water, hz, 1.0)
                 }
                 None => {
                     let c = w.dry_class(x, y);
-                    let hz = if c == Class::Obstacle { Hazard::Obstacle } else { Hazard::Free };
+                    let hz = if c == Class::Obstacle {
+                        Hazard::Obstacle
+                    } else {
+                        Hazard::Free
+                    };
                     (ground, 0.0, c, hz, 0.0)
                 }
             };
@@ -100,7 +108,10 @@ pub fn truth_map(w: &World) -> HazardMap {
             });
         }
     }
-    HazardMap { resolution: res, cells }
+    HazardMap {
+        resolution: res,
+        cells,
+    }
 }
 
 /// Statistics of each water body over the truth raster.

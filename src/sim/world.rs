@@ -165,7 +165,12 @@ fn smooth_noise(seed: u64, x: f64, y: f64) -> f64 {
     let (fx, fy) = (x - xi, y - yi);
     let s = |t: f64| t * t * (3.0 - 2.0 * t);
     let h = |a: f64, b: f64| 2.0 * unit_f64(hash(seed, &[a as i64 as u64, b as i64 as u64])) - 1.0;
-    let (a, b, c, d) = (h(xi, yi), h(xi + 1.0, yi), h(xi, yi + 1.0), h(xi + 1.0, yi + 1.0));
+    let (a, b, c, d) = (
+        h(xi, yi),
+        h(xi + 1.0, yi),
+        h(xi, yi + 1.0),
+        h(xi + 1.0, yi + 1.0),
+    );
     let (u, v) = (s(fx), s(fy));
     a + (b - a) * u + (c - a) * v + (a - b - c + d) * u * v
 }
@@ -248,22 +253,80 @@ impl World {
                     let trunk_r = (0.08 * h).clamp(0.05, 0.4).min(0.5 * r);
                     let crown = o.material.as_deref().unwrap_or("foliage");
                     // Trunk: an octagonal prism from below the ground into the crown.
-                    add_prism(&mut vertices, &mut triangles, &mut tri_material, [px, py], trunk_r, base - 0.3, base + 0.45 * h, 8, mat("bark"));
-                    add_cone(&mut vertices, &mut triangles, &mut tri_material, [px, py], r, base + 0.3 * h, base + h, 12, mat(crown));
-                    footprints.push(Footprint { centre: [px, py], half: [r, r], yaw: 0.0, is_box: false, class: Class::Vegetation });
+                    add_prism(
+                        &mut vertices,
+                        &mut triangles,
+                        &mut tri_material,
+                        [px, py],
+                        trunk_r,
+                        base - 0.3,
+                        base + 0.45 * h,
+                        8,
+                        mat("bark"),
+                    );
+                    add_cone(
+                        &mut vertices,
+                        &mut triangles,
+                        &mut tri_material,
+                        [px, py],
+                        r,
+                        base + 0.3 * h,
+                        base + h,
+                        12,
+                        mat(crown),
+                    );
+                    footprints.push(Footprint {
+                        centre: [px, py],
+                        half: [r, r],
+                        yaw: 0.0,
+                        is_box: false,
+                        class: Class::Vegetation,
+                    });
                 }
                 ObjectKind::Building => {
                     let s = o.size.unwrap_or([1.0; 3]);
                     let m = mat(o.material.as_deref().unwrap_or("concrete"));
-                    let zmin = Self::min_over_box(&terrain, [px, py], [0.5 * s[0], 0.5 * s[1]], yaw) - 0.3;
-                    add_box(&mut vertices, &mut triangles, &mut tri_material, [px, py], [0.5 * s[0], 0.5 * s[1]], yaw, zmin, base + s[2], m);
-                    footprints.push(Footprint { centre: [px, py], half: [0.5 * s[0], 0.5 * s[1]], yaw, is_box: true, class: materials[m].spec.class.class() });
+                    let zmin =
+                        Self::min_over_box(&terrain, [px, py], [0.5 * s[0], 0.5 * s[1]], yaw) - 0.3;
+                    add_box(
+                        &mut vertices,
+                        &mut triangles,
+                        &mut tri_material,
+                        [px, py],
+                        [0.5 * s[0], 0.5 * s[1]],
+                        yaw,
+                        zmin,
+                        base + s[2],
+                        m,
+                    );
+                    footprints.push(Footprint {
+                        centre: [px, py],
+                        half: [0.5 * s[0], 0.5 * s[1]],
+                        yaw,
+                        is_box: true,
+                        class: materials[m].spec.class.class(),
+                    });
                 }
                 ObjectKind::Rock => {
                     let s = o.size.unwrap_or([1.0; 3]);
                     let m = mat(o.material.as_deref().unwrap_or("rock"));
-                    add_rock(&mut vertices, &mut triangles, &mut tri_material, [px, py, base], s, yaw, hash(scene.seed, &[7, oi as u64]), m);
-                    footprints.push(Footprint { centre: [px, py], half: [s[0], s[1]], yaw, is_box: false, class: materials[m].spec.class.class() });
+                    add_rock(
+                        &mut vertices,
+                        &mut triangles,
+                        &mut tri_material,
+                        [px, py, base],
+                        s,
+                        yaw,
+                        hash(scene.seed, &[7, oi as u64]),
+                        m,
+                    );
+                    footprints.push(Footprint {
+                        centre: [px, py],
+                        half: [s[0], s[1]],
+                        yaw,
+                        is_box: false,
+                        class: materials[m].spec.class.class(),
+                    });
                 }
             }
         }
@@ -280,7 +343,10 @@ impl World {
                 let (point, normal) = match w.kind {
                     WaterKind::Level => {
                         let c = w.centre.unwrap_or_default();
-                        (Point3::new(c[0], c[1], w.level.unwrap_or(0.0)), Vector3::z())
+                        (
+                            Point3::new(c[0], c[1], w.level.unwrap_or(0.0)),
+                            Vector3::z(),
+                        )
                     }
                     WaterKind::Stream => {
                         let (a, b) = (w.from.unwrap_or_default(), w.to.unwrap_or_default());
@@ -294,11 +360,21 @@ impl World {
                 let attenuation = match w.attenuation {
                     Some(a) => a,
                     None => {
-                        let nm = scene.rig.lidar.as_ref().map(|l| l.wavelength_nm).unwrap_or(905.0);
+                        let nm = scene
+                            .rig
+                            .lidar
+                            .as_ref()
+                            .map(|l| l.wavelength_nm)
+                            .unwrap_or(905.0);
                         crate::optics::absorption_per_m(nm)?
                     }
                 };
-                Ok(WaterBody { spec: w.clone(), point, normal, attenuation })
+                Ok(WaterBody {
+                    spec: w.clone(),
+                    point,
+                    normal,
+                    attenuation,
+                })
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(World {
@@ -431,7 +507,10 @@ impl World {
         if let Some(f) = self.footprints.iter().find(|f| f.covers(x, y)) {
             return f.class;
         }
-        self.materials[self.terrain_material(x, y)].spec.class.class()
+        self.materials[self.terrain_material(x, y)]
+            .spec
+            .class
+            .class()
     }
 
     /// First solid (terrain or object) hit along the ray within `max_t`.
@@ -440,7 +519,9 @@ impl World {
             GVec::new(o.x as f32, o.y as f32, o.z as f32),
             GVec::new(d.x as f32, d.y as f32, d.z as f32),
         );
-        let hit = self.mesh.cast_local_ray_and_get_normal(&ray, max_t as f32, false)?;
+        let hit = self
+            .mesh
+            .cast_local_ray_and_get_normal(&ray, max_t as f32, false)?;
         let tri = hit.subshape as usize;
         if tri >= self.triangles.len() {
             return None;
@@ -456,7 +537,13 @@ impl World {
             usize::MAX => self.terrain_material(point.x, point.y),
             m => m,
         };
-        Some(Hit { t, point, normal, surface: Surface::Solid { tri }, material })
+        Some(Hit {
+            t,
+            point,
+            normal,
+            surface: Surface::Solid { tri },
+            material,
+        })
     }
 
     /// True for terrain triangles.
@@ -530,7 +617,17 @@ impl World {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn add_prism(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c: [f64; 2], r: f64, z0: f64, z1: f64, n: usize, mat: usize) {
+fn add_prism(
+    v: &mut Vec<[f64; 3]>,
+    t: &mut Vec<[u32; 3]>,
+    m: &mut Vec<usize>,
+    c: [f64; 2],
+    r: f64,
+    z0: f64,
+    z1: f64,
+    n: usize,
+    mat: usize,
+) {
     let b = v.len() as u32;
     for k in 0..n {
         let a = k as f64 / n as f64 * std::f64::consts::TAU;
@@ -550,7 +647,17 @@ fn add_prism(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c
 }
 
 #[allow(clippy::too_many_arguments)]
-fn add_cone(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c: [f64; 2], r: f64, z0: f64, z1: f64, n: usize, mat: usize) {
+fn add_cone(
+    v: &mut Vec<[f64; 3]>,
+    t: &mut Vec<[u32; 3]>,
+    m: &mut Vec<usize>,
+    c: [f64; 2],
+    r: f64,
+    z0: f64,
+    z1: f64,
+    n: usize,
+    mat: usize,
+) {
     let b = v.len() as u32;
     for k in 0..n {
         let a = k as f64 / n as f64 * std::f64::consts::TAU;
@@ -569,7 +676,17 @@ fn add_cone(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c:
 }
 
 #[allow(clippy::too_many_arguments)]
-fn add_box(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c: [f64; 2], half: [f64; 2], yaw: f64, z0: f64, z1: f64, mat: usize) {
+fn add_box(
+    v: &mut Vec<[f64; 3]>,
+    t: &mut Vec<[u32; 3]>,
+    m: &mut Vec<usize>,
+    c: [f64; 2],
+    half: [f64; 2],
+    yaw: f64,
+    z0: f64,
+    z1: f64,
+    mat: usize,
+) {
     let b = v.len() as u32;
     let (co, si) = (yaw.cos(), yaw.sin());
     for z in [z0, z1] {
@@ -579,14 +696,30 @@ fn add_box(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c: 
         }
     }
     let q = |a: u32, bb: u32, cc: u32, d: u32| [[b + a, b + bb, b + cc], [b + a, b + cc, b + d]];
-    for f in [q(0, 3, 2, 1), q(4, 5, 6, 7), q(0, 1, 5, 4), q(1, 2, 6, 5), q(2, 3, 7, 6), q(3, 0, 4, 7)] {
+    for f in [
+        q(0, 3, 2, 1),
+        q(4, 5, 6, 7),
+        q(0, 1, 5, 4),
+        q(1, 2, 6, 5),
+        q(2, 3, 7, 6),
+        q(3, 0, 4, 7),
+    ] {
         t.extend(f);
         m.extend([mat; 2]);
     }
 }
 
 #[allow(clippy::too_many_arguments)]
-fn add_rock(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c: [f64; 3], s: [f64; 3], yaw: f64, seed: u64, mat: usize) {
+fn add_rock(
+    v: &mut Vec<[f64; 3]>,
+    t: &mut Vec<[u32; 3]>,
+    m: &mut Vec<usize>,
+    c: [f64; 3],
+    s: [f64; 3],
+    yaw: f64,
+    seed: u64,
+    mat: usize,
+) {
     // A UV sphere (8 × 12) with seeded radial jitter, its lower third buried.
     let (nr, ns) = (8usize, 12usize);
     let b = v.len() as u32;
@@ -596,9 +729,21 @@ fn add_rock(v: &mut Vec<[f64; 3]>, t: &mut Vec<[u32; 3]>, m: &mut Vec<usize>, c:
         for j in 0..ns {
             let ph = std::f64::consts::TAU * j as f64 / ns as f64;
             let poles = i == 0 || i == nr;
-            let jit = if poles { 1.0 } else { 0.85 + 0.3 * unit_f64(hash(seed, &[i as u64, j as u64])) };
-            let (x, y, z) = (s[0] * jit * th.sin() * ph.cos(), s[1] * jit * th.sin() * ph.sin(), s[2] * jit * th.cos());
-            v.push([c[0] + co * x - si * y, c[1] + si * x + co * y, c[2] + z - 0.3 * s[2]]);
+            let jit = if poles {
+                1.0
+            } else {
+                0.85 + 0.3 * unit_f64(hash(seed, &[i as u64, j as u64]))
+            };
+            let (x, y, z) = (
+                s[0] * jit * th.sin() * ph.cos(),
+                s[1] * jit * th.sin() * ph.sin(),
+                s[2] * jit * th.cos(),
+            );
+            v.push([
+                c[0] + co * x - si * y,
+                c[1] + si * x + co * y,
+                c[2] + z - 0.3 * s[2],
+            ]);
         }
     }
     let id = |i: usize, j: usize| b + (i * ns + j % ns) as u32;

@@ -34,7 +34,12 @@ pub fn run_simulate(a: &SimulateArgs) -> anyhow::Result<()> {
         );
         println!(
             "truth: {} cells, {} water; build {:.2} s, render {:.2} s, write {:.2} s -> {}",
-            r.truth_cells, r.water_cells, r.build_s, r.render_s, r.write_s, a.out.display()
+            r.truth_cells,
+            r.water_cells,
+            r.build_s,
+            r.render_s,
+            r.write_s,
+            a.out.display()
         );
     }
     Ok(())
@@ -57,7 +62,10 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
-        println!("scene {} (map {} m, truth {} m cells)", r.scene, r.map_resolution, r.truth_resolution);
+        println!(
+            "scene {} (map {} m, truth {} m cells)",
+            r.scene, r.map_resolution, r.truth_resolution
+        );
         print!("{}", r.markdown());
     }
     Ok(())
