@@ -205,3 +205,82 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
     }
     Ok(HazardMap { resolution, cells })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hazard::{Class, Hazard, HazardMap, MapCell};
+
+    fn sample() -> HazardMap {
+        let cell = |kx: i64, ky: i64, class, hazard, depth| MapCell {
+            key: CellKey::new(kx, ky),
+            x: (kx as f64 + 0.5) * 0.25,
+            y: (ky as f64 + 0.5) * 0.25,
+            z: -0.125 * kx as f64,
+            elevation_std: 0.01,
+            water: if class == Class::Water { 0.9 } else { 0.0 },
+            depth,
+            class,
+            hazard,
+            hits: 0,
+            below: 0,
+        };
+        HazardMap {
+            resolution: 0.25,
+            cells: vec![
+                cell(-3, 2, Class::Ground, Hazard::Free, 0.0),
+                cell(4, -7, Class::Water, Hazard::DeepWater, f32::NAN),
+                cell(5, 5, Class::Obstacle, Hazard::Obstacle, 0.0),
+            ],
+        }
+    }
+
+    #[test]
+    fn reads_back_what_write_map_ply_wrote() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("map.ply");
+        let m = sample();
+        crate::io::export::write_map_ply(&p, &m).unwrap();
+        let r = read_map_ply(&p).unwrap();
+        assert_eq!(r.resolution, 0.25);
+        assert_eq!(r.cells.len(), 3);
+        for (a, b) in m.cells.iter().zip(&r.cells) {
+            assert_eq!((a.key, a.class, a.hazard), (b.key, b.class, b.hazard));
+            assert_eq!((a.x, a.y, a.z), (b.x, b.y, b.z));
+            assert!(a.depth == b.depth || (a.depth.is_nan() && b.depth.is_nan()));
+        }
+    }
+
+    #[test]
+    fn refuses_what_is_not_the_contract() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("map.ply");
+        crate::io::export::write_map_ply(&p, &sample()).unwrap();
+        let good = std::fs::read(&p).unwrap();
+        let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+        let swap = |from: &str, to: &str| {
+            let s = text(&good);
+            let i = s.find("end_header").unwrap();
+            let mut out = s[..i].replacen(from, to, 1).into_bytes();
+            out.extend_from_slice(&good[i..]);
+            out
+        };
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (swap("binary_little_endian", "ascii"), "binary_little_endian"),
+            (swap("property float depth", "property double depth"), "header line"),
+            (swap("comment resolution 0.25\n", ""), "resolution"),
+            (swap("element vertex 3", "element vertex 4"), "need"),
+            (good[..good.len() - 1].to_vec(), "need"),
+            (b"ply\n".to_vec(), "end_header"),
+        ];
+        for (bytes, want) in cases {
+            let e = parse_map_ply(&p, &bytes).unwrap_err().to_string();
+            assert!(e.contains(want), "{e:?} lacks {want:?}");
+        }
+        let mut bad_class = good.clone();
+        let n = bad_class.len();
+        bad_class[n - 5] = 9;
+        let e = parse_map_ply(&p, &bad_class).unwrap_err().to_string();
+        assert!(e.contains("vertex 2") && e.contains("class 9"), "{e}");
+    }
+}
