@@ -498,3 +498,29 @@ fn trajectory_follows_the_waypoints() {
     assert_eq!((p[0].x, p[1].x), (0.0, 0.4));
     assert!((p[1].stamp - p[0].stamp - 0.2).abs() < 1e-12);
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+    /// Over flat dry ground, from any height and in any direction that stays on the
+    /// terrain, the lidar range is h / sin(depression angle).
+    #[test]
+    fn flat_ground_range_property(h in 0.5f64..3.0, deg in 6.0f64..89.0, az in 100.0f64..260.0) {
+        let t = scene_text(0.5, "").replacen("position = [0.0, 0.0, 1.5]\nrings", &format!("position = [0.0, 0.0, {h}]\nrings"), 1);
+        let w = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
+        let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
+        let o = Point3::new(0.0, 0.0, h);
+        let (e, a) = (deg.to_radians(), az.to_radians());
+        let d = Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), -e.sin());
+        let look = h / e.tan();
+        let p = o + d * (h / e.sin());
+        proptest::prop_assume!(w.terrain.contains(p.x, p.y) && look < l.spec.dry_limit_m);
+        match l.trace(&w, &o, &d).unwrap() {
+            LidarReturn::Solid { point } => {
+                let r = (point - o).norm();
+                proptest::prop_assert!((r - h / e.sin()).abs() < 2e-4, "{} vs {}", r, h / e.sin());
+            }
+            other => proptest::prop_assert!(false, "{:?}", other),
+        }
+    }
+}
