@@ -118,12 +118,20 @@ def check_cloud(rc, res, table, msgs, topic, frame_id, frame_index):
     rays = np.hstack([np.repeat(origin[None, :], len(p), axis=0), dirs]).astype(np.float32)
     ans = rc.cast_rays(o3d.core.Tensor(rays))
     t = ans["t_hit"].numpy().astype(np.float64)
-    hit = origin + dirs * t[:, None]
-    # Dry terrain: the hit cell and its 8 neighbours are ground in the truth (class 1).
-    k = np.floor(hit[:, :2] / res).astype(np.int64)
-    dry = np.array(
-        [all(table.get((int(a) + i, int(b) + j)) == 1 for i in (-1, 0, 1) for j in (-1, 0, 1)) for a, b in k]
-    )
+    found = np.isfinite(t)
+    hit = origin + dirs * np.where(found, t, 0.0)[:, None]
+    logged = origin + dirs * rng[:, None]
+
+    def dry_at(points):
+        # The cell and its 8 neighbours are ground in the truth (class 1).
+        k = np.floor(points[:, :2] / res).astype(np.int64)
+        return np.array(
+            [all(table.get((int(a) + i, int(b) + j)) == 1 for i in (-1, 0, 1) for j in (-1, 0, 1)) for a, b in k]
+        )
+
+    # Dry terrain: Open3D's hit and the logged point both lie on dry ground (points through
+    # water, bottom returns and mirror points, are not dry-terrain ranges).
+    dry = found & dry_at(hit) & dry_at(logged)
     assert dry.sum() > 100, f"{topic}: only {dry.sum()} dry-terrain points"
     err = np.abs(t[dry] - rng[dry])
     return int(dry.sum()), float(err.max())
