@@ -176,7 +176,7 @@ fn bin_name(i: usize) -> String {
 
 /// Scores `map` against the truth raster and the trajectory of `info`.
 pub fn evaluate(map: &HazardMap, truth: &HazardMap, info: &TruthInfo) -> Result<EvalReport> {
-    if !(truth.resolution > 0.0) {
+    if truth.resolution.is_nan() || truth.resolution <= 0.0 {
         return Err(Error::invalid(
             "truth",
             format!("resolution {} must be > 0", truth.resolution),

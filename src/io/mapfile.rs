@@ -266,8 +266,14 @@ mod tests {
             out
         };
         let cases: Vec<(Vec<u8>, &str)> = vec![
-            (swap("binary_little_endian", "ascii"), "binary_little_endian"),
-            (swap("property float depth", "property double depth"), "header line"),
+            (
+                swap("binary_little_endian", "ascii"),
+                "binary_little_endian",
+            ),
+            (
+                swap("property float depth", "property double depth"),
+                "header line",
+            ),
             (swap("comment resolution 0.25\n", ""), "resolution"),
             (swap("element vertex 3", "element vertex 4"), "need"),
             (good[..good.len() - 1].to_vec(), "need"),

@@ -530,6 +530,7 @@ pub enum Band {
 
 /// Renders `camera` at `optical_to_map`: RGB as rgb8, SWIR as mono8 (reflectance × 255
 /// under full sun), MWIR as mono16 in centikelvin.
+#[allow(clippy::too_many_arguments)]
 pub fn render_image(
     w: &World,
     light: &Light,
