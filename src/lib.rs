@@ -9,11 +9,13 @@
 
 pub mod build;
 pub mod error;
+pub mod eval;
 pub mod geom;
 pub mod grid;
 pub mod hazard;
 pub mod io;
 pub mod optics;
+pub mod sim;
 
 pub use error::{Error, Result};
 

@@ -21,6 +21,7 @@
 pub mod export;
 pub mod frames;
 pub mod kitti;
+pub mod mapfile;
 pub mod mcap_log;
 pub mod ply;
 pub mod ros;

@@ -4,6 +4,7 @@ mod build_cmd;
 mod cloud_cmd;
 mod log_cmd;
 mod optics_cmd;
+mod sim_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -65,6 +66,12 @@ enum Command {
         #[arg(long)]
         rings: Option<usize>,
     },
+    /// Simulate a scene (maps/*.toml): writes DIR/log.mcap, DIR/truth.ply, DIR/truth.json
+    /// and DIR/scene.ply.
+    Simulate(sim_cmd::SimulateArgs),
+    /// Score a map (MAPDIR/map.ply) against the ground truth of a simulated scene, by range
+    /// from the vehicle's path.
+    Eval(sim_cmd::EvalArgs),
     /// Decodes the TF, PointCloud2, Image and CameraInfo messages of a log and writes them
     /// again with tarn's encoder (other types are skipped and counted).
     Recode {
@@ -94,6 +101,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             PathBuf::from("out/default"),
         )),
         Some(Command::Build(a)) => build_cmd::run(&a),
+        Some(Command::Simulate(a)) => sim_cmd::run_simulate(&a),
+        Some(Command::Eval(a)) => sim_cmd::run_eval(&a),
         Some(Command::LidarModel(a)) => optics_cmd::lidar_model(a),
         Some(Command::Info {
             input,

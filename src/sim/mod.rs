@@ -1,0 +1,368 @@
+//! The world tarn is measured in: scenes (`maps/*.toml`), a ray-casting sensor simulator
+//! with the optics of [`crate::optics`], and the ground truth of every scene.
+//!
+//! [`simulate`] turns a [`Scene`] into `DIR/log.mcap` (the DESIGN.md contract topics, only
+//! for the sensors the rig configures), `DIR/truth.ply` (the `map.ply` schema: one vertex
+//! per truth cell), `DIR/truth.json` ([`TruthInfo`]) and `DIR/scene.ply` (the terrain and
+//! object mesh the rays were cast against). `maps/README.md` documents the formats.
+//!
+//! `sim` sits beside the pipeline: it uses every module, no pipeline module uses it.
+
+mod render;
+mod rng;
+mod scene;
+mod truth;
+mod world;
+
+#[cfg(test)]
+mod tests;
+
+use std::path::Path;
+use std::time::Instant;
+
+use nalgebra::{Point3, Vector3};
+use serde::Serialize;
+
+pub use render::{
+    body_to_optical, mount, pinhole, radiance, render_image, sun, Band, Lidar, LidarReturn, Light,
+    Radiance, Stereo, N_WATER,
+};
+pub use rng::{hash, normal, unit_f64};
+pub use scene::*;
+pub use truth::{truth_map, water_stats, TruthInfo, TruthPose, TruthWater};
+pub use world::{Hit, Material, Surface, Terrain, WaterBody, World};
+
+use crate::error::{Error, Result};
+use crate::geom::Pose;
+use crate::io::mcap_log::{LogWriter, WriteOptions};
+use crate::io::ros::{Header, Image, TfMessage, Time, TransformStamped};
+
+/// Options of a simulation run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimOptions {
+    /// Sensor noise (range, disparity, dropout, pixel noise). Off: exact geometry.
+    pub noise: bool,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions { noise: true }
+    }
+}
+
+/// What [`simulate`] did.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct SimReport {
+    pub scene: String,
+    pub frames: usize,
+    /// Primary rays cast per sensor kind, over all frames.
+    pub lidar_beams: u64,
+    pub lidar_returns: u64,
+    pub stereo_rays: u64,
+    pub stereo_points: u64,
+    pub image_pixels: u64,
+    pub truth_cells: usize,
+    pub water_cells: usize,
+    pub build_s: f64,
+    pub render_s: f64,
+    pub write_s: f64,
+}
+
+/// The vehicle poses: along the waypoints at `speed`, one per 1/`rate_hz` s, on the
+/// terrain (base_link at ground level, heading along the path, no roll or pitch).
+pub fn trajectory(w: &World) -> Vec<TruthPose> {
+    let tr = &w.scene.trajectory;
+    let pts = &tr.waypoints;
+    let seg: Vec<f64> = pts
+        .windows(2)
+        .map(|p| (p[1][0] - p[0][0]).hypot(p[1][1] - p[0][1]))
+        .collect();
+    let total: f64 = seg.iter().sum();
+    let step = tr.speed / tr.rate_hz;
+    let n_max = (total / step).floor() as usize + 1;
+    let n = tr.frames.map_or(n_max, |f| f.min(n_max));
+    (0..n)
+        .map(|i| {
+            let mut s = i as f64 * step;
+            let mut k = 0;
+            while k + 1 < seg.len() && s > seg[k] {
+                s -= seg[k];
+                k += 1;
+            }
+            let (a, b) = (pts[k], pts[k + 1]);
+            let f = if seg[k] > 0.0 {
+                (s / seg[k]).min(1.0)
+            } else {
+                0.0
+            };
+            let (x, y) = (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]));
+            TruthPose {
+                stamp: tr.start_time + i as f64 / tr.rate_hz,
+                x,
+                y,
+                z: w.terrain.height(x, y),
+                yaw: (b[1] - a[1]).atan2(b[0] - a[0]),
+            }
+        })
+        .collect()
+}
+
+/// base_link → map of a trajectory pose.
+pub fn pose_of(p: &TruthPose) -> Pose {
+    crate::geom::pose_xyz_rpy(p.x, p.y, p.z, 0.0, 0.0, p.yaw)
+}
+
+fn stamp_ns(t: f64) -> i64 {
+    (t * 1e9).round() as i64
+}
+
+fn header(t: f64, frame: &str) -> Header {
+    Header {
+        stamp: Time::from_nanos(stamp_ns(t)),
+        frame_id: frame.into(),
+    }
+}
+
+fn tf(t: f64, parent: &str, child: &str, pose: Pose) -> TransformStamped {
+    TransformStamped {
+        header: header(t, parent),
+        child_frame_id: child.into(),
+        child_to_parent: pose,
+    }
+}
+
+/// Frame names of the simulated sensors.
+pub const LIDAR_FRAME: &str = "lidar";
+pub const CAMERA_FRAME: &str = "camera_left_optical";
+pub const SWIR_FRAME: &str = "swir_optical";
+pub const MWIR_FRAME: &str = "mwir_optical";
+
+/// Writes the scene mesh (terrain + objects; what the rays hit) as a binary PLY.
+pub fn write_scene_mesh(w: &World, path: &Path) -> Result<()> {
+    let verts: Vec<_> = w
+        .vertices
+        .iter()
+        .map(|v| {
+            (
+                [v[0] as f32, v[1] as f32, v[2] as f32],
+                [150u8, 140, 120],
+                1u8,
+            )
+        })
+        .collect();
+    crate::io::export::write_mesh_ply(
+        path,
+        "tarn simulator scene mesh (terrain and objects)",
+        &verts,
+        &w.triangles,
+    )
+}
+
+/// Simulates `scene` into `out_dir` (created if missing).
+pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimReport> {
+    let t0 = Instant::now();
+    std::fs::create_dir_all(out_dir).map_err(|e| Error::io(out_dir, e))?;
+    let w = World::build(scene)?;
+    let poses = trajectory(&w);
+    let rig = &scene.rig;
+    let lidar = rig.lidar.as_ref().map(Lidar::new).transpose()?;
+    let stereo = rig.stereo.as_ref().map(Stereo::new).transpose()?;
+    let swir = rig
+        .swir
+        .as_ref()
+        .map(|c| render::camera_of(c, SWIR_FRAME))
+        .transpose()?;
+    let mwir = rig
+        .mwir
+        .as_ref()
+        .map(|c| render::camera_of(c, MWIR_FRAME))
+        .transpose()?;
+    let light = Light::new(&w);
+    let mut rep = SimReport {
+        scene: scene.name.clone(),
+        frames: poses.len(),
+        ..Default::default()
+    };
+    rep.build_s = t0.elapsed().as_secs_f64();
+
+    let mut topics = Vec::new();
+    let mut log = LogWriter::create(out_dir.join("log.mcap"), &WriteOptions::default())?;
+    let start = poses.first().map(|p| p.stamp).unwrap_or(0.0);
+    let mut statics = Vec::new();
+    if let Some(l) = &lidar {
+        statics.push(tf(start, "base_link", LIDAR_FRAME, l.mount));
+        topics.push("/lidar/points".to_string());
+    }
+    if let Some(s) = &stereo {
+        statics.push(tf(start, "base_link", CAMERA_FRAME, s.optical_mount));
+        topics.extend(["/stereo/points", "/camera/image", "/camera/camera_info"].map(String::from));
+    }
+    if let Some((_, m)) = &swir {
+        statics.push(tf(start, "base_link", SWIR_FRAME, *m));
+        topics.extend(["/swir/image", "/swir/camera_info"].map(String::from));
+    }
+    if let Some((_, m)) = &mwir {
+        statics.push(tf(start, "base_link", MWIR_FRAME, *m));
+        topics.extend(["/mwir/image", "/mwir/camera_info"].map(String::from));
+    }
+    let ns0 = stamp_ns(start) as u64;
+    log.write_tf(
+        "/tf_static",
+        &TfMessage {
+            transforms: statics,
+        },
+        ns0,
+    )?;
+    let (mut render_s, mut write_s) = (0.0, 0.0);
+    for (fi, p) in poses.iter().enumerate() {
+        let base = pose_of(p);
+        let ns = stamp_ns(p.stamp) as u64;
+        let f = fi as u64;
+        let tw = Instant::now();
+        log.write_tf(
+            "/tf",
+            &TfMessage {
+                transforms: vec![tf(p.stamp, "map", "base_link", base)],
+            },
+            ns,
+        )?;
+        write_s += tw.elapsed().as_secs_f64();
+        if let Some(l) = &lidar {
+            let tr = Instant::now();
+            let cloud = l.scan(&w, &(base * l.mount), f, opts.noise)?;
+            render_s += tr.elapsed().as_secs_f64();
+            rep.lidar_beams += cloud.len() as u64;
+            rep.lidar_returns += cloud.valid_count() as u64;
+            let tw = Instant::now();
+            log.write_cloud("/lidar/points", &cloud, header(p.stamp, LIDAR_FRAME), ns)?;
+            write_s += tw.elapsed().as_secs_f64();
+        }
+        if let Some(s) = &stereo {
+            let tr = Instant::now();
+            let opt = base * s.optical_mount;
+            let cloud = s.cloud(&w, &opt, f, opts.noise)?;
+            let px = render_image(
+                &w,
+                &light,
+                &s.camera,
+                &opt,
+                Band::Rgb,
+                s.spec.image_noise,
+                f,
+                opts.noise,
+            );
+            render_s += tr.elapsed().as_secs_f64();
+            rep.stereo_rays += cloud.len() as u64;
+            rep.stereo_points += cloud.valid_count() as u64;
+            rep.image_pixels += (s.camera.width * s.camera.height) as u64;
+            let tw = Instant::now();
+            log.write_cloud("/stereo/points", &cloud, header(p.stamp, CAMERA_FRAME), ns)?;
+            let img = Image {
+                width: s.camera.width,
+                height: s.camera.height,
+                pixels: px,
+                frame_id: CAMERA_FRAME.into(),
+                stamp: p.stamp,
+            };
+            log.write_image("/camera/image", &img, header(p.stamp, CAMERA_FRAME), ns)?;
+            log.write_camera(
+                "/camera/camera_info",
+                &s.camera,
+                header(p.stamp, CAMERA_FRAME),
+                ns,
+            )?;
+            write_s += tw.elapsed().as_secs_f64();
+        }
+        for (cam, band, topic, info, frame, spec) in [
+            (
+                &swir,
+                Band::Swir,
+                "/swir/image",
+                "/swir/camera_info",
+                SWIR_FRAME,
+                &rig.swir,
+            ),
+            (
+                &mwir,
+                Band::Mwir,
+                "/mwir/image",
+                "/mwir/camera_info",
+                MWIR_FRAME,
+                &rig.mwir,
+            ),
+        ] {
+            let (Some((model, m)), Some(spec)) = (cam, spec) else {
+                continue;
+            };
+            let tr = Instant::now();
+            let px = render_image(
+                &w,
+                &light,
+                model,
+                &(base * m),
+                band,
+                spec.image_noise,
+                f,
+                opts.noise,
+            );
+            render_s += tr.elapsed().as_secs_f64();
+            rep.image_pixels += (model.width * model.height) as u64;
+            let tw = Instant::now();
+            let img = Image {
+                width: model.width,
+                height: model.height,
+                pixels: px,
+                frame_id: frame.into(),
+                stamp: p.stamp,
+            };
+            log.write_image(topic, &img, header(p.stamp, frame), ns)?;
+            log.write_camera(info, model, header(p.stamp, frame), ns)?;
+            write_s += tw.elapsed().as_secs_f64();
+        }
+    }
+    let tw = Instant::now();
+    log.finish()?;
+    let truth = truth_map(&w);
+    crate::io::export::write_map_ply(&out_dir.join("truth.ply"), &truth)?;
+    let counts = truth.class_counts();
+    rep.truth_cells = truth.cells.len();
+    rep.water_cells = counts[crate::hazard::Class::Water as usize];
+    let info = TruthInfo {
+        scene: scene.name.clone(),
+        description: scene.description.clone(),
+        seed: scene.seed,
+        resolution: truth.resolution,
+        fording_depth_m: scene.fording_depth,
+        origin: scene.terrain.origin,
+        size: scene.terrain.size,
+        trajectory: poses,
+        water_bodies: water_stats(&w, &truth),
+        class_counts: counts,
+        topics,
+    };
+    crate::io::export::write_json(&out_dir.join("truth.json"), &info)?;
+    write_scene_mesh(&w, &out_dir.join("scene.ply"))?;
+    write_s += tw.elapsed().as_secs_f64();
+    rep.render_s = render_s;
+    rep.write_s = write_s;
+    Ok(rep)
+}
+
+/// Casts `n` lidar-like rays from a point above the middle of the scene's terrain (a
+/// workload for measuring rays per second): returns how many hit.
+pub fn cast_fan(w: &World, n: usize) -> usize {
+    use rayon::prelude::*;
+    let t = &w.terrain;
+    let cx = t.origin[0] + 0.5 * (t.nx - 1) as f64 * t.resolution;
+    let cy = t.origin[1] + 0.5 * (t.ny - 1) as f64 * t.resolution;
+    let o = Point3::new(cx, cy, t.height(cx, cy) + 2.0);
+    (0..n)
+        .into_par_iter()
+        .filter(|&i| {
+            let az = i as f64 * 2.399_963; // golden angle
+            let el = -0.5 * (i % 64) as f64 / 64.0 - 0.02;
+            let d = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+            w.cast(&o, &d, 120.0).is_some()
+        })
+        .count()
+}

@@ -1,0 +1,610 @@
+//! The sensors: a lidar (spinning or vertical scanner) with the optics of `optics` over
+//! water, a stereo pair (left image + binned point cloud, mirror points on still water), and
+//! SWIR and MWIR cameras. Every ray is independent; its noise is hashed from (seed, sensor,
+//! frame, ray index), so results do not depend on the thread count.
+
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rayon::prelude::*;
+
+use super::rng::{hash, normal, unit_f64};
+use super::scene::{CameraSpec, LidarSpec, SkyKind, StereoSpec};
+use super::world::{Hit, Surface, World};
+use crate::error::Result;
+use crate::geom::camera::{CameraModel, Distortion};
+use crate::geom::{PointCloud, Pose};
+use crate::optics::{
+    apparent_bottom_point, fresnel, Attenuation, LidarModelConfig, LidarWaterModel, Sensitivity,
+    SolidAngleForm,
+};
+
+/// Refractive index of water used throughout the simulator.
+pub const N_WATER: f64 = 1.33;
+/// Nudge (m) off a surface before casting a secondary ray.
+const EPS: f64 = 1e-4;
+
+/// Pose of a sensor body in base_link from position and roll/pitch/yaw in degrees.
+pub fn mount(position: [f64; 3], rpy_deg: [f64; 3]) -> Pose {
+    crate::geom::pose_xyz_rpy(
+        position[0],
+        position[1],
+        position[2],
+        rpy_deg[0].to_radians(),
+        rpy_deg[1].to_radians(),
+        rpy_deg[2].to_radians(),
+    )
+}
+
+/// Camera body (x forward, y left, z up) → optical frame (z forward, x right, y down).
+pub fn body_to_optical() -> Pose {
+    let m = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
+    Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m)),
+    )
+}
+
+/// A pinhole camera without distortion for `width` × `height` and a horizontal FOV.
+pub fn pinhole(width: usize, height: usize, hfov_deg: f64, frame: &str) -> Result<CameraModel> {
+    let f = 0.5 * width as f64 / (0.5 * hfov_deg.to_radians()).tan();
+    CameraModel::new(
+        width,
+        height,
+        [
+            f,
+            f,
+            0.5 * (width as f64 - 1.0),
+            0.5 * (height as f64 - 1.0),
+        ],
+        Distortion::None,
+        frame,
+    )
+}
+
+/// How a lidar beam ended.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LidarReturn {
+    /// Dry ground or an object.
+    Solid { point: Point3<f64> },
+    /// The bottom under water: `point` is where an uncorrected lidar reports it.
+    Bottom {
+        point: Point3<f64>,
+        bottom: Point3<f64>,
+        lookahead: f64,
+        depth: f64,
+    },
+    /// A mirror bounce off water to a solid beyond: `point` lies on the original ray at the
+    /// total path length.
+    Specular { point: Point3<f64> },
+    /// Nothing detectable came back.
+    None,
+}
+
+/// The lidar as the renderer needs it.
+#[derive(Debug, Clone)]
+pub struct Lidar {
+    pub spec: LidarSpec,
+    pub mount: Pose,
+    /// Smallest detectable received/emitted power ratio.
+    pub min_power_ratio: f64,
+}
+
+impl Lidar {
+    pub fn new(spec: &LidarSpec) -> Result<Lidar> {
+        // Sensitivity from the dry-ground limit seen from the mounting height.
+        let m = LidarWaterModel::new(LidarModelConfig {
+            height_m: spec.position[2],
+            attenuation: Attenuation::PerMetre(0.0),
+            albedo: spec.reference_albedo,
+            aperture_diameter_m: spec.aperture_m,
+            n_water: N_WATER,
+            sensitivity: Sensitivity::DryLimit(spec.dry_limit_m),
+            solid_angle: SolidAngleForm::Exact,
+        })?;
+        Ok(Lidar {
+            spec: spec.clone(),
+            mount: mount(spec.position, spec.rpy_deg),
+            min_power_ratio: m.min_power_ratio(),
+        })
+    }
+
+    /// Unit beam direction (lidar frame) of ring `r` (0 = lowest), column `c`.
+    pub fn beam(&self, r: usize, c: usize) -> Vector3<f64> {
+        let s = &self.spec;
+        let el = if s.rings == 1 {
+            s.elevation_deg[0]
+        } else {
+            s.elevation_deg[0]
+                + (s.elevation_deg[1] - s.elevation_deg[0]) * r as f64 / (s.rings - 1) as f64
+        }
+        .to_radians();
+        let span = s.azimuth_deg[1] - s.azimuth_deg[0];
+        let az = if s.columns == 1 {
+            0.5 * (s.azimuth_deg[0] + s.azimuth_deg[1])
+        } else if span >= 360.0 {
+            s.azimuth_deg[0] + span * c as f64 / s.columns as f64
+        } else {
+            s.azimuth_deg[0] + span * c as f64 / (s.columns - 1) as f64
+        }
+        .to_radians();
+        Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
+    }
+
+    fn lambert(&self, albedo: f64, cos: f64, range: f64) -> f64 {
+        let area = std::f64::consts::PI * 0.25 * self.spec.aperture_m.powi(2);
+        albedo / std::f64::consts::PI * cos.max(0.0) * area / (range * range)
+    }
+
+    /// Traces one beam from `o` along unit `d` (map frame), without noise.
+    pub fn trace(&self, w: &World, o: &Point3<f64>, d: &Vector3<f64>) -> Result<LidarReturn> {
+        let max = self.spec.max_range_m;
+        let Some(hit) = w.cast(o, d, max) else {
+            return Ok(LidarReturn::None);
+        };
+        match hit.surface {
+            Surface::Solid { .. } => {
+                let alb = w.materials[hit.material].spec.lidar;
+                let ok = self.lambert(alb, hit.normal.dot(&-d), hit.t) >= self.min_power_ratio;
+                Ok(if ok {
+                    LidarReturn::Solid { point: hit.point }
+                } else {
+                    LidarReturn::None
+                })
+            }
+            Surface::Water { body } => self.trace_water(w, o, d, &hit, body),
+        }
+    }
+
+    fn trace_water(
+        &self,
+        w: &World,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        hit: &Hit,
+        body: usize,
+    ) -> Result<LidarReturn> {
+        let b = &w.water[body];
+        let level = hit.point.z;
+        let height = o.z - level;
+        let lookahead = (hit.point.x - o.x).hypot(hit.point.y - o.y);
+        let n = b.normal;
+        let cos_i = -d.dot(&n);
+        // Refracted beam (Snell, vector form).
+        let eta = 1.0 / N_WATER;
+        let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+        let dt = (d * eta + n * (eta * cos_i - k.sqrt())).normalize();
+        let start = hit.point + dt * EPS;
+        if let Some(bot) = w.cast_solid(&start, &dt, 100.0) {
+            let depth = level - bot.point.z;
+            if depth > 0.0 && height > 0.0 {
+                let model = LidarWaterModel::new(LidarModelConfig {
+                    height_m: height,
+                    attenuation: Attenuation::PerMetre(b.attenuation),
+                    albedo: w.materials[bot.material].spec.lidar,
+                    aperture_diameter_m: self.spec.aperture_m,
+                    n_water: N_WATER,
+                    sensitivity: Sensitivity::MinPowerRatio(self.min_power_ratio),
+                    solid_angle: SolidAngleForm::Exact,
+                })?;
+                if model.return_ratio(lookahead, depth)? >= self.min_power_ratio {
+                    let point = apparent_bottom_point(*o, bot.point, level, N_WATER)?;
+                    return Ok(LidarReturn::Bottom {
+                        point,
+                        bottom: bot.point,
+                        lookahead,
+                        depth,
+                    });
+                }
+            }
+        }
+        // Specular bounce off the (mean) surface to a solid beyond.
+        let r = d + n * (2.0 * cos_i);
+        if let Some(s) = w.cast_solid(&(hit.point + r * EPS), &r, self.spec.max_range_m - hit.t) {
+            let fr = fresnel(cos_i.clamp(0.0, 1.0).acos(), N_WATER)?;
+            let refl = 0.5 * (fr.r_s + fr.r_p);
+            let total = hit.t + EPS + s.t;
+            let p =
+                refl * self.lambert(w.materials[s.material].spec.lidar, s.normal.dot(&-r), total);
+            if p >= self.min_power_ratio {
+                return Ok(LidarReturn::Specular {
+                    point: o + d * total,
+                });
+            }
+        }
+        Ok(LidarReturn::None)
+    }
+
+    /// One organized scan (rings × columns, ring 0 lowest on row 0) in the lidar frame.
+    pub fn scan(
+        &self,
+        w: &World,
+        lidar_to_map: &Pose,
+        frame: u64,
+        noise: bool,
+    ) -> Result<PointCloud> {
+        let (rows, cols) = (self.spec.rings, self.spec.columns);
+        let o = lidar_to_map.translation.vector.into();
+        let map_to_lidar = lidar_to_map.inverse();
+        let seed = w.scene.seed;
+        let xyz = (0..rows * cols)
+            .into_par_iter()
+            .map(|i| -> Result<[f32; 3]> {
+                let (r, c) = (i / cols, i % cols);
+                let d = lidar_to_map.rotation * self.beam(r, c);
+                let p = match self.trace(w, &o, &d)? {
+                    LidarReturn::Solid { point }
+                    | LidarReturn::Bottom { point, .. }
+                    | LidarReturn::Specular { point } => point,
+                    LidarReturn::None => return Ok([f32::NAN; 3]),
+                };
+                let mut q = map_to_lidar * p;
+                if noise && self.spec.range_noise_m > 0.0 {
+                    let range = q.coords.norm();
+                    let e = self.spec.range_noise_m * normal(hash(seed, &[21, frame, i as u64]));
+                    q = Point3::from(q.coords * ((range + e).max(0.0) / range));
+                }
+                Ok([q.x as f32, q.y as f32, q.z as f32])
+            })
+            .collect::<Result<Vec<_>>>()?;
+        PointCloud::organized(rows, cols, xyz)
+    }
+}
+
+/// Sun direction (map frame, unit, towards the sun) and its elevation (rad) at `hours`:
+/// up from 6 to 18, due south (−y) at noon at 55°, rising in the east (+x).
+pub fn sun(hours: f64) -> (Vector3<f64>, f64) {
+    let a = (hours - 6.0) / 12.0 * std::f64::consts::PI; // 0 at dawn, π at dusk
+    let el = 55f64.to_radians() * a.sin();
+    // Azimuth from east (+x) through south (−y) to west (−x).
+    let az = -a;
+    let d = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+    (d, el)
+}
+
+/// Lighting of a scene at its time of day.
+#[derive(Debug, Clone, Copy)]
+pub struct Light {
+    pub sun: Vector3<f64>,
+    /// Direct irradiance scale (0 at night or overcast).
+    pub direct: f64,
+    /// Ambient (sky) irradiance scale.
+    pub ambient: f64,
+    pub kind: SkyKind,
+    pub hours: f64,
+}
+
+impl Light {
+    pub fn new(w: &World) -> Light {
+        let s = &w.scene.sky;
+        let (d, el) = sun(s.time_of_day);
+        let day = (el.sin() / 55f64.to_radians().sin()).clamp(0.0, 1.0);
+        let (direct, ambient) = match s.kind {
+            SkyKind::Clear => (0.85 * day, 0.25 * day + 0.01),
+            SkyKind::PartlyCloudy => (0.7 * day, 0.3 * day + 0.01),
+            SkyKind::Overcast => (0.0, 0.55 * day + 0.01),
+        };
+        Light {
+            sun: d,
+            direct,
+            ambient,
+            kind: s.kind,
+            hours: s.time_of_day,
+        }
+    }
+
+    /// Sky radiance in a direction: visible RGB (0..1, before exposure).
+    pub fn sky_rgb(&self, seed: u64, d: &Vector3<f64>) -> [f64; 3] {
+        let up = d.z.clamp(0.0, 1.0);
+        let b = self.ambient / 0.26;
+        let clear = [0.75 - 0.45 * up, 0.82 - 0.35 * up, 0.92 - 0.1 * up].map(|c| c * b);
+        match self.kind {
+            SkyKind::Clear => clear,
+            SkyKind::Overcast => [0.8 * b, 0.8 * b, 0.82 * b],
+            SkyKind::PartlyCloudy => {
+                // Clouds: thresholded noise on the sky dome.
+                let (u, v) = (d.x / (d.z + 0.15), d.y / (d.z + 0.15));
+                let c = cloud_noise(seed, 2.0 * u, 2.0 * v);
+                let m = ((c - 0.1) / 0.3).clamp(0.0, 1.0);
+                [0, 1, 2].map(|i| clear[i] * (1.0 - m) + 0.95 * b * m)
+            }
+        }
+    }
+
+    /// Sky radiance at 1.5 µm (0..1).
+    pub fn sky_swir(&self, d: &Vector3<f64>) -> f64 {
+        let b = self.ambient / 0.26;
+        match self.kind {
+            SkyKind::Overcast => 0.35 * b,
+            _ => (0.08 + 0.25 * (1.0 - d.z.clamp(0.0, 1.0)).powi(4)) * b,
+        }
+    }
+
+    /// Apparent sky temperature (K) in the mid-wave infrared.
+    pub fn sky_temperature(&self, d: &Vector3<f64>) -> f64 {
+        let up = d.z.clamp(0.0, 1.0);
+        let horizon = 280.0;
+        let zenith = match self.kind {
+            SkyKind::Clear => 220.0,
+            SkyKind::PartlyCloudy => 240.0,
+            SkyKind::Overcast => 268.0,
+        };
+        horizon + (zenith - horizon) * up.sqrt()
+    }
+
+    /// Temperature (K) of a surface of mean `t`, daily half amplitude `swing`, peaking at 14 h.
+    pub fn surface_temperature(&self, t: f64, swing: f64) -> f64 {
+        t + swing * ((self.hours - 14.0) / 24.0 * std::f64::consts::TAU).cos()
+    }
+}
+
+fn cloud_noise(seed: u64, x: f64, y: f64) -> f64 {
+    let (xi, yi) = (x.floor(), y.floor());
+    let (fx, fy) = (x - xi, y - yi);
+    let h = |a: f64, b: f64| unit_f64(hash(seed, &[31, a as i64 as u64, b as i64 as u64]));
+    let (a, b, c, d) = (
+        h(xi, yi),
+        h(xi + 1.0, yi),
+        h(xi, yi + 1.0),
+        h(xi + 1.0, yi + 1.0),
+    );
+    let s = |t: f64| t * t * (3.0 - 2.0 * t);
+    let (u, v) = (s(fx), s(fy));
+    a + (b - a) * u + (c - a) * v + (a - b - c + d) * u * v
+}
+
+/// What a camera pixel sees, in all three bands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Radiance {
+    pub rgb: [f64; 3],
+    pub swir: f64,
+    /// Apparent temperature (K).
+    pub mwir: f64,
+}
+
+fn shade_solid(w: &World, light: &Light, hit: &Hit) -> Radiance {
+    let m = &w.materials[hit.material].spec;
+    let mut direct = 0.0;
+    if light.direct > 0.0 {
+        let c = hit.normal.dot(&light.sun);
+        if c > 0.0
+            && w.cast_solid(&(hit.point + hit.normal * 1e-3), &light.sun, 200.0)
+                .is_none()
+        {
+            direct = light.direct * c;
+        }
+    }
+    let e = direct + light.ambient;
+    Radiance {
+        rgb: m.rgb.map(|a| a * e),
+        swir: m.swir * e,
+        mwir: light.surface_temperature(m.temperature, m.temperature_swing),
+    }
+}
+
+fn sky_radiance(w: &World, light: &Light, d: &Vector3<f64>) -> Radiance {
+    Radiance {
+        rgb: light.sky_rgb(w.scene.seed, d),
+        swir: light.sky_swir(d),
+        mwir: light.sky_temperature(d),
+    }
+}
+
+/// Radiance along a camera ray: solids shaded with sun and sky; water as a Fresnel mix of
+/// the reflection (one bounce: sky or solid) and the water's body colour; ripples perturb
+/// the normal.
+pub fn radiance(w: &World, light: &Light, o: &Point3<f64>, d: &Vector3<f64>, max: f64) -> Radiance {
+    let Some(hit) = w.cast(o, d, max) else {
+        return sky_radiance(w, light, d);
+    };
+    match hit.surface {
+        Surface::Solid { .. } => shade_solid(w, light, &hit),
+        Surface::Water { body } => {
+            let n = w.water_normal(body, &hit.point);
+            let cos_i = (-d.dot(&n)).clamp(1e-6, 1.0);
+            let r = d + n * (2.0 * cos_i);
+            let refl = if r.z <= 0.0 {
+                // A ripple tilted the reflection into the water: it sees the water itself.
+                sky_radiance(w, light, &Vector3::new(r.x, r.y, 0.0))
+            } else {
+                match w.cast_solid(&(hit.point + r * EPS), &r, max) {
+                    Some(s) => shade_solid(w, light, &s),
+                    None => sky_radiance(w, light, &r),
+                }
+            };
+            let fr = fresnel(cos_i.acos(), N_WATER)
+                .map(|f| 0.5 * (f.r_s + f.r_p))
+                .unwrap_or(1.0);
+            let b = &w.water[body].spec;
+            let body_rgb = b
+                .colour
+                .map(|c| c * (light.direct * light.sun.z.max(0.0) + light.ambient));
+            let t_water = light.surface_temperature(b.temperature, b.temperature_swing);
+            Radiance {
+                rgb: [0, 1, 2].map(|i| fr * refl.rgb[i] + (1.0 - fr) * body_rgb[i]),
+                // Water absorbs 1.5 µm within millimetres: only the surface reflection.
+                swir: fr * refl.swir,
+                mwir: (1.0 - fr) * t_water + fr * refl.mwir,
+            }
+        }
+    }
+}
+
+/// The stereo pair: its left camera and where it sits.
+#[derive(Debug, Clone)]
+pub struct Stereo {
+    pub spec: StereoSpec,
+    pub camera: CameraModel,
+    /// base_link → left optical frame.
+    pub optical_mount: Pose,
+}
+
+impl Stereo {
+    pub fn new(spec: &StereoSpec) -> Result<Stereo> {
+        Ok(Stereo {
+            camera: pinhole(
+                spec.width,
+                spec.height,
+                spec.hfov_deg,
+                "camera_left_optical",
+            )?,
+            optical_mount: mount(spec.position, spec.rpy_deg) * body_to_optical(),
+            spec: spec.clone(),
+        })
+    }
+
+    /// The point stereo reports along unit ray `d` (map frame) from `o`, before noise:
+    /// the surface on solids; on still water the mirror image of what the reflected ray
+    /// meets (a point on the original ray at the total path length); `None` for the sky,
+    /// for a reflected sky, and on rippled water that breaks up the reflection.
+    pub fn trace(&self, w: &World, o: &Point3<f64>, d: &Vector3<f64>) -> Option<(f64, usize)> {
+        let max = self.spec.max_range_m;
+        let hit = w.cast(o, d, max)?;
+        match hit.surface {
+            Surface::Solid { .. } => Some((hit.t, hit.material)),
+            Surface::Water { body } => {
+                if w.water[body].spec.ripple > 0.02 {
+                    return None;
+                }
+                let n = w.water_normal(body, &hit.point);
+                let r = d + n * (2.0 * -d.dot(&n));
+                let s = w.cast_solid(&(hit.point + r * EPS), &r, max - hit.t)?;
+                Some((hit.t + EPS + s.t, s.material))
+            }
+        }
+    }
+
+    /// The binned organized cloud in the left optical frame (NaN: no match).
+    pub fn cloud(
+        &self,
+        w: &World,
+        optical_to_map: &Pose,
+        frame: u64,
+        noise: bool,
+    ) -> Result<PointCloud> {
+        let k = self.spec.bin;
+        let (rows, cols) = (self.spec.height / k, self.spec.width / k);
+        let o: Point3<f64> = optical_to_map.translation.vector.into();
+        let f = self.camera.fx;
+        let seed = w.scene.seed;
+        let half = 0.5 * (k as f64 - 1.0);
+        let xyz = (0..rows * cols)
+            .into_par_iter()
+            .map(|i| {
+                let (r, c) = (i / cols, i % cols);
+                let (u, v) = ((k * c) as f64 + half, (k * r) as f64 + half);
+                let Some(ray) = self.camera.pixel_ray(u, v) else {
+                    return [f32::NAN; 3];
+                };
+                let ray = ray.normalize();
+                let d = optical_to_map.rotation * ray;
+                let Some((t, mat)) = self.trace(w, &o, &d) else {
+                    return [f32::NAN; 3];
+                };
+                let mut t = t;
+                if noise {
+                    let tex = w.materials[mat].spec.texture;
+                    if unit_f64(hash(seed, &[41, frame, i as u64])) >= tex {
+                        return [f32::NAN; 3];
+                    }
+                    // Disparity noise σ_d px → depth noise z² σ_d / (f B), along the ray.
+                    let z = t * ray.z;
+                    let sz = z * z * self.spec.disparity_noise_px / (f * self.spec.baseline_m);
+                    t += sz / ray.z * normal(hash(seed, &[42, frame, i as u64]));
+                    if t <= 0.0 {
+                        return [f32::NAN; 3];
+                    }
+                }
+                let p = ray * t;
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect();
+        PointCloud::organized(rows, cols, xyz)
+    }
+}
+
+/// A rendered camera image in one band.
+pub enum Band {
+    Rgb,
+    Swir,
+    Mwir,
+}
+
+/// Renders `camera` at `optical_to_map`: RGB as rgb8, SWIR as mono8 (reflectance × 255
+/// under full sun), MWIR as mono16 in centikelvin.
+#[allow(clippy::too_many_arguments)]
+pub fn render_image(
+    w: &World,
+    light: &Light,
+    camera: &CameraModel,
+    optical_to_map: &Pose,
+    band: Band,
+    noise_sd: f64,
+    frame: u64,
+    noise: bool,
+) -> crate::io::ros::Pixels {
+    use crate::io::ros::Pixels;
+    let o: Point3<f64> = optical_to_map.translation.vector.into();
+    let n = camera.width * camera.height;
+    let seed = w.scene.seed;
+    let rad: Vec<Radiance> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let (u, v) = ((i % camera.width) as f64, (i / camera.width) as f64);
+            match camera.pixel_ray(u, v) {
+                Some(ray) => radiance(
+                    w,
+                    light,
+                    &o,
+                    &(optical_to_map.rotation * ray.normalize()),
+                    300.0,
+                ),
+                None => Radiance {
+                    rgb: [0.0; 3],
+                    swir: 0.0,
+                    mwir: 0.0,
+                },
+            }
+        })
+        .collect();
+    let jitter = |i: usize, ch: u64| {
+        if noise && noise_sd > 0.0 {
+            noise_sd * normal(hash(seed, &[51, ch, frame, i as u64]))
+        } else {
+            0.0
+        }
+    };
+    let exposure = 255.0 / 0.75;
+    match band {
+        Band::Rgb => Pixels::Rgb8(
+            rad.iter()
+                .enumerate()
+                .map(|(i, r)| {
+                    [0, 1, 2].map(|c| {
+                        (r.rgb[c] * exposure + jitter(i, c as u64))
+                            .round()
+                            .clamp(0.0, 255.0) as u8
+                    })
+                })
+                .collect(),
+        ),
+        Band::Swir => Pixels::Mono8(
+            rad.iter()
+                .enumerate()
+                .map(|(i, r)| (r.swir * exposure + jitter(i, 3)).round().clamp(0.0, 255.0) as u8)
+                .collect(),
+        ),
+        Band::Mwir => Pixels::Mono16(
+            rad.iter()
+                .enumerate()
+                .map(|(i, r)| (r.mwir * 100.0 + jitter(i, 4)).round().clamp(0.0, 65535.0) as u16)
+                .collect(),
+        ),
+    }
+}
+
+/// A single camera of the rig (SWIR or MWIR).
+pub fn camera_of(spec: &CameraSpec, frame: &str) -> Result<(CameraModel, Pose)> {
+    Ok((
+        pinhole(spec.width, spec.height, spec.hfov_deg, frame)?,
+        mount(spec.position, spec.rpy_deg) * body_to_optical(),
+    ))
+}

@@ -1,0 +1,526 @@
+//! Tests of the simulator: scene parsing, renderer geometry against analytic answers, the
+//! optics of bottom returns, determinism, logs read back, truth scored against itself.
+
+use nalgebra::{Point3, Vector3};
+
+use super::*;
+use crate::hazard::Class;
+use crate::optics::{
+    apparent_bottom_point, Attenuation, LidarModelConfig, LidarWaterModel, Sensitivity,
+    SolidAngleForm,
+};
+
+/// A small flat scene: a flat-bottomed pond (depth `depth` under level −0.2) 15 m ahead, a
+/// building beyond it; lidar at 1.5 m, a small stereo camera.
+fn scene_text(depth: f64, extra: &str) -> String {
+    format!(
+        r#"
+name = "test"
+seed = 7
+[terrain]
+origin = [-5.0, -30.0]
+size = [40.0, 60.0]
+resolution = 0.5
+material = "soil"
+[[terrain.features]]
+kind = "depression"
+centre = [12.0, 0.0]
+radius = [8.0, 8.0]
+depth = {d}
+flat = 0.75
+[[water]]
+kind = "level"
+level = -0.2
+centre = [12.0, 0.0]
+radius = 9.0
+attenuation = 0.8
+[[objects]]
+kind = "building"
+position = [30.0, 0.0]
+size = [3.0, 8.0, 6.0]
+[trajectory]
+waypoints = [[0.0, 0.0], [2.0, 0.0]]
+speed = 2.0
+rate_hz = 5.0
+frames = 2
+[rig.lidar]
+position = [0.0, 0.0, 1.5]
+rings = 16
+elevation_deg = [-20.0, 2.0]
+columns = 64
+azimuth_deg = [-30.0, 30.0]
+dry_limit_m = 25.0
+[rig.stereo]
+position = [0.0, 0.0, 1.5]
+rpy_deg = [0.0, 8.0, 0.0]
+width = 64
+height = 48
+hfov_deg = 60.0
+baseline_m = 0.12
+{extra}
+"#,
+        d = depth + 0.0,
+    )
+}
+
+fn world(depth: f64) -> World {
+    World::build(&Scene::from_toml_str(&scene_text(depth, "")).unwrap()).unwrap()
+}
+
+#[test]
+fn every_shipped_scene_parses_and_builds() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/maps");
+    let mut n = 0;
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            let s = Scene::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            World::build(&s).unwrap();
+            n += 1;
+        }
+    }
+    assert!(n >= 1);
+}
+
+fn bad(extra_replace: (&str, &str)) -> String {
+    let t = scene_text(0.5, "").replacen(extra_replace.0, extra_replace.1, 1);
+    match Scene::from_toml_str(&t) {
+        Ok(_) => panic!("accepted {extra_replace:?}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn bad_scenes_name_the_key() {
+    let cases: &[((&str, &str), &str)] = &[
+        (
+            ("seed = 7", "seed = 7\ncolour = 3"),
+            "unknown field `colour`",
+        ),
+        (
+            ("resolution = 0.5", "resolution = -0.5"),
+            "terrain.resolution",
+        ),
+        (
+            ("resolution = 0.5", "resolution = 0.0001"),
+            "terrain.resolution",
+        ),
+        (
+            ("material = \"soil\"", "material = \"cheese\""),
+            "unknown material \"cheese\"",
+        ),
+        (("level = -0.2\n", ""), "water[0].level"),
+        (("radius = 9.0", "radius = 0.0"), "water[0].radius"),
+        (
+            ("attenuation = 0.8", "attenuation = -1.0"),
+            "water[0].attenuation",
+        ),
+        (
+            ("kind = \"level\"", "kind = \"lake\""),
+            "unknown variant `lake`",
+        ),
+        (("flat = 0.75", "flat = 1.5"), "terrain.features[0].flat"),
+        (("depth = 0.5", "depth = -0.5"), "terrain.features[0].depth"),
+        (
+            ("size = [3.0, 8.0, 6.0]", "size = [3.0, 0.0, 6.0]"),
+            "objects[0].size[1]",
+        ),
+        (("[2.0, 0.0]]", "[100.0, 0.0]]"), "trajectory.waypoints[1]"),
+        (("speed = 2.0", "speed = 0.0"), "trajectory.speed"),
+        (("rings = 16", "rings = 0"), "rig.lidar.rings"),
+        (
+            (
+                "elevation_deg = [-20.0, 2.0]",
+                "elevation_deg = [2.0, -20.0]",
+            ),
+            "rig.lidar.elevation_deg",
+        ),
+        (
+            ("dry_limit_m = 25.0", "dry_limit_m = nan"),
+            "rig.lidar.dry_limit_m",
+        ),
+        (("width = 64", "width = 63"), "rig.stereo.bin"),
+        (
+            ("hfov_deg = 60.0", "hfov_deg = 180.0"),
+            "rig.stereo.hfov_deg",
+        ),
+        (
+            ("baseline_m = 0.12", "baseline_m = 0.0"),
+            "rig.stereo.baseline_m",
+        ),
+        (("name = \"test\"", "name = \"\""), "name"),
+    ];
+    for (rep, want) in cases {
+        let e = bad(*rep);
+        assert!(
+            e.contains(want),
+            "{rep:?}: error {e:?} does not mention {want:?}"
+        );
+    }
+    // A rig without sensors.
+    let t = scene_text(0.5, "")
+        .split("[rig.lidar]")
+        .next()
+        .unwrap()
+        .to_string();
+    let e = Scene::from_toml_str(&t).unwrap_err().to_string();
+    assert!(e.contains("rig"), "{e}");
+}
+
+#[test]
+fn load_reports_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("s.toml");
+    std::fs::write(
+        &p,
+        scene_text(0.5, "").replacen("rings = 16", "rings = \"many\"", 1),
+    )
+    .unwrap();
+    let e = Scene::load(&p).unwrap_err().to_string();
+    assert!(e.contains("s.toml") && e.contains("line"), "{e}");
+}
+
+#[test]
+fn flat_ground_range_is_height_over_sine_of_elevation() {
+    let w = world(0.5);
+    let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
+    let h = 1.5;
+    let o = Point3::new(0.0, 0.0, h);
+    // Beams towards −y (away from the pond) at several depression angles.
+    for deg in [5.0f64, 8.0, 12.0, 20.0, 35.0, 60.0, 89.0] {
+        let e = deg.to_radians();
+        let d = Vector3::new(0.0, -e.cos(), -e.sin());
+        match l.trace(&w, &o, &d).unwrap() {
+            LidarReturn::Solid { point } => {
+                let r = (point - o).norm();
+                assert!(
+                    (r - h / e.sin()).abs() < 2e-4,
+                    "{deg}°: {r} vs {}",
+                    h / e.sin()
+                );
+            }
+            other => panic!("{deg}°: {other:?}"),
+        }
+    }
+    // Beyond the dry-ground limit nothing returns: 25 m lookahead for albedo 0.3 from 1.5 m;
+    // soil's lidar albedo is 0.30 too, so a beam meeting the ground at 30 m is lost.
+    let e = (h / 30.0f64).atan();
+    let d = Vector3::new(0.0, -e.cos(), -e.sin());
+    assert_eq!(l.trace(&w, &o, &d).unwrap(), LidarReturn::None);
+    let e = (h / 20.0f64).atan();
+    let d = Vector3::new(0.0, -e.cos(), -e.sin());
+    assert!(matches!(
+        l.trace(&w, &o, &d).unwrap(),
+        LidarReturn::Solid { .. }
+    ));
+}
+
+fn model(w: &World, l: &Lidar, height: f64, depth_albedo: f64) -> LidarWaterModel {
+    LidarWaterModel::new(LidarModelConfig {
+        height_m: height,
+        attenuation: Attenuation::PerMetre(w.water[0].attenuation),
+        albedo: depth_albedo,
+        aperture_diameter_m: l.spec.aperture_m,
+        n_water: N_WATER,
+        sensitivity: Sensitivity::MinPowerRatio(l.min_power_ratio),
+        solid_angle: SolidAngleForm::Exact,
+    })
+    .unwrap()
+}
+
+#[test]
+fn bottom_returns_exactly_where_the_optics_model_says() {
+    for depth in [0.4, 0.9] {
+        let w = world(depth);
+        let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
+        let o = Point3::new(0.0, 0.0, 1.5);
+        let level = -0.2;
+        let d_true = depth - 0.2; // bottom at −depth, surface at −0.2
+        let m = model(
+            &w,
+            &l,
+            o.z - level,
+            w.materials[w.material("soil").unwrap()].spec.lidar,
+        );
+        let limit = m
+            .max_lookahead_for_depth(d_true)
+            .unwrap()
+            .expect("some lookahead returns");
+        let (mut bottoms, mut last_bottom, mut misses) = (0, 0.0f64, 0);
+        // Beams meeting the water between 9 and 21 m ahead: the flat bottom spans 9..21 m.
+        for k in 0..400 {
+            let look = 6.5 + 11.0 * k as f64 / 399.0;
+            let e = ((o.z - level) / look).atan();
+            let d = Vector3::new(e.cos(), 0.0, -e.sin());
+            let r = l.trace(&w, &o, &d).unwrap();
+            let expect = m.return_ratio(look, d_true).unwrap() >= l.min_power_ratio;
+            match r {
+                LidarReturn::Bottom {
+                    point,
+                    bottom,
+                    lookahead,
+                    depth: dd,
+                } => {
+                    assert!(
+                        expect,
+                        "bottom return at {look} m where the model says none (limit {limit})"
+                    );
+                    assert!((lookahead - look).abs() < 1e-6);
+                    assert!((dd - d_true).abs() < 1e-4, "depth {dd} vs {d_true}");
+                    let want = apparent_bottom_point(o, bottom, level, N_WATER).unwrap();
+                    assert!((point - want).norm() < 1e-9);
+                    // The uncorrected point lies on the original beam, deeper than the bottom.
+                    let along = (point - o).normalize();
+                    assert!((along - d).norm() < 1e-4, "{along:?} vs {d:?}");
+                    bottoms += 1;
+                    last_bottom = last_bottom.max(look);
+                }
+                other => {
+                    assert!(!expect, "no bottom return ({other:?}) at {look} m where the model says one (limit {limit})");
+                    misses += 1;
+                }
+            }
+        }
+        assert!(
+            bottoms > 0 && misses > 0,
+            "depth {depth}: {bottoms} bottoms, {misses} misses, limit {limit}"
+        );
+        assert!(
+            (last_bottom - limit).abs() < 11.0 / 399.0 + 1e-9,
+            "last bottom {last_bottom} vs limit {limit}"
+        );
+    }
+}
+
+#[test]
+fn specular_bounce_lands_on_the_original_ray_at_the_total_path() {
+    // Deep murky water: no bottom return; the beam bounces off the pond to the building.
+    let t = scene_text(1.5, "").replacen("attenuation = 0.8", "attenuation = 20.0", 1);
+    let w = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
+    let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
+    let o = Point3::new(0.0, 0.0, 1.5);
+    let e = (1.7f64 / 12.0).atan();
+    let d = Vector3::new(e.cos(), 0.0, -e.sin());
+    match l.trace(&w, &o, &d).unwrap() {
+        LidarReturn::Specular { point } => {
+            // Mirror the point about the water level: it lies on the building face x = 28.5.
+            let mirrored = Point3::new(point.x, point.y, 2.0 * -0.2 - point.z);
+            let real_dir = Vector3::new(d.x, d.y, -d.z);
+            let s = w.cast_water(&o, &d, 100.0).unwrap();
+            let q = s.point + real_dir * ((mirrored - s.point).norm());
+            assert!((q - mirrored).norm() < 1e-3, "{q:?} vs {mirrored:?}");
+            assert!((mirrored.x - 28.5).abs() < 1e-3, "{mirrored:?}");
+        }
+        other => panic!(
+            "{other:?} {:?} {:?}",
+            w.cast(&o, &d, 100.0),
+            w.cast_solid(&o, &d, 100.0)
+        ),
+    }
+}
+
+#[test]
+fn stereo_on_still_water_triangulates_the_mirror_image() {
+    let w = world(0.5);
+    let s = Stereo::new(w.scene.rig.stereo.as_ref().unwrap()).unwrap();
+    let o = Point3::new(0.0, 0.0, 1.5);
+    // Towards the building's reflection: mirror point on the original ray.
+    let e = (1.7f64 / 14.0).atan();
+    let d = Vector3::new(e.cos(), 0.0, -e.sin());
+    let (t, _) = s.trace(&w, &o, &d).expect("the building is reflected");
+    let p = o + d * t;
+    let mirrored = Point3::new(p.x, p.y, -0.4 - p.z);
+    assert!(
+        (mirrored.x - 28.5).abs() < 1e-3 && mirrored.z > -0.2,
+        "{mirrored:?}"
+    );
+    // A reflected sky gives no match.
+    let d = Vector3::new(0.0, 1.0, 0.0);
+    let e = (1.7f64 / 12.0).atan();
+    let d2 = Vector3::new(e.cos() * 0.9, (1.0 - 0.81f64).sqrt() * e.cos(), -e.sin()).normalize();
+    let _ = d;
+    assert!(w.cast_water(&o, &d2, 100.0).is_some());
+    let refl_hits = {
+        let h = w.cast_water(&o, &d2, 100.0).unwrap();
+        let r = d2 + Vector3::z() * (2.0 * -d2.z);
+        w.cast_solid(&(h.point + r * 1e-4), &r, 100.0).is_some()
+    };
+    assert_eq!(s.trace(&w, &o, &d2).is_some(), refl_hits);
+    // Ripples break the reflection up.
+    let t = scene_text(0.5, "").replacen("attenuation = 0.8", "attenuation = 0.8\nripple = 0.1", 1);
+    let w2 = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
+    assert!(s.trace(&w2, &o, &d).is_none());
+}
+
+#[test]
+fn truth_marks_the_pond_with_its_depth() {
+    let w = world(0.5);
+    let t = truth_map(&w);
+    let c = t
+        .cells
+        .iter()
+        .find(|c| (c.x - 12.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11)
+        .unwrap();
+    assert_eq!(c.class, Class::Water);
+    assert!(
+        (c.z + 0.2).abs() < 1e-12 && (c.depth - 0.3).abs() < 1e-6,
+        "{c:?}"
+    );
+    let dry = t
+        .cells
+        .iter()
+        .find(|c| (c.x - 0.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11)
+        .unwrap();
+    assert_eq!((dry.class, dry.depth), (Class::Ground, 0.0));
+    let b = t
+        .cells
+        .iter()
+        .find(|c| (c.x - 30.1).abs() < 0.11 && (c.y - 0.1).abs() < 0.11)
+        .unwrap();
+    assert_eq!(b.class, Class::Obstacle);
+    let stats = water_stats(&w, &t);
+    // Flat bottom of radius 6 m at 0.3 m depth, then the rim: area between π6² and π8².
+    assert!(
+        stats[0].area_m2 > std::f64::consts::PI * 36.0
+            && stats[0].area_m2 < std::f64::consts::PI * 64.0
+    );
+    assert!((stats[0].max_depth_m - 0.3).abs() < 1e-6);
+}
+
+fn run_sim(threads: usize, noise: bool) -> (tempfile::TempDir, SimReport) {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Scene::from_toml_str(&scene_text(
+        0.5,
+        "[rig.mwir]\nposition = [0.0, 0.0, 1.5]\nwidth = 32\nheight = 24\nhfov_deg = 50.0\n",
+    ))
+    .unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let r = pool
+        .install(|| simulate(&scene, dir.path(), SimOptions { noise }))
+        .unwrap();
+    (dir, r)
+}
+
+#[test]
+fn same_seed_same_bytes_whatever_the_thread_count() {
+    let (a, ra) = run_sim(1, true);
+    let (b, _) = run_sim(3, true);
+    for f in ["log.mcap", "truth.ply", "truth.json", "scene.ply"] {
+        let (x, y) = (
+            std::fs::read(a.path().join(f)).unwrap(),
+            std::fs::read(b.path().join(f)).unwrap(),
+        );
+        assert!(x == y, "{f} differs between 1 and 3 threads");
+    }
+    assert_eq!(ra.frames, 2);
+    assert!(ra.lidar_returns > 0 && ra.stereo_points > 0);
+    // Noise changes the clouds.
+    let (c, _) = run_sim(2, false);
+    assert_ne!(
+        std::fs::read(a.path().join("log.mcap")).unwrap(),
+        std::fs::read(c.path().join("log.mcap")).unwrap()
+    );
+}
+
+#[test]
+fn the_frame_stream_reads_the_log_back() {
+    let (dir, r) = run_sim(2, true);
+    let mut fs =
+        crate::io::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default())
+            .unwrap();
+    let mut n = 0;
+    let traj: TruthInfo =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("truth.json")).unwrap())
+            .unwrap();
+    for f in fs.by_ref() {
+        let f = f.unwrap();
+        let p = &traj.trajectory[n];
+        assert!((f.stamp - p.stamp).abs() < 1e-6);
+        assert!((f.base_to_map.translation.vector - Vector3::new(p.x, p.y, p.z)).norm() < 1e-9);
+        let lidar = f.lidar.expect("lidar");
+        assert_eq!((lidar.rows, lidar.cols), (16, 64));
+        let st = f.stereo.expect("stereo");
+        assert_eq!((st.rows, st.cols), (24, 32));
+        let img = f.image.expect("image");
+        assert_eq!((img.image.width, img.image.height), (64, 48));
+        assert!(img.camera.is_some() && img.frame_to_map.is_some());
+        assert!(f.mwir.is_some() && f.swir.is_none());
+        // Lidar points in the map lie near the truth surface (dry ground within noise).
+        n += 1;
+    }
+    assert_eq!(n, r.frames);
+}
+
+#[test]
+fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
+    let (dir, _) = run_sim(2, true);
+    let truth_dir = dir.path();
+    let map_dir = tempfile::tempdir().unwrap();
+    std::fs::copy(truth_dir.join("truth.ply"), map_dir.path().join("map.ply")).unwrap();
+    let r = crate::eval::evaluate_dirs(map_dir.path(), truth_dir).unwrap();
+    assert!(r.is_perfect(), "{r:#?}");
+    assert_eq!(r.all.water_recall, Some(1.0));
+    assert_eq!(r.all.false_positive_rate, Some(0.0));
+    assert!(r.all.water_cells > 0 && r.all.dry_cells > 0);
+    assert_eq!(
+        r.bins.iter().map(|b| b.observed_cells).sum::<usize>(),
+        r.all.observed_cells
+    );
+
+    // Wrong: the pond's far half called ground, a dry strip called water, terrain 5 cm high.
+    let mut m = crate::io::mapfile::read_map_ply(&truth_dir.join("truth.ply")).unwrap();
+    for c in &mut m.cells {
+        if c.class == Class::Water && c.x > 12.0 {
+            c.class = Class::Ground;
+        } else if c.class == Class::Ground && c.y > 10.0 {
+            c.class = Class::Water;
+        } else if c.class == Class::Ground {
+            c.z += 0.05;
+        }
+    }
+    crate::io::export::write_map_ply(&map_dir.path().join("map.ply"), &m).unwrap();
+    let r = crate::eval::evaluate_dirs(map_dir.path(), truth_dir).unwrap();
+    assert!(!r.is_perfect());
+    let recall = r.all.water_recall.unwrap();
+    assert!(recall > 0.3 && recall < 0.7, "{recall}");
+    assert!(r.all.false_positive_rate.unwrap() > 0.0);
+    assert!((r.all.terrain_rms_m.unwrap() - 0.05).abs() < 1e-5);
+}
+
+#[test]
+fn trajectory_follows_the_waypoints() {
+    let w = world(0.5);
+    let p = trajectory(&w);
+    assert_eq!(p.len(), 2);
+    assert_eq!((p[0].x, p[1].x), (0.0, 0.4));
+    assert!((p[1].stamp - p[0].stamp - 0.2).abs() < 1e-12);
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+    /// Over flat dry ground, from any height and in any direction that stays on the
+    /// terrain, the lidar range is h / sin(depression angle).
+    #[test]
+    fn flat_ground_range_property(h in 0.5f64..3.0, deg in 6.0f64..89.0, az in 100.0f64..260.0) {
+        let t = scene_text(0.5, "").replacen("position = [0.0, 0.0, 1.5]\nrings", &format!("position = [0.0, 0.0, {h}]\nrings"), 1);
+        let w = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
+        let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
+        let o = Point3::new(0.0, 0.0, h);
+        let (e, a) = (deg.to_radians(), az.to_radians());
+        let d = Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), -e.sin());
+        let look = h / e.tan();
+        let p = o + d * (h / e.sin());
+        proptest::prop_assume!(w.terrain.contains(p.x, p.y) && look < l.spec.dry_limit_m);
+        match l.trace(&w, &o, &d).unwrap() {
+            LidarReturn::Solid { point } => {
+                let r = (point - o).norm();
+                proptest::prop_assert!((r - h / e.sin()).abs() < 2e-4, "{} vs {}", r, h / e.sin());
+            }
+            other => proptest::prop_assert!(false, "{:?}", other),
+        }
+    }
+}
