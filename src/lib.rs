@@ -16,3 +16,5 @@ pub mod optics;
 pub use error::{Error, Result};
 pub mod build;
 pub mod hazard;
+pub mod classify;
+pub mod project;
