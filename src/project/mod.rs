@@ -151,8 +151,14 @@ impl ElevationSurface {
             return Err(Error::invalid("elevation surface", "the grid has no observed cell"));
         }
         let z0 = known.iter().sum::<f64>() / known.len() as f64;
-        // Row index i advances along parry z (= map y), column j along parry x (= map x).
-        let heights: Vec<f32> = z.iter().map(|v| v.map_or(0.0, |v| (v - z0) as f32)).collect();
+        // Row index i advances along parry z (= map y), column j along parry x (= map x);
+        // parry's Array2 is column-major: element (i, j) is at i + j·n. `z` is indexed y·n + x.
+        let heights: Vec<f32> = (0..n * n)
+            .map(|e| {
+                let (i, j) = (e % n, e / n);
+                z[i * n + j].map_or(0.0, |v| (v - z0) as f32)
+            })
+            .collect();
         let span = (n - 1) as f64 * res;
         let scale = parry3d::math::Vector::new(span as f32, 1.0, span as f32);
         let mut hf = HeightField::new(parry3d::utils::Array2::new(n, n, heights), scale);

@@ -136,11 +136,11 @@ fn water_level_and_stereo_paths() {
 
     // Stereo at half resolution: 32 × 24 points, one valid at element (10, 5) 3 m ahead.
     let mut xyz = vec![[f32::NAN; 3]; 32 * 24];
-    xyz[10 * 32 + 5] = [0.2, 0.5, 3.0];
+    xyz[10 * 32 + 5] = [0.23, 0.47, 3.04];
     let cloud = PointCloud::organized(24, 32, xyz).unwrap();
     let (v, st) = p.project(&labels, &pose, Some(&cloud), None, RES).unwrap();
     assert_eq!(st.via_point, 4, "a 2 × 2 block of pixels");
-    let q = pose * Point3::new(0.2, 0.5, 3.0);
+    let q = pose * Point3::new(0.23f32 as f64, 0.47f32 as f64, 3.04f32 as f64);
     assert_eq!(v.get(key_of(RES, q.x, q.y)), Some(&[0, 4, 0, 0]));
     assert_eq!(v.len(), 1);
     // Wrong stereo size is refused.
@@ -210,3 +210,4 @@ fn merge_refuses_other_resolution() {
     a.add(CellKey::new(0, 0), Label::Other);
     assert_eq!(a.majority(CellKey::new(0, 0)), Some(Label::Water));
 }
+
