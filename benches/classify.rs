@@ -18,11 +18,18 @@ use tarn::geom::{pose_xyz_rpy, PointCloud};
 use tarn::grid::{GridConfig, RangeNoise, RollingGrid};
 use tarn::project::{ElevationSurface, ProjectConfig, Projector, RayTarget};
 
-const DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/rellis3d-puddle-frame");
+const DIR: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/data/rellis3d-puddle-frame"
+);
 
 fn setup() -> (ColorModel, RgbImage) {
-    let rgb = image::open(format!("{DIR}/frame000104-1581624663_149.jpg")).unwrap().to_rgb8();
-    let ids = image::open(format!("{DIR}/frame000104-1581624663_149.png")).unwrap().to_luma8();
+    let rgb = image::open(format!("{DIR}/frame000104-1581624663_149.jpg"))
+        .unwrap()
+        .to_rgb8();
+    let ids = image::open(format!("{DIR}/frame000104-1581624663_149.png"))
+        .unwrap()
+        .to_luma8();
     let w = rgb.width();
     let (mut water, mut sky, mut other) = (Vec::new(), Vec::new(), Vec::new());
     for (i, (p, id)) in rgb.pixels().zip(ids.pixels()).enumerate() {
@@ -36,7 +43,11 @@ fn setup() -> (ColorModel, RgbImage) {
         }
     }
     let (m, _) = ColorModel::train(
-        &[(Label::Water, &water), (Label::Sky, &sky), (Label::Other, &other)],
+        &[
+            (Label::Water, &water),
+            (Label::Sky, &sky),
+            (Label::Other, &other),
+        ],
         &TrainConfig::default(),
     )
     .unwrap();
@@ -76,20 +87,35 @@ fn classify(c: &mut Criterion) {
 
 fn project(c: &mut Criterion) {
     // 40 m × 40 m grid at 0.1 m (400 × 400) of rolling ground; camera 1.5 m up, 15° down.
-    let cfg = GridConfig { resolution: 0.1, size_cells: 400, ..Default::default() };
+    let cfg = GridConfig {
+        resolution: 0.1,
+        size_cells: 400,
+        ..Default::default()
+    };
     let mut grid = RollingGrid::new(cfg, 18.0, 0.0).unwrap();
     let mut xyz = Vec::new();
     for i in -20..380 {
         for j in -200..200 {
             let (x, y) = ((i as f64 + 0.5) * 0.1, (j as f64 + 0.5) * 0.1);
-            xyz.push([x as f32, y as f32, (0.2 * (0.3 * x).sin() + 0.1 * (0.5 * y).cos()) as f32]);
+            xyz.push([
+                x as f32,
+                y as f32,
+                (0.2 * (0.3 * x).sin() + 0.1 * (0.5 * y).cos()) as f32,
+            ]);
         }
     }
     let mut cloud = PointCloud::unorganized(xyz);
     cloud.sensor_origin = Point3::new(0.0, 0.0, 10.0);
     grid.ingest(&cloud, &RangeNoise::constant(0.01)).unwrap();
     let surface = ElevationSurface::from_grid(&grid).unwrap();
-    let cam = CameraModel::new(640, 480, [500.0, 500.0, 319.5, 239.5], Distortion::PlumbBob([-0.2, 0.05, 0.0, 0.0, 0.0]), "cam").unwrap();
+    let cam = CameraModel::new(
+        640,
+        480,
+        [500.0, 500.0, 319.5, 239.5],
+        Distortion::PlumbBob([-0.2, 0.05, 0.0, 0.0, 0.0]),
+        "cam",
+    )
+    .unwrap();
     let pose = optical_pose(&pose_xyz_rpy(0.0, 0.0, 1.5, 0.0, 15f64.to_radians(), 0.0));
     let p = Projector::new(cam.clone(), ProjectConfig::default()).unwrap();
     let mut labels = LabelImage::filled(640, 480, Label::Other);
@@ -115,11 +141,26 @@ fn project(c: &mut Criterion) {
     let stereo = PointCloud::organized(240, 320, sxyz).unwrap();
     let mut g = c.benchmark_group("project_640x480_onto_400x400");
     g.sample_size(10);
-    g.bench_function("heightfield_build", |b| b.iter(|| ElevationSurface::from_grid(&grid).unwrap()));
-    g.bench_function("stereo_votes", |b| b.iter(|| p.project(&labels, &pose, Some(&stereo), None, 0.1).unwrap()));
-    g.bench_function("ray_cast_terrain", |b| b.iter(|| p.project(&labels, &pose, None, Some(&t), 0.1).unwrap()));
+    g.bench_function("heightfield_build", |b| {
+        b.iter(|| ElevationSurface::from_grid(&grid).unwrap())
+    });
+    g.bench_function("stereo_votes", |b| {
+        b.iter(|| p.project(&labels, &pose, Some(&stereo), None, 0.1).unwrap())
+    });
+    g.bench_function("ray_cast_terrain", |b| {
+        b.iter(|| p.project(&labels, &pose, None, Some(&t), 0.1).unwrap())
+    });
     g.bench_function("ray_cast_water_level", |b| {
-        b.iter(|| p.project(&labels, &pose, None, Some(&RayTarget::WaterLevel(-0.1)), 0.1).unwrap())
+        b.iter(|| {
+            p.project(
+                &labels,
+                &pose,
+                None,
+                Some(&RayTarget::WaterLevel(-0.1)),
+                0.1,
+            )
+            .unwrap()
+        })
     });
     g.finish();
 }

@@ -96,7 +96,10 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<()> {
         let bad = |w: &str, m: String| Err(Error::invalid(format!("train config {w}"), m));
         if self.max_components == 0 || self.max_components > 64 {
-            return bad("max_components", format!("{} (must be 1..=64)", self.max_components));
+            return bad(
+                "max_components",
+                format!("{} (must be 1..=64)", self.max_components),
+            );
         }
         if self.max_iter == 0 {
             return bad("max_iter", "0".into());
@@ -181,13 +184,24 @@ impl Dens {
         Ok(Dens {
             log_coef: c.weight.ln() - 0.5 * (3.0 * (2.0 * std::f64::consts::PI).ln() + det.ln()),
             mean: c.mean,
-            prec: [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(0, 1)], p[(0, 2)], p[(1, 2)]],
+            prec: [
+                p[(0, 0)],
+                p[(1, 1)],
+                p[(2, 2)],
+                p[(0, 1)],
+                p[(0, 2)],
+                p[(1, 2)],
+            ],
         })
     }
 
     #[inline]
     fn log_pdf(&self, x: &[f64; 3]) -> f64 {
-        let (a, b, c) = (x[0] - self.mean[0], x[1] - self.mean[1], x[2] - self.mean[2]);
+        let (a, b, c) = (
+            x[0] - self.mean[0],
+            x[1] - self.mean[1],
+            x[2] - self.mean[2],
+        );
         let p = &self.prec;
         let q = a * a * p[0]
             + b * b * p[1]
@@ -260,7 +274,10 @@ impl ColorModel {
             if !(c.prior.is_finite() && c.prior > 0.0) || c.components.is_empty() {
                 return Err(Error::invalid(
                     format!("colour model class {i} ({})", c.name),
-                    format!("prior {} must be positive and there must be components", c.prior),
+                    format!(
+                        "prior {} must be positive and there must be components",
+                        c.prior
+                    ),
                 ));
             }
             let d = c
@@ -269,7 +286,10 @@ impl ColorModel {
                 .enumerate()
                 .map(|(k, comp)| {
                     Dens::new(comp).map_err(|e| {
-                        Error::invalid(format!("colour model class {i} ({}) component {k}", c.name), e.to_string())
+                        Error::invalid(
+                            format!("colour model class {i} ({}) component {k}", c.name),
+                            e.to_string(),
+                        )
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
@@ -285,7 +305,11 @@ impl ColorModel {
     /// Parses a JSON model; `name` is used in errors.
     pub fn from_json(text: &str, name: &str) -> Result<Self> {
         let d: ColorModelData = serde_json::from_str(text).map_err(|e| {
-            Error::format(name, format!("line {} column {}", e.line(), e.column()), e.to_string())
+            Error::format(
+                name,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
         })?;
         Self::from_data(d).map_err(|e| Error::format(name, "model", e.to_string()))
     }
@@ -319,14 +343,20 @@ impl ColorModel {
     }
 
     /// Trains one mixture per class. `samples` pairs a label with that class's pixels.
-    pub fn train(samples: &[(Label, &[[u8; 3]])], cfg: &TrainConfig) -> Result<(Self, TrainReport)> {
+    pub fn train(
+        samples: &[(Label, &[[u8; 3]])],
+        cfg: &TrainConfig,
+    ) -> Result<(Self, TrainReport)> {
         cfg.validate()?;
         if samples.is_empty() {
             return Err(Error::invalid("training set", "no classes"));
         }
         let total: usize = samples.iter().map(|(_, s)| s.len()).sum();
         let mut classes = Vec::new();
-        let mut report = TrainReport { bic: Vec::new(), samples: Vec::new() };
+        let mut report = TrainReport {
+            bic: Vec::new(),
+            samples: Vec::new(),
+        };
         for (ci, (label, px)) in samples.iter().enumerate() {
             if px.is_empty() {
                 return Err(Error::invalid(
@@ -369,7 +399,10 @@ impl ColorModel {
                 components,
             });
         }
-        let m = Self::from_data(ColorModelData { format: FORMAT.into(), classes })?;
+        let m = Self::from_data(ColorModelData {
+            format: FORMAT.into(),
+            classes,
+        })?;
         Ok((m, report))
     }
 }
@@ -478,7 +511,11 @@ struct Suff {
 
 impl Suff {
     fn zero() -> Self {
-        Suff { n: 0.0, s: Vector3::zeros(), ss: Matrix3::zeros() }
+        Suff {
+            n: 0.0,
+            s: Vector3::zeros(),
+            ss: Matrix3::zeros(),
+        }
     }
 }
 
@@ -500,7 +537,12 @@ fn m_step(st: &[Suff], total: f64, cfg: &TrainConfig) -> Vec<Component> {
 
 /// k-means++ seeds, 10 Lloyd steps, then EM. Returns components, total log-likelihood and
 /// EM iterations.
-fn fit_em(x: &[([f64; 3], f64)], k: usize, cfg: &TrainConfig, rng: &mut SplitMix) -> (Vec<Component>, f64, usize) {
+fn fit_em(
+    x: &[([f64; 3], f64)],
+    k: usize,
+    cfg: &TrainConfig,
+    rng: &mut SplitMix,
+) -> (Vec<Component>, f64, usize) {
     let total: f64 = x.iter().map(|(_, w)| w).sum();
     // k-means++ (weighted).
     let w: Vec<f64> = x.iter().map(|(_, w)| *w).collect();
@@ -579,7 +621,10 @@ fn fit_em(x: &[([f64; 3], f64)], k: usize, cfg: &TrainConfig, rng: &mut SplitMix
         ll_prev = ll;
     }
     // Log-likelihood of the final parameters.
-    let dens: Vec<Dens> = comps.iter().map(|c| Dens::new(c).expect("regularised")).collect();
+    let dens: Vec<Dens> = comps
+        .iter()
+        .map(|c| Dens::new(c).expect("regularised"))
+        .collect();
     let ll_final: f64 = x
         .par_chunks(CHUNK)
         .map(|ch| {
@@ -629,7 +674,11 @@ pub fn training_samples(
     if rgb.dimensions() != ids.dimensions() {
         return Err(Error::invalid(
             "label image",
-            format!("{:?} pixels for a {:?} image", ids.dimensions(), rgb.dimensions()),
+            format!(
+                "{:?} pixels for a {:?} image",
+                ids.dimensions(),
+                rgb.dimensions()
+            ),
         ));
     }
     let (w, h) = rgb.dimensions();
@@ -643,7 +692,10 @@ pub fn training_samples(
     let mut by: std::collections::BTreeMap<Label, Vec<[u8; 3]>> = Default::default();
     for y in y0..y1 {
         for x in x0..x1 {
-            let l = class_of.get(&ids.get_pixel(x, y).0[0]).copied().unwrap_or(Label::Other);
+            let l = class_of
+                .get(&ids.get_pixel(x, y).0[0])
+                .copied()
+                .unwrap_or(Label::Other);
             by.entry(l).or_default().push(rgb.get_pixel(x, y).0);
         }
     }
@@ -690,7 +742,11 @@ mod tests {
         .unwrap();
         assert_eq!(m.data().classes[0].components.len(), 2, "{:?}", rep.bic);
         assert_eq!(m.data().classes[1].components.len(), 1, "{:?}", rep.bic);
-        let mut means: Vec<[f64; 3]> = m.data().classes[0].components.iter().map(|c| c.mean).collect();
+        let mut means: Vec<[f64; 3]> = m.data().classes[0]
+            .components
+            .iter()
+            .map(|c| c.mean)
+            .collect();
         means.sort_by(|a, b| a[0].total_cmp(&b[0]));
         assert!(d2(&means[0], &[60.0, 80.0, 200.0]) < 1.0, "{means:?}");
         assert!(d2(&means[1], &[200.0, 200.0, 210.0]) < 1.0, "{means:?}");
@@ -705,7 +761,11 @@ mod tests {
         let sky = vec![[255u8, 255, 255]; 5000];
         let mut rng = SplitMix(2);
         let other = gauss(&mut rng, [100.0, 110.0, 60.0], 20.0, 5000);
-        let (m, _) = ColorModel::train(&[(Label::Sky, &sky), (Label::Other, &other)], &TrainConfig::default()).unwrap();
+        let (m, _) = ColorModel::train(
+            &[(Label::Sky, &sky), (Label::Other, &other)],
+            &TrainConfig::default(),
+        )
+        .unwrap();
         assert_eq!(m.data().classes[0].components.len(), 1);
         for r in m.data().classes[0].components[0].cov.iter().enumerate() {
             assert!(r.1[r.0] >= 1.0);
@@ -717,7 +777,12 @@ mod tests {
     #[test]
     fn planar_class_stays_proper() {
         // Grey ramp: all samples on the line r = g = b (rank-1 covariance).
-        let grey: Vec<[u8; 3]> = (0..3000).map(|i| { let v = (i % 200) as u8 + 20; [v, v, v] }).collect();
+        let grey: Vec<[u8; 3]> = (0..3000)
+            .map(|i| {
+                let v = (i % 200) as u8 + 20;
+                [v, v, v]
+            })
+            .collect();
         let (m, _) = ColorModel::train(&[(Label::Other, &grey)], &TrainConfig::default()).unwrap();
         let json = serde_json::to_string(m.data()).unwrap();
         let back = ColorModel::from_json(&json, "m.json").unwrap();
@@ -730,26 +795,44 @@ mod tests {
         let a = gauss(&mut rng, [50.0, 60.0, 70.0], 15.0, 20000);
         let b = gauss(&mut rng, [150.0, 160.0, 170.0], 25.0, 20000);
         let run = |t| {
-            rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap().install(|| {
-                ColorModel::train(&[(Label::Water, &a), (Label::Other, &b)], &TrainConfig::default())
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap()
+                .install(|| {
+                    ColorModel::train(
+                        &[(Label::Water, &a), (Label::Other, &b)],
+                        &TrainConfig::default(),
+                    )
                     .unwrap()
                     .0
-            })
+                })
         };
         assert_eq!(run(1).data(), run(3).data());
     }
 
     #[test]
     fn bad_model_files_are_refused() {
-        assert!(ColorModel::from_json("{", "m.json").unwrap_err().to_string().contains("m.json"));
+        assert!(ColorModel::from_json("{", "m.json")
+            .unwrap_err()
+            .to_string()
+            .contains("m.json"));
         let bad = r#"{"format":"tarn-color-gmm-1","classes":[{"label":"water","name":"w","prior":1.0,
             "components":[{"weight":1.0,"mean":[0,0,0],"cov":[[1,0,0],[0,-1,0],[0,0,1]]}]}]}"#;
-        let e = ColorModel::from_json(bad, "m.json").unwrap_err().to_string();
-        assert!(e.contains("positive definite") && e.contains("component 0"), "{e}");
+        let e = ColorModel::from_json(bad, "m.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("positive definite") && e.contains("component 0"),
+            "{e}"
+        );
         let dup = r#"{"format":"tarn-color-gmm-1","classes":[
             {"label":"water","name":"w","prior":1.0,"components":[{"weight":1.0,"mean":[0,0,0],"cov":[[1,0,0],[0,1,0],[0,0,1]]}]},
             {"label":"water","name":"v","prior":1.0,"components":[{"weight":1.0,"mean":[0,0,0],"cov":[[1,0,0],[0,1,0],[0,0,1]]}]}]}"#;
-        assert!(ColorModel::from_json(dup, "m.json").unwrap_err().to_string().contains("twice"));
+        assert!(ColorModel::from_json(dup, "m.json")
+            .unwrap_err()
+            .to_string()
+            .contains("twice"));
         assert!(ColorModel::train(&[(Label::Water, &[])], &TrainConfig::default()).is_err());
     }
 

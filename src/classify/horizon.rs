@@ -37,7 +37,10 @@ pub fn optical_to_body() -> UnitQuaternion<f64> {
 /// The optical frame's pose from a camera body pose (x forward, y left, z up) in the map
 /// frame, e.g. one given as x, y, z, roll, pitch, yaw.
 pub fn optical_pose(body_to_map: &Pose) -> Pose {
-    Pose::from_parts(body_to_map.translation, body_to_map.rotation * optical_to_body())
+    Pose::from_parts(
+        body_to_map.translation,
+        body_to_map.rotation * optical_to_body(),
+    )
 }
 
 /// Where the horizon is.
@@ -46,7 +49,10 @@ pub enum Horizon {
     /// Rows above this one (y < row) are above the horizon.
     Row(usize),
     /// From the camera's intrinsics, distortion and pose (optical frame → map frame).
-    Camera { camera: CameraModel, cam_to_map: Pose },
+    Camera {
+        camera: CameraModel,
+        cam_to_map: Pose,
+    },
 }
 
 /// What [`Horizon::apply`] changed.
@@ -76,7 +82,10 @@ impl Horizon {
                     ));
                 }
                 if !pose_is_finite(cam_to_map) {
-                    return Err(Error::invalid("horizon camera pose", format!("{cam_to_map}")));
+                    return Err(Error::invalid(
+                        "horizon camera pose",
+                        format!("{cam_to_map}"),
+                    ));
                 }
                 // A pixel whose ray cannot be computed is treated as above the horizon
                 // (it cannot be shown to see the ground).
@@ -138,7 +147,10 @@ impl GroundGeometry {
         let (mut incidence, mut range, mut lookahead) =
             (vec![f32::NAN; n], vec![f32::NAN; n], vec![f32::NAN; n]);
         if h > 0.0 {
-            for (i, r) in pixel_rays_in_map(camera, cam_to_map).into_iter().enumerate() {
+            for (i, r) in pixel_rays_in_map(camera, cam_to_map)
+                .into_iter()
+                .enumerate()
+            {
                 let Some(r) = r else { continue };
                 if r.z < 0.0 {
                     let t = h / -r.z;
@@ -171,10 +183,14 @@ pub(crate) mod tests {
 
     #[test]
     fn level_camera_horizon_is_the_principal_row() {
-        let cam = CameraModel::new(64, 48, [50.0, 50.0, 31.5, 20.0], Distortion::None, "c").unwrap();
-        let above = Horizon::Camera { camera: cam, cam_to_map: cam_pose(1.5, 0.0) }
-            .above_mask(64, 48)
-            .unwrap();
+        let cam =
+            CameraModel::new(64, 48, [50.0, 50.0, 31.5, 20.0], Distortion::None, "c").unwrap();
+        let above = Horizon::Camera {
+            camera: cam,
+            cam_to_map: cam_pose(1.5, 0.0),
+        }
+        .above_mask(64, 48)
+        .unwrap();
         for y in 0..48 {
             assert_eq!(above[y * 64 + 10], y <= 20, "row {y}");
         }
@@ -185,7 +201,14 @@ pub(crate) mod tests {
         let mut l = LabelImage::filled(2, 4, Label::Water);
         l.data[6] = Label::Sky;
         let st = Horizon::Row(2).apply(&mut l, true).unwrap();
-        assert_eq!(st, HorizonStats { above: 4, water_to_sky: 4, sky_to_water: 1 });
+        assert_eq!(
+            st,
+            HorizonStats {
+                above: 4,
+                water_to_sky: 4,
+                sky_to_water: 1
+            }
+        );
         assert_eq!(&l.data[..4], &[Label::Sky; 4]);
         assert_eq!(&l.data[4..], &[Label::Water; 4]);
         assert!(Horizon::Camera {

@@ -143,10 +143,7 @@ impl MonoImage {
         if data.len() != width * height {
             return Err(Error::invalid(
                 "mono image",
-                format!(
-                    "{} values for {width} × {height} pixels",
-                    data.len()
-                ),
+                format!("{} values for {width} × {height} pixels", data.len()),
             ));
         }
         Ok(MonoImage {
@@ -177,7 +174,12 @@ impl MonoImage {
 pub fn save_gray_png(path: &std::path::Path, img: &image::GrayImage) -> Result<()> {
     crate::io::export::write_atomic(path, |w| {
         image::codecs::png::PngEncoder::new(w)
-            .write_image(img.as_raw(), img.width(), img.height(), image::ExtendedColorType::L8)
+            .write_image(
+                img.as_raw(),
+                img.width(),
+                img.height(),
+                image::ExtendedColorType::L8,
+            )
             .map_err(std::io::Error::other)
     })
 }
@@ -226,14 +228,22 @@ mod tests {
         }
         assert_eq!(Label::from_u8(7), None);
         let img = image::GrayImage::from_raw(2, 1, vec![1, 9]).unwrap();
-        let e = LabelImage::from_gray(&img, "x.png").unwrap_err().to_string();
+        let e = LabelImage::from_gray(&img, "x.png")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("pixel 1") && e.contains('9'), "{e}");
     }
 
     #[test]
     fn confusion_metrics() {
         let mut c = Confusion::default();
-        for (p, t) in [(true, true), (true, false), (false, true), (false, false), (true, true)] {
+        for (p, t) in [
+            (true, true),
+            (true, false),
+            (false, true),
+            (false, false),
+            (true, true),
+        ] {
             c.add(p, t);
         }
         assert!((c.precision() - 2.0 / 3.0).abs() < 1e-12);

@@ -163,7 +163,10 @@ pub fn classify_swir(
     if let Some(v) = visible {
         check_sizes(v, geom, "visible image for SWIR")?;
     }
-    if !(cfg.max_incidence.is_finite() && cfg.dark_ratio > 0.0 && (0.0..=1.0).contains(&cfg.reference_percentile)) {
+    if !(cfg.max_incidence.is_finite()
+        && cfg.dark_ratio > 0.0
+        && (0.0..=1.0).contains(&cfg.reference_percentile))
+    {
         return Err(Error::invalid("SWIR config", format!("{cfg:?}")));
     }
     let include: Vec<bool> = img
@@ -172,13 +175,20 @@ pub fn classify_swir(
         .zip(&geom.incidence)
         .map(|(v, inc)| v.is_finite() && (*inc as f64) <= cfg.max_incidence)
         .collect();
-    let refs = band_percentiles(img, &include, cfg.half_band_rows, &[cfg.reference_percentile]);
+    let refs = band_percentiles(
+        img,
+        &include,
+        cfg.half_band_rows,
+        &[cfg.reference_percentile],
+    );
     let mut out = LabelImage::filled(img.width, img.height, Label::Unknown);
     for (i, o) in out.data.iter_mut().enumerate() {
         if !include[i] {
             continue;
         }
-        let Some(r) = &refs[i / img.width] else { continue };
+        let Some(r) = &refs[i / img.width] else {
+            continue;
+        };
         *o = if img.data[i] < cfg.dark_ratio * r[0] {
             match visible {
                 Some(v) if v.data[i] >= cfg.snow_min_visible => Label::SnowIce,
@@ -246,7 +256,10 @@ impl MwirConfig {
     /// The regime at a local solar hour (0..24).
     pub fn regime(&self, hour: f64) -> Result<ThermalRegime> {
         if !(0.0..24.0).contains(&hour) {
-            return Err(Error::invalid("hour of day", format!("{hour} (must be 0 ≤ h < 24)")));
+            return Err(Error::invalid(
+                "hour of day",
+                format!("{hour} (must be 0 ≤ h < 24)"),
+            ));
         }
         Ok(if in_hours(hour, self.night_hours) {
             ThermalRegime::Night
@@ -259,7 +272,12 @@ impl MwirConfig {
 }
 
 /// Labels an MWIR image taken at local solar `hour`.
-pub fn classify_mwir(img: &MonoImage, geom: &GroundGeometry, hour: f64, cfg: &MwirConfig) -> Result<LabelImage> {
+pub fn classify_mwir(
+    img: &MonoImage,
+    geom: &GroundGeometry,
+    hour: f64,
+    cfg: &MwirConfig,
+) -> Result<LabelImage> {
     check_sizes(img, geom, "MWIR image")?;
     if !(cfg.k_sigma >= 0.0 && cfg.min_contrast >= 0.0 && cfg.max_lookahead_m > 0.0) {
         return Err(Error::invalid("MWIR config", format!("{cfg:?}")));
@@ -282,7 +300,9 @@ pub fn classify_mwir(img: &MonoImage, geom: &GroundGeometry, hour: f64, cfg: &Mw
         if !include[i] {
             continue;
         }
-        let Some(q) = &stats[i / img.width] else { continue };
+        let Some(q) = &stats[i / img.width] else {
+            continue;
+        };
         // Night: q[0] = q05, q[1] = q25; day: q95, q75 (mirror image).
         let sigma = (q[1] - q[0]).abs() / 0.971;
         let mu = q[1] + sign * 0.674 * sigma;
@@ -311,9 +331,18 @@ mod tests {
 
     /// 80 × 60 camera 1.5 m up, pitched 20° down; a "pond" in image columns 30..50, rows 40..55.
     fn scene() -> (CameraModel, GroundGeometry, Vec<bool>) {
-        let cam = CameraModel::new(80, 60, [60.0, 60.0, 39.5, 29.5], Distortion::PlumbBob([-0.05, 0.01, 0.0, 0.0, 0.0]), "c").unwrap();
+        let cam = CameraModel::new(
+            80,
+            60,
+            [60.0, 60.0, 39.5, 29.5],
+            Distortion::PlumbBob([-0.05, 0.01, 0.0, 0.0, 0.0]),
+            "c",
+        )
+        .unwrap();
         let g = GroundGeometry::level(&cam, &cam_pose(1.5, 20f64.to_radians()), 0.0).unwrap();
-        let water = (0..80 * 60).map(|i| (30..50).contains(&(i % 80)) && (40..55).contains(&(i / 80))).collect();
+        let water = (0..80 * 60)
+            .map(|i| (30..50).contains(&(i % 80)) && (40..55).contains(&(i / 80)))
+            .collect();
         (cam, g, water)
     }
 
@@ -321,7 +350,9 @@ mod tests {
     fn swir_dark_water_and_incidence_gate() {
         let (_, g, water) = scene();
         // Terrain 180 ± 10 %, water 40 ± 10 %: dark wherever it is.
-        let data = (0..80 * 60).map(|i| if water[i] { 40.0 } else { 180.0 } * (1.0 + 0.1 * noise(i))).collect();
+        let data = (0..80 * 60)
+            .map(|i| if water[i] { 40.0 } else { 180.0 } * (1.0 + 0.1 * noise(i)))
+            .collect();
         let img = MonoImage::new(80, 60, data).unwrap();
         let l = classify_swir(&img, &g, None, &SwirConfig::default()).unwrap();
         let mut checked = 0;
@@ -342,8 +373,22 @@ mod tests {
     #[test]
     fn swir_snow_needs_bright_visible() {
         let (_, g, water) = scene();
-        let swir = MonoImage::new(80, 60, (0..4800).map(|i| if water[i] { 30.0 } else { 200.0 }).collect()).unwrap();
-        let vis = MonoImage::new(80, 60, (0..4800).map(|i| if water[i] && i % 80 < 40 { 240.0 } else { 90.0 }).collect()).unwrap();
+        let swir = MonoImage::new(
+            80,
+            60,
+            (0..4800)
+                .map(|i| if water[i] { 30.0 } else { 200.0 })
+                .collect(),
+        )
+        .unwrap();
+        let vis = MonoImage::new(
+            80,
+            60,
+            (0..4800)
+                .map(|i| if water[i] && i % 80 < 40 { 240.0 } else { 90.0 })
+                .collect(),
+        )
+        .unwrap();
         let l = classify_swir(&swir, &g, Some(&vis), &SwirConfig::default()).unwrap();
         let i_snow = 45 * 80 + 35;
         let i_water = 45 * 80 + 45;
@@ -360,7 +405,19 @@ mod tests {
         let cfg = MwirConfig::default();
         // Terrain 280 K ± 0.5 with a gradient down the image; water +3 K at night.
         let mk = |dw: f32| {
-            MonoImage::new(80, 60, (0..4800).map(|i| 280.0 + 0.05 * (i / 80) as f32 + 0.5 * noise(i) + if water[i] { dw } else { 0.0 }).collect()).unwrap()
+            MonoImage::new(
+                80,
+                60,
+                (0..4800)
+                    .map(|i| {
+                        280.0
+                            + 0.05 * (i / 80) as f32
+                            + 0.5 * noise(i)
+                            + if water[i] { dw } else { 0.0 }
+                    })
+                    .collect(),
+            )
+            .unwrap()
         };
         let night = classify_mwir(&mk(3.0), &g, 3.0, &cfg).unwrap();
         let day = classify_mwir(&mk(-3.0), &g, 15.0, &cfg).unwrap();
@@ -370,7 +427,11 @@ mod tests {
             if g.lookahead[i].is_finite() && g.lookahead[i] as f64 <= cfg.max_lookahead_m {
                 assert_eq!(night.data[i] == Label::Water, water[i], "night pixel {i}");
                 assert_eq!(day.data[i] == Label::Water, water[i], "day pixel {i}");
-                assert_ne!(wrong_way.data[i], Label::Water, "cool water at night, pixel {i}");
+                assert_ne!(
+                    wrong_way.data[i],
+                    Label::Water,
+                    "cool water at night, pixel {i}"
+                );
             } else {
                 assert_eq!(night.data[i], Label::Unknown);
             }
@@ -382,13 +443,26 @@ mod tests {
     #[test]
     fn mwir_lookahead_limit() {
         let (_, g, water) = scene();
-        let cfg = MwirConfig { max_lookahead_m: 5.0, ..Default::default() };
-        let img = MonoImage::new(80, 60, (0..4800).map(|i| 280.0 + 0.3 * noise(i) + if water[i] { 3.0 } else { 0.0 }).collect()).unwrap();
+        let cfg = MwirConfig {
+            max_lookahead_m: 5.0,
+            ..Default::default()
+        };
+        let img = MonoImage::new(
+            80,
+            60,
+            (0..4800)
+                .map(|i| 280.0 + 0.3 * noise(i) + if water[i] { 3.0 } else { 0.0 })
+                .collect(),
+        )
+        .unwrap();
         let l = classify_mwir(&img, &g, 2.0, &cfg).unwrap();
         for i in 0..4800 {
             let far = !(g.lookahead[i] as f64 <= 5.0);
             assert_eq!(l.data[i] == Label::Unknown, far, "pixel {i}");
         }
-        assert!(l.data.iter().any(|&x| x == Label::Unknown) && l.data.iter().any(|&x| x == Label::Water));
+        assert!(
+            l.data.iter().any(|&x| x == Label::Unknown)
+                && l.data.iter().any(|&x| x == Label::Water)
+        );
     }
 }

@@ -42,7 +42,10 @@ pub struct LabelVotes {
 impl LabelVotes {
     pub fn new(resolution: f64) -> Result<Self> {
         if !(resolution.is_finite() && resolution > 0.0) {
-            return Err(Error::invalid("vote map resolution", format!("{resolution} m")));
+            return Err(Error::invalid(
+                "vote map resolution",
+                format!("{resolution} m"),
+            ));
         }
         Ok(LabelVotes {
             resolution,
@@ -75,7 +78,10 @@ impl LabelVotes {
         if other.resolution != self.resolution {
             return Err(Error::invalid(
                 "vote map merge",
-                format!("resolutions {} m and {} m differ", self.resolution, other.resolution),
+                format!(
+                    "resolutions {} m and {} m differ",
+                    self.resolution, other.resolution
+                ),
             ));
         }
         for (k, c) in &other.cells {
@@ -107,7 +113,10 @@ impl LabelVotes {
     /// The label with the most votes in a cell (ties: the lower index).
     pub fn majority(&self, key: CellKey) -> Option<Label> {
         let c = self.cells.get(&key)?;
-        let (i, n) = c.iter().enumerate().max_by_key(|(i, n)| (**n, std::cmp::Reverse(*i)))?;
+        let (i, n) = c
+            .iter()
+            .enumerate()
+            .max_by_key(|(i, n)| (**n, std::cmp::Reverse(*i)))?;
         (*n > 0).then_some(Label::DECIDED[i])
     }
 }
@@ -148,7 +157,10 @@ impl ElevationSurface {
             .collect();
         let known: Vec<f64> = z.iter().flatten().copied().collect();
         if known.is_empty() {
-            return Err(Error::invalid("elevation surface", "the grid has no observed cell"));
+            return Err(Error::invalid(
+                "elevation surface",
+                "the grid has no observed cell",
+            ));
         }
         let z0 = known.iter().sum::<f64>() / known.len() as f64;
         // Row index i advances along parry z (= map y), column j along parry x (= map x);
@@ -320,7 +332,10 @@ impl Projector {
         if labels.width != w || labels.height != h {
             return Err(Error::invalid(
                 "label image",
-                format!("{} × {} for a {w} × {h} camera", labels.width, labels.height),
+                format!(
+                    "{} × {} for a {w} × {h} camera",
+                    labels.width, labels.height
+                ),
             ));
         }
         if !pose_is_finite(cam_to_map) {
@@ -420,11 +435,17 @@ pub fn label_points(
     if labels.width != camera.width || labels.height != camera.height {
         return Err(Error::invalid(
             "label image",
-            format!("{} × {} for a {} × {} camera", labels.width, labels.height, camera.width, camera.height),
+            format!(
+                "{} × {} for a {} × {} camera",
+                labels.width, labels.height, camera.width, camera.height
+            ),
         ));
     }
     if !pose_is_finite(cloud_to_cam) {
-        return Err(Error::invalid("cloud to camera pose", format!("{cloud_to_cam}")));
+        return Err(Error::invalid(
+            "cloud to camera pose",
+            format!("{cloud_to_cam}"),
+        ));
     }
     let mut votes = LabelVotes::new(resolution)?;
     let per_point: Vec<Option<Label>> = (0..cloud.len())

@@ -54,8 +54,13 @@ fn rays_on_flat_ground_hit_where_the_plane_says() {
         if !(0.5..14.0).contains(&hit.x) || hit.y.abs() > 9.0 {
             continue;
         }
-        let t = s.cast(&origin, &d, 100.0).unwrap_or_else(|| panic!("pixel {i} missed"));
-        assert!((t - t_plane).abs() < 1e-3 * t_plane.max(1.0), "pixel {i}: {t} vs {t_plane}");
+        let t = s
+            .cast(&origin, &d, 100.0)
+            .unwrap_or_else(|| panic!("pixel {i} missed"));
+        assert!(
+            (t - t_plane).abs() < 1e-3 * t_plane.max(1.0),
+            "pixel {i}: {t} vs {t_plane}"
+        );
         checked += 1;
     }
     assert!(checked > 1000, "{checked}");
@@ -80,7 +85,13 @@ fn ridge_occludes_the_cells_behind_it() {
     let p = Projector::new(camera(Distortion::None), ProjectConfig::default()).unwrap();
     let labels = LabelImage::filled(64, 48, Label::Water);
     let (v, st) = p
-        .project(&labels, &cam_pose(0.95, 0.3), None, Some(&RayTarget::Terrain(&s)), RES)
+        .project(
+            &labels,
+            &cam_pose(0.95, 0.3),
+            None,
+            Some(&RayTarget::Terrain(&s)),
+            RES,
+        )
         .unwrap();
     assert!(st.via_ray > 0);
     let mut front = 0;
@@ -93,9 +104,18 @@ fn ridge_occludes_the_cells_behind_it() {
     // Without the ridge the same camera sees cells beyond 4.5 m.
     let flat = ElevationSurface::from_grid(&grid(|_, _| Some(0.0))).unwrap();
     let (v2, _) = p
-        .project(&labels, &cam_pose(0.95, 0.3), None, Some(&RayTarget::Terrain(&flat)), RES)
+        .project(
+            &labels,
+            &cam_pose(0.95, 0.3),
+            None,
+            Some(&RayTarget::Terrain(&flat)),
+            RES,
+        )
         .unwrap();
-    assert!(v2.to_sorted_vec().iter().any(|(k, _)| crate::grid::centre_of(RES, *k).0 > 4.5));
+    assert!(v2
+        .to_sorted_vec()
+        .iter()
+        .any(|(k, _)| crate::grid::centre_of(RES, *k).0 > 4.5));
 }
 
 #[test]
@@ -106,12 +126,21 @@ fn holes_are_never_hit() {
     let p = Projector::new(camera(Distortion::None), ProjectConfig::default()).unwrap();
     let labels = LabelImage::filled(64, 48, Label::Other);
     let (v, _) = p
-        .project(&labels, &cam_pose(1.5, 0.3), None, Some(&RayTarget::Terrain(&s)), RES)
+        .project(
+            &labels,
+            &cam_pose(1.5, 0.3),
+            None,
+            Some(&RayTarget::Terrain(&s)),
+            RES,
+        )
         .unwrap();
     let mut near = 0;
     for (k, _) in v.to_sorted_vec() {
         let (x, _) = crate::grid::centre_of(RES, k);
-        assert!(!(2.95..5.05).contains(&x), "cell {k:?} in the hole got a vote");
+        assert!(
+            !(2.95..5.05).contains(&x),
+            "cell {k:?} in the hole got a vote"
+        );
         near += (x < 2.9) as usize;
     }
     assert!(near > 50);
@@ -160,10 +189,20 @@ fn projection_is_thread_independent() {
         }
     }
     let run = |t| {
-        rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap().install(|| {
-            p.project(&labels, &cam_pose(1.5, 0.3), None, Some(&RayTarget::Terrain(&s)), RES)
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap()
+            .install(|| {
+                p.project(
+                    &labels,
+                    &cam_pose(1.5, 0.3),
+                    None,
+                    Some(&RayTarget::Terrain(&s)),
+                    RES,
+                )
                 .unwrap()
-        })
+            })
     };
     let (a, sa) = run(1);
     let (b, sb) = run(3);
@@ -178,7 +217,14 @@ fn votes_strategy() -> impl Strategy<Value = Vec<(i64, i64, u8)>> {
 fn build(v: &[(i64, i64, u8)]) -> LabelVotes {
     let mut m = LabelVotes::new(RES).unwrap();
     for &(x, y, l) in v {
-        m.add(CellKey::new(x, y), if l == 4 { Label::Unknown } else { Label::DECIDED[l as usize] });
+        m.add(
+            CellKey::new(x, y),
+            if l == 4 {
+                Label::Unknown
+            } else {
+                Label::DECIDED[l as usize]
+            },
+        );
     }
     m
 }
@@ -210,4 +256,3 @@ fn merge_refuses_other_resolution() {
     a.add(CellKey::new(0, 0), Label::Other);
     assert_eq!(a.majority(CellKey::new(0, 0)), Some(Label::Water));
 }
-
