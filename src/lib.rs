@@ -15,6 +15,6 @@ pub mod optics;
 
 pub use error::{Error, Result};
 pub mod build;
-pub mod hazard;
 pub mod classify;
+pub mod hazard;
 pub mod project;

@@ -163,11 +163,12 @@ impl Dens {
     fn new(c: &Component) -> Result<Dens> {
         let m = Matrix3::from_fn(|i, j| c.cov[i][j]);
         let asym = (m - m.transpose()).abs().max();
-        if !(c.weight.is_finite() && c.weight > 0.0)
-            || !c.mean.iter().all(|v| v.is_finite())
-            || !m.iter().all(|v| v.is_finite())
-            || asym > 1e-6 * m.abs().max().max(1.0)
-        {
+        let ok = c.weight.is_finite()
+            && c.weight > 0.0
+            && c.mean.iter().all(|v| v.is_finite())
+            && m.iter().all(|v| v.is_finite())
+            && asym <= 1e-6 * m.abs().max().max(1.0);
+        if !ok {
             return Err(Error::invalid(
                 "mixture component",
                 format!("weight {}, mean {:?}, cov {:?}: weight must be positive and everything finite and symmetric", c.weight, c.mean, c.cov),
@@ -468,7 +469,7 @@ fn d2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 /// Draws an index with probability ∝ `p` (all non-negative); `None` when all are zero.
 fn draw(p: &[f64], rng: &mut SplitMix) -> Option<usize> {
     let s: f64 = p.iter().sum();
-    if !(s > 0.0) {
+    if s.is_nan() || s <= 0.0 {
         return None;
     }
     let mut t = rng.next_f64() * s;
@@ -486,7 +487,7 @@ fn regularise(m: Matrix3<f64>, cfg: &TrainConfig) -> [[f64; 3]; 3] {
     let s = (m + m.transpose()) * 0.5 + Matrix3::identity() * cfg.reg_eps;
     let mut e = SymmetricEigen::new(s);
     for v in e.eigenvalues.iter_mut() {
-        if !(*v >= cfg.min_var) {
+        if v.is_nan() || *v < cfg.min_var {
             *v = cfg.min_var;
         }
     }

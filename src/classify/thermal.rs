@@ -317,6 +317,7 @@ pub fn classify_mwir(
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 mod tests {
     use super::*;
     use crate::classify::horizon::tests::cam_pose;
@@ -460,9 +461,6 @@ mod tests {
             let far = !(g.lookahead[i] as f64 <= 5.0);
             assert_eq!(l.data[i] == Label::Unknown, far, "pixel {i}");
         }
-        assert!(
-            l.data.iter().any(|&x| x == Label::Unknown)
-                && l.data.iter().any(|&x| x == Label::Water)
-        );
+        assert!(l.data.contains(&Label::Unknown) && l.data.contains(&Label::Water));
     }
 }

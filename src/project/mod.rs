@@ -344,7 +344,7 @@ impl Projector {
         let k = match stereo {
             None => 0,
             Some(c) => {
-                let k = if c.cols > 0 { w / c.cols } else { 0 };
+                let k = w.checked_div(c.cols).unwrap_or(0);
                 if !c.is_organized() || k == 0 || c.cols * k != w || c.rows * k != h {
                     return Err(Error::invalid(
                         "stereo cloud",

@@ -171,8 +171,8 @@ fn load_camera(p: &PathBuf) -> anyhow::Result<CameraModel> {
             p.display()
         ),
     };
-    Ok(CameraModel::new(c.width, c.height, c.k, dist, "camera")
-        .with_context(|| p.display().to_string())?)
+    CameraModel::new(c.width, c.height, c.k, dist, "camera")
+        .with_context(|| p.display().to_string())
 }
 
 #[derive(Args)]
