@@ -72,8 +72,8 @@ fn main() {
             / l.data.len() as f64;
         row(
             &format!(
-                "LUT {bits} bits ({} KiB) + horizon, agrees with direct on {:.2} % of pixels",
-                lut.table_bytes() / 1024,
+                "LUT {bits} bits ({} B) + horizon, agrees with direct on {:.2} % of pixels",
+                lut.table_bytes(),
                 100.0 * agree
             ),
             &score_right(&with_h(&l), &r.ids),
