@@ -100,6 +100,7 @@ impl Horizon {
     /// Labels above the horizon become sky. With `sky_below_is_water`, sky labels below the
     /// horizon become water: sky colour below the horizon is a reflection of the sky.
     pub fn apply(&self, labels: &mut LabelImage, sky_below_is_water: bool) -> Result<HorizonStats> {
+        labels.validate()?;
         let above = self.above_mask(labels.width, labels.height)?;
         let mut st = HorizonStats::default();
         for (l, a) in labels.data.iter_mut().zip(above) {

@@ -86,27 +86,51 @@ impl LabelImage {
         }
     }
 
+    /// Checks that `data` holds `width × height` labels.
+    pub fn validate(&self) -> Result<()> {
+        if self.data.len() != self.width * self.height {
+            return Err(Error::invalid(
+                "label image",
+                format!(
+                    "{} labels for {} × {} pixels",
+                    self.data.len(),
+                    self.width,
+                    self.height
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     #[inline]
     pub fn get(&self, x: usize, y: usize) -> Label {
         self.data[y * self.width + x]
     }
 
     /// 8-bit water mask: 255 water, 0 anything else.
-    pub fn water_mask(&self) -> image::GrayImage {
-        let px = self
-            .data
-            .iter()
-            .map(|&l| if l == Label::Water { 255 } else { 0 })
-            .collect();
-        image::GrayImage::from_raw(self.width as u32, self.height as u32, px)
-            .expect("buffer size is width × height")
+    pub fn water_mask(&self) -> Result<image::GrayImage> {
+        self.gray(|l| if l == Label::Water { 255 } else { 0 })
     }
 
     /// 8-bit image of label values ([`Label`] discriminants).
-    pub fn to_gray(&self) -> image::GrayImage {
-        let px = self.data.iter().map(|&l| l as u8).collect();
-        image::GrayImage::from_raw(self.width as u32, self.height as u32, px)
-            .expect("buffer size is width × height")
+    pub fn to_gray(&self) -> Result<image::GrayImage> {
+        self.gray(|l| l as u8)
+    }
+
+    fn gray(&self, f: impl Fn(Label) -> u8) -> Result<image::GrayImage> {
+        self.validate()?;
+        let (w, h) = (u32::try_from(self.width), u32::try_from(self.height));
+        let px = self.data.iter().map(|&l| f(l)).collect();
+        match (w, h) {
+            (Ok(w), Ok(h)) => image::GrayImage::from_raw(w, h, px),
+            _ => None,
+        }
+        .ok_or_else(|| {
+            Error::invalid(
+                "label image",
+                format!("{} × {} is too large for an image", self.width, self.height),
+            )
+        })
     }
 
     /// Reads back [`Self::to_gray`]; `name` is used in errors.
@@ -232,6 +256,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("pixel 1") && e.contains('9'), "{e}");
+        let bad = LabelImage {
+            width: 3,
+            height: 2,
+            data: vec![Label::Water; 5],
+        };
+        assert!(bad
+            .water_mask()
+            .unwrap_err()
+            .to_string()
+            .contains("5 labels for 3 × 2"));
+        let good = LabelImage::filled(3, 2, Label::Water);
+        assert_eq!(
+            LabelImage::from_gray(&good.to_gray().unwrap(), "g").unwrap(),
+            good
+        );
+        assert!(good
+            .water_mask()
+            .unwrap()
+            .as_raw()
+            .iter()
+            .all(|&v| v == 255));
     }
 
     #[test]

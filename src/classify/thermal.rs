@@ -106,7 +106,14 @@ fn band_percentiles(
 }
 
 fn check_sizes(img: &MonoImage, g: &GroundGeometry, what: &str) -> Result<()> {
-    if img.width != g.width || img.height != g.height || img.data.len() != img.width * img.height {
+    let n = img.width * img.height;
+    if img.width != g.width
+        || img.height != g.height
+        || img.data.len() != n
+        || g.incidence.len() != n
+        || g.range.len() != n
+        || g.lookahead.len() != n
+    {
         return Err(Error::invalid(
             what,
             format!(

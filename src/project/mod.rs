@@ -329,6 +329,7 @@ impl Projector {
         resolution: f64,
     ) -> Result<(LabelVotes, ProjectStats)> {
         let (w, h) = (self.camera.width, self.camera.height);
+        labels.validate()?;
         if labels.width != w || labels.height != h {
             return Err(Error::invalid(
                 "label image",
@@ -432,6 +433,7 @@ pub fn label_points(
     cloud_to_cam: &Pose,
     resolution: f64,
 ) -> Result<(Vec<Option<Label>>, LabelVotes)> {
+    labels.validate()?;
     if labels.width != camera.width || labels.height != camera.height {
         return Err(Error::invalid(
             "label image",

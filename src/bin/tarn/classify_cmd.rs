@@ -236,9 +236,9 @@ pub fn classify(a: ClassifyArgs) -> anyhow::Result<()> {
             st.above, st.water_to_sky, st.sky_to_water
         );
     }
-    save_gray_png(&a.out, &labels.water_mask())?;
+    save_gray_png(&a.out, &labels.water_mask()?)?;
     if let Some(p) = &a.labels_out {
-        save_gray_png(p, &labels.to_gray())?;
+        save_gray_png(p, &labels.to_gray()?)?;
     }
     let n = labels.data.len().max(1);
     let count = |l: Label| labels.data.iter().filter(|&&x| x == l).count();
