@@ -8,6 +8,7 @@
 //! only from modules to its left; `geom` and `optics` are the ground floor.
 
 pub mod build;
+pub mod classify;
 pub mod error;
 pub mod eval;
 pub mod geom;
@@ -15,6 +16,7 @@ pub mod grid;
 pub mod hazard;
 pub mod io;
 pub mod optics;
+pub mod project;
 pub mod sim;
 
 pub use error::{Error, Result};

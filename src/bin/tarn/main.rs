@@ -1,6 +1,7 @@
 //! The `tarn` command line: parses, calls the library, prints. One file per command.
 
 mod build_cmd;
+mod classify_cmd;
 mod cloud_cmd;
 mod log_cmd;
 mod optics_cmd;
@@ -72,6 +73,11 @@ enum Command {
     /// Score a map (MAPDIR/map.ply) against the ground truth of a simulated scene, by range
     /// from the vehicle's path.
     Eval(sim_cmd::EvalArgs),
+    /// Train the colour water classifier (one Gaussian mixture per class in RGB, components
+    /// by BIC) from an image and a label image of class ids; writes a JSON model.
+    TrainColor(classify_cmd::TrainArgs),
+    /// Classify an image's pixels as water or not (8-bit mask, 255 = water).
+    Classify(classify_cmd::ClassifyArgs),
     /// Decodes the TF, PointCloud2, Image and CameraInfo messages of a log and writes them
     /// again with tarn's encoder (other types are skipped and counted).
     Recode {
@@ -104,6 +110,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Simulate(a)) => sim_cmd::run_simulate(&a),
         Some(Command::Eval(a)) => sim_cmd::run_eval(&a),
         Some(Command::LidarModel(a)) => optics_cmd::lidar_model(a),
+        Some(Command::TrainColor(a)) => classify_cmd::train(a),
+        Some(Command::Classify(a)) => classify_cmd::classify(a),
         Some(Command::Info {
             input,
             json,

@@ -1,0 +1,139 @@
+//! A classifier compiled into a lookup table over quantised RGB.
+//!
+//! With `bits` bits per channel the table has 2^(3·bits) entries of one byte; each entry is
+//! the label of its bin's centre colour. 8 bits is exact (16 MiB), 6 bits is 256 KiB and fits
+//! a second-level cache. Classifying a pixel is three shifts and one load.
+
+use image::RgbImage;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::gmm::PixelClassifier;
+use super::{Label, LabelImage};
+use crate::error::{Error, Result};
+
+/// A lookup table of labels over quantised RGB. See the module documentation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ColorLut {
+    bits: u8,
+    table: Vec<Label>,
+}
+
+impl ColorLut {
+    /// Evaluates `c` at the centre of every bin. `bits` must be 1..=8.
+    pub fn compile(c: &impl PixelClassifier, bits: u8) -> Result<Self> {
+        if !(1..=8).contains(&bits) {
+            return Err(Error::invalid(
+                "lookup table bits per channel",
+                format!("{bits} (must be 1..=8)"),
+            ));
+        }
+        let n = 1usize << bits;
+        let shift = 8 - bits as u32;
+        // Centre of a bin of width 2^shift: q·2^shift + (2^shift − 1)/2, rounded down.
+        let centre = |q: usize| ((q << shift) + ((1usize << shift) - 1) / 2) as u8;
+        let mut table = vec![Label::Other; n * n * n];
+        table.par_chunks_mut(n).enumerate().for_each(|(rg, out)| {
+            let (r, g) = (rg / n, rg % n);
+            for (b, o) in out.iter_mut().enumerate() {
+                *o = c.classify_pixel([centre(r), centre(g), centre(b)]);
+            }
+        });
+        Ok(ColorLut { bits, table })
+    }
+
+    pub fn bits(&self) -> u8 {
+        self.bits
+    }
+
+    /// Bytes of table.
+    pub fn table_bytes(&self) -> usize {
+        self.table.len()
+    }
+
+    #[inline(always)]
+    fn index(&self, r: u8, g: u8, b: u8) -> usize {
+        let s = 8 - self.bits as u32;
+        let bits = self.bits as u32;
+        (((r as usize) >> s) << (2 * bits)) | (((g as usize) >> s) << bits) | ((b as usize) >> s)
+    }
+
+    /// Labels a packed RGB buffer into `out` on the calling thread (no parallelism).
+    pub fn classify_into(&self, rgb: &[u8], out: &mut [Label]) -> Result<()> {
+        if rgb.len() != 3 * out.len() {
+            return Err(Error::invalid(
+                "lookup table input",
+                format!("{} bytes of RGB for {} labels", rgb.len(), out.len()),
+            ));
+        }
+        for (o, p) in out.iter_mut().zip(rgb.chunks_exact(3)) {
+            *o = self.table[self.index(p[0], p[1], p[2])];
+        }
+        Ok(())
+    }
+
+    /// Labels an image (rows in parallel).
+    pub fn classify(&self, img: &RgbImage) -> LabelImage {
+        let w = (img.width() as usize).max(1);
+        let mut data = vec![Label::Other; (img.width() * img.height()) as usize];
+        data.par_chunks_mut(w)
+            .zip(img.as_raw().par_chunks(3 * w))
+            .for_each(|(o, row)| {
+                self.classify_into(row, o).expect("row lengths match");
+            });
+        LabelImage {
+            width: img.width() as usize,
+            height: img.height() as usize,
+            data,
+        }
+    }
+}
+
+impl PixelClassifier for ColorLut {
+    fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
+        self.table[self.index(rgb[0], rgb[1], rgb[2])]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::color::RuleClassifier;
+    use proptest::prelude::*;
+
+    #[test]
+    fn rejects_bad_bits() {
+        let r = RuleClassifier::default();
+        assert!(ColorLut::compile(&r, 0).is_err());
+        assert!(ColorLut::compile(&r, 9).is_err());
+        let l = ColorLut::compile(&r, 3).unwrap();
+        assert!(l.classify_into(&[0; 5], &mut [Label::Other; 2]).is_err());
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// An 8-bit table is the classifier itself; a coarser one agrees at bin centres.
+        #[test]
+        fn lut_agrees_with_source(p in any::<[u8; 3]>(), bits in 1u8..=7) {
+            static L8: std::sync::OnceLock<ColorLut> = std::sync::OnceLock::new();
+            let r = RuleClassifier::default();
+            let l8 = L8.get_or_init(|| ColorLut::compile(&r, 8).unwrap());
+            prop_assert_eq!(l8.classify_pixel(p), r.classify_pixel(p));
+            let l = ColorLut::compile(&r, bits).unwrap();
+            let s = 8 - bits as u32;
+            let c = |v: u8| ((((v as u32) >> s) << s) + ((1u32 << s) - 1) / 2) as u8;
+            prop_assert_eq!(l.classify_pixel(p), r.classify_pixel([c(p[0]), c(p[1]), c(p[2])]));
+        }
+
+        #[test]
+        fn image_equals_pixels(px in proptest::collection::vec(any::<u8>(), 3 * 15)) {
+            let r = RuleClassifier::default();
+            let l = ColorLut::compile(&r, 5).unwrap();
+            let img = RgbImage::from_raw(5, 3, px.clone()).unwrap();
+            let out = l.classify(&img);
+            for (i, p) in px.chunks(3).enumerate() {
+                prop_assert_eq!(out.data[i], l.classify_pixel([p[0], p[1], p[2]]));
+            }
+        }
+    }
+}
