@@ -8,6 +8,7 @@
 //! only from modules to its left; `geom` and `optics` are the ground floor.
 
 pub mod build;
+pub mod cues;
 pub mod error;
 pub mod geom;
 pub mod grid;
