@@ -83,10 +83,10 @@ impl FrameCues {
                 _ => None,
             };
             let check = match (&gray, &frame.image) {
-                (Some(g), Some(img)) => img.camera.as_ref().map(|camera| MirrorCheck {
-                    camera,
-                    image: g,
-                }),
+                (Some(g), Some(img)) => img
+                    .camera
+                    .as_ref()
+                    .map(|camera| MirrorCheck { camera, image: g }),
                 _ => None,
             };
             let out = stereo_reflections(cloud, res, z_ref, check, scfg)?;

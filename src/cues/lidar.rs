@@ -482,11 +482,16 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
         let nv = v.norm();
         (nv > 0.0).then(|| v / nv)
     };
-    let from_angles = |az: f64, el: f64| {
-        Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
-    };
+    let from_angles =
+        |az: f64, el: f64| Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
     let mut local: Vec<Option<Vector3<f64>>> = (0..cloud.len())
-        .map(|i| if cloud.is_valid(i) { from_point(i) } else { None })
+        .map(|i| {
+            if cloud.is_valid(i) {
+                from_point(i)
+            } else {
+                None
+            }
+        })
         .collect();
     match model {
         BeamModel::Directions(d) => {
@@ -527,7 +532,8 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
                 }
                 let mut fill: Vec<(usize, Vector3<f64>)> = Vec::new();
                 // Consecutive valid pairs (and the wrap-around pair when cyclic).
-                let mut pairs: Vec<(usize, usize)> = valid.windows(2).map(|w| (w[0], w[1])).collect();
+                let mut pairs: Vec<(usize, usize)> =
+                    valid.windows(2).map(|w| (w[0], w[1])).collect();
                 if cyclic {
                     pairs.push((valid[valid.len() - 1], valid[0] + cols));
                 }

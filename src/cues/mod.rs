@@ -65,11 +65,7 @@ impl EvidenceMap {
         if !(x.is_finite() && y.is_finite()) {
             return None;
         }
-        Some(
-            self.cells
-                .entry(key_of(self.resolution, x, y))
-                .or_default(),
-        )
+        Some(self.cells.entry(key_of(self.resolution, x, y)).or_default())
     }
 
     /// A level (map-frame metres) in the grid's fixed-point millimetres.

@@ -106,8 +106,7 @@ pub fn normalised_reflectivity(
     range: f64,
     cfg: &ReflectivityConfig,
 ) -> Option<f64> {
-    if !(range >= cfg.min_range_m && range <= cfg.max_range_m && cos_inc >= cfg.min_cos_incidence)
-    {
+    if !(range >= cfg.min_range_m && range <= cfg.max_range_m && cos_inc >= cfg.min_cos_incidence) {
         return None;
     }
     let (v, calibrated) = match cfg.channel {
@@ -140,7 +139,9 @@ pub(crate) fn apply(
     let vals: Vec<(usize, f64)> = samples
         .iter()
         .enumerate()
-        .filter_map(|(k, s)| normalised_reflectivity(cloud, s.slot, s.cos_inc, s.range, cfg).map(|v| (k, v)))
+        .filter_map(|(k, s)| {
+            normalised_reflectivity(cloud, s.slot, s.cos_inc, s.range, cfg).map(|v| (k, v))
+        })
         .collect();
     if vals.len() < cfg.min_samples.max(1) {
         return None;

@@ -87,7 +87,8 @@ pub struct StereoCueConfig {
     /// Range noise of the stereo points (sets the below-ground gate).
     pub noise: RangeNoise,
     /// A point is below the local ground when more than `max(gate_min_m, gate_sigma·σ(r))`
-    /// below it.
+    /// below it (σ(r) the whole range error: generous, so that the upper part of a
+    /// reflection is not taken for ground and does not drag the level down).
     pub gate_sigma: f64,
     pub gate_min_m: f64,
     /// Points more than this above the local ground are objects, not ground (m).
@@ -96,7 +97,9 @@ pub struct StereoCueConfig {
     pub gap_min_m: f64,
     /// Fewest points in a run.
     pub min_run: usize,
-    /// Fraction of a run's steps whose range must decrease (wrap backward).
+    /// Fraction of a run's steps whose range must decrease (wrap backward). A vertical
+    /// object's reflection wraps over its whole run; a round crown's over about half, so
+    /// crowns alone are often missed at this setting.
     pub wrap_fraction: f64,
     /// Pairing radius of mirrored points and their sources (m).
     pub pair_radius_m: f64,
@@ -225,20 +228,24 @@ pub fn stereo_reflections(
         let mut run: Vec<usize> = Vec::new();
         let mut run_gap = false;
         let mut run_shore = 0.0;
-        let close = |run: &mut Vec<usize>, gap: bool, shore: f64, runs: &mut Vec<Run>, rej: &mut usize| {
-            if run.is_empty() {
-                return;
-            }
-            let slots = std::mem::take(run);
-            let rng = |s: usize| (pts[s] - o).norm();
-            let steps = slots.len() - 1;
-            let back = slots.windows(2).filter(|w| rng(w[1]) < rng(w[0])).count();
-            if slots.len() >= cfg.min_run && gap && back as f64 >= cfg.wrap_fraction * steps as f64 {
-                runs.push(Run { slots, shore });
-            } else {
-                *rej += 1;
-            }
-        };
+        let close =
+            |run: &mut Vec<usize>, gap: bool, shore: f64, runs: &mut Vec<Run>, rej: &mut usize| {
+                if run.is_empty() {
+                    return;
+                }
+                let slots = std::mem::take(run);
+                let rng = |s: usize| (pts[s] - o).norm();
+                let steps = slots.len() - 1;
+                let back = slots.windows(2).filter(|w| rng(w[1]) < rng(w[0])).count();
+                if slots.len() >= cfg.min_run
+                    && gap
+                    && back as f64 >= cfg.wrap_fraction * steps as f64
+                {
+                    runs.push(Run { slots, shore });
+                } else {
+                    *rej += 1;
+                }
+            };
         for r in (0..rows).rev() {
             let s = r * cols + c;
             if !cloud.is_valid(s) {
@@ -264,14 +271,26 @@ pub fn stereo_reflections(
                 run.push(s);
                 continue;
             }
-            close(&mut run, run_gap, run_shore, &mut runs, &mut rejected_geometry);
+            close(
+                &mut run,
+                run_gap,
+                run_shore,
+                &mut runs,
+                &mut rejected_geometry,
+            );
             if p.z - zg <= cfg.above_gate_m {
                 z_g = Some(p.z);
                 h_g = h;
                 invalid_since_ground = 0;
             }
         }
-        close(&mut run, run_gap, run_shore, &mut runs, &mut rejected_geometry);
+        close(
+            &mut run,
+            run_gap,
+            run_shore,
+            &mut runs,
+            &mut rejected_geometry,
+        );
     }
 
     // 2. Water level by symmetry (one-parameter ICP against the non-reflected points).
@@ -288,7 +307,9 @@ pub fn stereo_reflections(
         shores.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
         let mut level = shores[m];
         let sources: Vec<[f64; 3]> = (0..cloud.len())
-            .filter(|&s| cloud.is_valid(s) && !in_run[s] && pts[s].z > level - cfg.level_tolerance_m)
+            .filter(|&s| {
+                cloud.is_valid(s) && !in_run[s] && pts[s].z > level - cfg.level_tolerance_m
+            })
             .map(|s| [pts[s].x, pts[s].y, pts[s].z])
             .collect();
         if sources.len() >= cfg.min_pairs.max(1) {
@@ -349,11 +370,29 @@ pub fn stereo_reflections(
             let (mut a, mut b) = (Vec::new(), Vec::new());
             for (&s, m) in run.slots.iter().zip(&mirrored) {
                 let (row, col) = (s / cols, s % cols);
-                let here = chk.image.sample(kk * col as f64 + half, kk * row as f64 + half);
-                let there = chk
-                    .camera
-                    .project(&(to_frame * m))
-                    .and_then(|[u, v]| chk.image.sample(u, v));
+                let here = chk
+                    .image
+                    .sample(kk * col as f64 + half, kk * row as f64 + half);
+                // Use the mirrored point only where the camera sees it (the stereo point at
+                // its pixel is the mirrored point itself, not something in front of it).
+                let there = chk.camera.project(&(to_frame * m)).and_then(|[u, v]| {
+                    let (cr, cc) = (((v - half) / kk).round(), ((u - half) / kk).round());
+                    if !(cr >= 0.0 && cc >= 0.0 && (cr as usize) < rows && (cc as usize) < cols) {
+                        return None;
+                    }
+                    let t = cr as usize * cols + cc as usize;
+                    let seen = cloud.is_valid(t) && !in_run[t] && {
+                        let d = (pts[t] - m).norm();
+                        d <= cfg
+                            .pair_radius_m
+                            .max(cfg.gate_sigma * cfg.noise.sigma((m - o).norm()))
+                    };
+                    if seen {
+                        chk.image.sample(u, v)
+                    } else {
+                        None
+                    }
+                });
                 if let (Some(x), Some(y)) = (here, there) {
                     a.push(x);
                     b.push(y);

@@ -1,7 +1,7 @@
 use super::*;
 use crate::cues::testutil::TestRng;
 use crate::grid::{key_of, GridConfig, RollingGrid};
-use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig, Sensitivity};
+use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig};
 
 const RES: f64 = 0.1;
 
@@ -66,7 +66,12 @@ impl Scene<'_> {
 
 /// A single-row vertical scanner in the x–z plane, `n` beams from 60° to 1° below the
 /// horizon; range noise `sigma` along the beam.
-fn vertical_scan(scene: &Scene, n: usize, sigma: f64, seed: u64) -> (PointCloud, Vec<[f32; 3]>, Vec<Shot>) {
+fn vertical_scan(
+    scene: &Scene,
+    n: usize,
+    sigma: f64,
+    seed: u64,
+) -> (PointCloud, Vec<[f32; 3]>, Vec<Shot>) {
     let o = Point3::new(0.0, 0.0, scene.model.config().height_m);
     let mut rng = TestRng(seed);
     let (mut xyz, mut dirs, mut shots) = (Vec::new(), Vec::new(), Vec::new());
@@ -95,7 +100,8 @@ fn shallow_pond_scene(model: &LidarWaterModel) -> (f64, f64) {
     // The pond starts before the diagnostic interval and ends inside it, so both bottom
     // returns and no-returns occur, with dry returning ground beyond.
     let (start, end) = model.diagnostic_interval(0.0).unwrap().unwrap();
-    (0.5 * start, 0.5 * (start + end))
+    let bottom_seen = model.max_lookahead_for_depth(0.2).unwrap().unwrap();
+    (0.5 * bottom_seen, 0.5 * (start + end))
 }
 
 #[test]
@@ -135,14 +141,25 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
     assert_eq!(out.stats.noret as usize, expected.len());
     let water_missing = shots
         .iter()
-        .filter(|s| matches!(s, Shot::Missing { over_water: true, .. }))
+        .filter(|s| {
+            matches!(
+                s,
+                Shot::Missing {
+                    over_water: true,
+                    ..
+                }
+            )
+        })
         .count();
     assert!(water_missing >= expected.len());
     for (k, e) in out.evidence.iter() {
         if e.noret > 0 {
             let (x, _) = crate::grid::centre_of(RES, *k);
             assert!(x >= start - RES && x <= end + RES, "noret at x = {x}");
-            assert!(x >= a - RES && x <= b + RES, "noret outside the pond at x = {x}");
+            assert!(
+                x >= a - RES && x <= b + RES,
+                "noret outside the pond at x = {x}"
+            );
         }
     }
     // Ground beyond the pond inside the interval returned: counted as diagnostic returns.
@@ -150,7 +167,10 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
     for (k, e) in out.evidence.iter() {
         if e.diag_ret > 0 {
             let (x, _) = crate::grid::centre_of(RES, *k);
-            assert!(x > b - RES && x >= start - RES && x <= end + RES, "diag_ret at {x}");
+            assert!(
+                x > b - RES && x >= start - RES && x <= end + RES,
+                "diag_ret at {x}"
+            );
         }
     }
 }
@@ -182,8 +202,16 @@ fn bottom_returns_give_depth_within_five_centimetres() {
             .iter()
             .filter(|s| matches!(s, Shot::Bottom { .. }))
             .count();
-        assert!(n_bottom > 20, "{n_bottom} bottom returns");
-        assert!(out.stats.bottom as usize >= n_bottom * 9 / 10, "{:?}", out.stats);
+        assert!(
+            n_bottom > 20,
+            "{n_bottom} bottom returns, pond {a}..{b}, bottom seen to {:?}",
+            base.optics().max_lookahead_for_depth(depth)
+        );
+        assert!(
+            out.stats.bottom as usize >= n_bottom * 9 / 10,
+            "{:?}",
+            out.stats
+        );
         let (mut se, mut n) = (0.0, 0usize);
         for (k, e) in out.evidence.iter() {
             if e.depth_n > 0 {
@@ -248,7 +276,11 @@ fn deep_below_level_return_is_specular_and_mirrored_back() {
 
 /// A spinning lidar: `rings` elevations, `cols` azimuths, 1.8 m high, with the beams of
 /// missing returns unknown to the cue (inferred from the scan).
-fn spinning_scan(scene: &Scene, rings: usize, cols: usize) -> (PointCloud, Vec<Shot>, Vec<Vector3<f64>>) {
+fn spinning_scan(
+    scene: &Scene,
+    rings: usize,
+    cols: usize,
+) -> (PointCloud, Vec<Shot>, Vec<Vector3<f64>>) {
     let o = Point3::new(0.0, 0.0, scene.model.config().height_m);
     let (mut xyz, mut shots, mut dirs) = (Vec::new(), Vec::new(), Vec::new());
     for r in 0..rings {
@@ -317,7 +349,10 @@ fn spinning_lidar_with_inferred_beams_finds_the_pond_and_only_the_pond() {
     for (k, e) in out.evidence.iter() {
         if e.noret > 0 {
             let (x, y) = crate::grid::centre_of(RES, *k);
-            assert!((x - centre).hypot(y) <= radius + 2.0 * RES, "noret at ({x}, {y})");
+            assert!(
+                (x - centre).hypot(y) <= radius + 2.0 * RES,
+                "noret at ({x}, {y})"
+            );
         }
     }
     // Fused into a grid, the pond's cells read as water and the dry cells do not.
@@ -330,7 +365,8 @@ fn spinning_lidar_with_inferred_beams_finds_the_pond_and_only_the_pond() {
         0.0,
     )
     .unwrap();
-    g.ingest(&out.corrected, &crate::grid::RangeNoise::LIDAR).unwrap();
+    g.ingest(&out.corrected, &crate::grid::RangeNoise::LIDAR)
+        .unwrap();
     assert_eq!(g.apply_evidence(&out.evidence.clone().into_batch()), 0);
     let f = crate::grid::Fusion::default();
     let (mut dry_water, mut dry) = (0, 0);
@@ -366,7 +402,11 @@ fn results_do_not_depend_on_thread_count() {
     };
     let (mut cloud, _, _) = spinning_scan(&scene, 16, 512);
     let mut rng = TestRng(3);
-    cloud.intensity = Some((0..cloud.len()).map(|_| (10.0 + rng.uniform()) as f32).collect());
+    cloud.intensity = Some(
+        (0..cloud.len())
+            .map(|_| (10.0 + rng.uniform()) as f32)
+            .collect(),
+    );
     let run = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -407,7 +447,11 @@ fn bad_beam_models_are_errors_not_panics() {
         None,
     )
     .unwrap();
-    let e = spin.run(&PointCloud::organized(2, 2, vec![[f32::NAN; 3]; 4]).unwrap(), RES, 0.0);
+    let e = spin.run(
+        &PointCloud::organized(2, 2, vec![[f32::NAN; 3]; 4]).unwrap(),
+        RES,
+        0.0,
+    );
     assert!(e.unwrap_err().to_string().contains("5 ring elevations"));
 }
 
