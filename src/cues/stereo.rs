@@ -86,9 +86,9 @@ pub struct MirrorCheck<'a> {
 pub struct StereoCueConfig {
     /// Range noise of the stereo points (sets the below-ground gate).
     pub noise: RangeNoise,
-    /// A point is below the local ground when more than `max(gate_min_m, gate_sigma·σ(r))`
-    /// below it (σ(r) the whole range error: generous, so that the upper part of a
-    /// reflection is not taken for ground and does not drag the level down).
+    /// A point starts a run when more than `max(gate_min_m, gate_sigma·σ_v)` below the
+    /// local ground, `σ_v = σ(r)·|sin δ|` the vertical part of the range error along a ray
+    /// of depression `δ`.
     pub gate_sigma: f64,
     pub gate_min_m: f64,
     /// Points more than this above the local ground are objects, not ground (m).
@@ -97,9 +97,8 @@ pub struct StereoCueConfig {
     pub gap_min_m: f64,
     /// Fewest points in a run.
     pub min_run: usize,
-    /// Fraction of a run's steps whose range must decrease (wrap backward). A vertical
-    /// object's reflection wraps over its whole run; a round crown's over about half, so
-    /// crowns alone are often missed at this setting.
+    /// For a run with no terrain after it in its column: the fraction of its steps whose
+    /// range must decrease (wrap backward).
     pub wrap_fraction: f64,
     /// Pairing radius of mirrored points and their sources (m).
     pub pair_radius_m: f64,
@@ -228,24 +227,39 @@ pub fn stereo_reflections(
         let mut run: Vec<usize> = Vec::new();
         let mut run_gap = false;
         let mut run_shore = 0.0;
-        let close =
-            |run: &mut Vec<usize>, gap: bool, shore: f64, runs: &mut Vec<Run>, rej: &mut usize| {
-                if run.is_empty() {
-                    return;
+        let mut run_min_h = f64::INFINITY;
+        // A run is a reflection when it follows a gap and the terrain seen after it, up
+        // the column, is *nearer* than the run (range wraps backward: the virtual image
+        // lies beyond the far shore). With nothing after it, its own ranges must wrap.
+        let close = |run: &mut Vec<usize>,
+                     gap: bool,
+                     shore: f64,
+                     next_h: Option<f64>,
+                     runs: &mut Vec<Run>,
+                     rej: &mut usize| {
+            if run.is_empty() {
+                return;
+            }
+            let slots = std::mem::take(run);
+            let rng = |s: usize| (pts[s] - o).norm();
+            let hor = |s: usize| (pts[s].x - o.x).hypot(pts[s].y - o.y);
+            let wraps = match next_h {
+                Some(hn) => {
+                    let min_h = slots.iter().map(|&s| hor(s)).fold(f64::INFINITY, f64::min);
+                    hn < min_h - cfg.gap_min_m
                 }
-                let slots = std::mem::take(run);
-                let rng = |s: usize| (pts[s] - o).norm();
-                let steps = slots.len() - 1;
-                let back = slots.windows(2).filter(|w| rng(w[1]) < rng(w[0])).count();
-                if slots.len() >= cfg.min_run
-                    && gap
-                    && back as f64 >= cfg.wrap_fraction * steps as f64
-                {
-                    runs.push(Run { slots, shore });
-                } else {
-                    *rej += 1;
+                None => {
+                    let steps = slots.len() - 1;
+                    let back = slots.windows(2).filter(|w| rng(w[1]) < rng(w[0])).count();
+                    steps > 0 && back as f64 >= cfg.wrap_fraction * steps as f64
                 }
             };
+            if slots.len() >= cfg.min_run && gap && wraps {
+                runs.push(Run { slots, shore });
+            } else {
+                *rej += 1;
+            }
+        };
         for r in (0..rows).rev() {
             let s = r * cols + c;
             if !cloud.is_valid(s) {
@@ -261,23 +275,37 @@ pub fn stereo_reflections(
                 h_g = h;
                 continue;
             };
+            // Stereo error lies along the ray: its vertical part is σ(r)·|sin(depression)|.
             let range = (p - o).norm();
-            let gate = cfg.gate_min_m.max(cfg.gate_sigma * cfg.noise.sigma(range));
-            if p.z < zg - gate && p.z < o.z {
-                if run.is_empty() {
-                    run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
-                    run_shore = zg;
+            let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
+            let gate = cfg.gate_min_m.max(cfg.gate_sigma * vertical);
+            let below = p.z < zg - gate && p.z < o.z;
+            if let Some(&last) = run.last() {
+                // Inside a run, points below the level whose range keeps wrapping backward
+                // are the upper part of the same virtual image.
+                // Terrain much nearer than the run (the far shore) ends it.
+                let wrapping = range < (pts[last] - o).norm();
+                let nearer = h < run_min_h - cfg.gap_min_m;
+                if !nearer && (below || (p.z < zg && wrapping)) {
+                    run_min_h = run_min_h.min(h);
+                    run.push(s);
+                    continue;
                 }
+                close(
+                    &mut run,
+                    run_gap,
+                    run_shore,
+                    Some(h),
+                    &mut runs,
+                    &mut rejected_geometry,
+                );
+            } else if below {
+                run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
+                run_shore = zg;
+                run_min_h = h;
                 run.push(s);
                 continue;
             }
-            close(
-                &mut run,
-                run_gap,
-                run_shore,
-                &mut runs,
-                &mut rejected_geometry,
-            );
             if p.z - zg <= cfg.above_gate_m {
                 z_g = Some(p.z);
                 h_g = h;
@@ -288,6 +316,7 @@ pub fn stereo_reflections(
             &mut run,
             run_gap,
             run_shore,
+            None,
             &mut runs,
             &mut rejected_geometry,
         );
