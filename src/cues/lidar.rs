@@ -71,6 +71,11 @@ pub struct LidarCueConfig {
     pub above_gate_m: f64,
     /// Slack on the optics' greatest visible depth when telling bottom from specular (m).
     pub depth_tolerance_m: f64,
+    /// A below-level return too deep for a bottom return is taken as specular only when
+    /// at least this far below the level (m): the mirror image of an object, not rough
+    /// ground or vegetation dipping under the last ground return. Shallower ones are
+    /// counted as unexplained and give no evidence.
+    pub specular_min_depth_m: f64,
 }
 
 impl Default for LidarCueConfig {
@@ -80,6 +85,7 @@ impl Default for LidarCueConfig {
             below_gate_m: 0.10,
             above_gate_m: 0.30,
             depth_tolerance_m: 0.05,
+            specular_min_depth_m: 0.5,
         }
     }
 }
@@ -91,6 +97,7 @@ impl LidarCueConfig {
             ("below_gate_m", self.below_gate_m),
             ("above_gate_m", self.above_gate_m),
             ("depth_tolerance_m", self.depth_tolerance_m),
+            ("specular_min_depth_m", self.specular_min_depth_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(
@@ -118,6 +125,8 @@ pub struct LidarCueStats {
     pub diag_ret: u64,
     pub bottom: u64,
     pub specular: u64,
+    /// Below-level returns neither bottom nor deep enough to be specular.
+    pub unexplained: u64,
     pub dark: u64,
     pub lit: u64,
 }
@@ -131,9 +140,9 @@ pub struct LidarCues {
     /// be fused into the elevation map instead of the raw cloud.
     pub corrected: PointCloud,
     pub stats: LidarCueStats,
-    /// The scan's reflectivity reference (median normalised reflectivity of its ground
-    /// returns) when the reflectivity cue ran.
-    pub reflectivity_reference: Option<f64>,
+    /// The scan's dark threshold (the `dark_quantile` of its ground returns' normalised
+    /// reflectivity) when the reflectivity cue ran.
+    pub reflectivity_threshold: Option<f64>,
 }
 
 /// A lidar sensor's cue model: the optics for its height, wavelength and water clarity,
@@ -287,6 +296,7 @@ impl LidarCueModel {
         for e in events.iter().flatten() {
             match *e {
                 Event::MissingCast => stats.missing_cast += 1,
+                Event::Unexplained => stats.unexplained += 1,
                 Event::NoRet { x, y, level } => {
                     stats.missing_cast += 1;
                     stats.noret += 1;
@@ -346,14 +356,14 @@ impl LidarCueModel {
             if let Some(r) = super::reflectivity::apply(cloud, rc, &samples, &mut ev) {
                 stats.dark = r.dark;
                 stats.lit = r.lit;
-                reference = Some(r.reference);
+                reference = Some(r.threshold);
             }
         }
         Ok(LidarCues {
             evidence: ev,
             corrected,
             stats,
-            reflectivity_reference: reference,
+            reflectivity_threshold: reference,
         })
     }
 
@@ -393,6 +403,8 @@ impl LidarCueModel {
                             level,
                             depth,
                         });
+                    } else if level - p.z < cfg.specular_min_depth_m {
+                        out.push(Event::Unexplained);
                     } else {
                         out.push(Event::Specular {
                             slot: s,
@@ -441,6 +453,7 @@ impl LidarCueModel {
 #[derive(Debug, Clone, Copy)]
 enum Event {
     MissingCast,
+    Unexplained,
     NoRet {
         x: f64,
         y: f64,

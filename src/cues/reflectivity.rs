@@ -6,8 +6,10 @@
 //! `intensity · r² / cos θ` for a raw intensity channel, or `reflectivity / cos θ` for a
 //! sensor-calibrated reflectivity channel (already range-compensated, as the Ouster's),
 //! with `cos θ` the incidence on level ground. Each scan is its own reference: a ground
-//! return is *dark* when its normalised value is below `dark_ratio` times the median of the
-//! scan's ground returns in the range band, else *lit*. Both counts go to the cell
+//! return is *dark* when its normalised value is below the `dark_quantile` quantile of the
+//! scan's ground returns in the range band, else *lit*. Most ground in a scan is dry, so
+//! about `dark_quantile` of dry ground reads dark by construction: that is the fusion's
+//! `p_dark_dry`, not a tuned number. Both counts go to the cell
 //! ([`crate::grid::Evidence::dark`], `lit`); the fusion rule turns them into weak evidence.
 
 use serde::{Deserialize, Serialize};
@@ -33,8 +35,9 @@ pub enum Channel {
 #[serde(deny_unknown_fields, default)]
 pub struct ReflectivityConfig {
     pub channel: Channel,
-    /// A return is dark below this fraction of the scan's median (0..1).
-    pub dark_ratio: f64,
+    /// A return is dark below this quantile of the scan's ground returns (0..1); keep it
+    /// equal to the fusion's `p_dark_dry`.
+    pub dark_quantile: f64,
     /// Range band of the returns used (m): close returns saturate, far ones are noisy.
     pub min_range_m: f64,
     pub max_range_m: f64,
@@ -48,7 +51,7 @@ impl Default for ReflectivityConfig {
     fn default() -> Self {
         ReflectivityConfig {
             channel: Channel::Auto,
-            dark_ratio: 0.75,
+            dark_quantile: 0.15,
             min_range_m: 2.0,
             max_range_m: 40.0,
             min_cos_incidence: 0.05,
@@ -59,8 +62,8 @@ impl Default for ReflectivityConfig {
 
 impl ReflectivityConfig {
     pub fn validate(&self) -> Result<()> {
-        let ok = self.dark_ratio > 0.0
-            && self.dark_ratio < 1.0
+        let ok = self.dark_quantile > 0.0
+            && self.dark_quantile < 1.0
             && self.min_range_m.is_finite()
             && self.min_range_m >= 0.0
             && self.max_range_m > self.min_range_m
@@ -72,9 +75,9 @@ impl ReflectivityConfig {
             Err(Error::invalid(
                 "reflectivity cue",
                 format!(
-                    "dark_ratio {} must be in (0, 1), ranges {}..{} m increasing and ≥ 0, \
+                    "dark_quantile {} must be in (0, 1), ranges {}..{} m increasing and ≥ 0, \
                      min_cos_incidence {} in (0, 1]",
-                    self.dark_ratio, self.min_range_m, self.max_range_m, self.min_cos_incidence
+                    self.dark_quantile, self.min_range_m, self.max_range_m, self.min_cos_incidence
                 ),
             ))
         }
@@ -94,7 +97,8 @@ pub(crate) struct ReflectivitySample {
 pub(crate) struct Applied {
     pub dark: u64,
     pub lit: u64,
-    pub reference: f64,
+    /// The scan's dark threshold (normalised units).
+    pub threshold: f64,
 }
 
 /// Normalised reflectivity of slot `slot` (see the module documentation); `None` without a
@@ -147,10 +151,9 @@ pub(crate) fn apply(
         return None;
     }
     let mut sorted: Vec<f64> = vals.iter().map(|v| v.1).collect();
-    let m = sorted.len() / 2;
-    sorted.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
-    let reference = sorted[m];
-    let threshold = cfg.dark_ratio * reference;
+    let q = ((sorted.len() as f64 * cfg.dark_quantile) as usize).min(sorted.len() - 1);
+    sorted.select_nth_unstable_by(q, |a, b| a.total_cmp(b));
+    let threshold = sorted[q];
     let (mut dark, mut lit) = (0, 0);
     for (k, v) in vals {
         let s = &samples[k];
@@ -167,6 +170,6 @@ pub(crate) fn apply(
     Some(Applied {
         dark,
         lit,
-        reference,
+        threshold,
     })
 }

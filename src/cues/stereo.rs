@@ -299,7 +299,9 @@ pub fn stereo_reflections(
                     &mut runs,
                     &mut rejected_geometry,
                 );
-            } else if below {
+            }
+            if below {
+                // A new run (also right after one that nearer terrain ended).
                 run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
                 run_shore = zg;
                 run_min_h = h;

@@ -24,8 +24,12 @@
 //! | lidar return inside the diagnostic interval | `p_water_return` | `1 − p_dropout` | same |
 //! | reflection ray (stereo or lidar specular) crossing the level here | `p_reflect_detect` | `p_reflect_false` | run geometry: below ground, gap, range wrapping |
 //! | refraction-consistent bottom return | `p_bottom_detect` | `p_bottom_false` | optics: depth within what the sensor can see |
-//! | dark return (normalised reflectivity below the scan's threshold) | `p_dark_wet` | `p_dark_dry` | per-scan reference |
-//! | return tested and not dark | `1 − p_dark_wet` | `1 − p_dark_dry` | same |
+//! | cell mostly dark (normalised reflectivity below the scan's threshold) | `p_dark_wet` | `p_dark_dry` | per-scan quantile |
+//! | cell mostly not dark | `1 − p_dark_wet` | `1 − p_dark_dry` | same |
+//!
+//! The reflectivity cue counts once per cell (its returns see one surface and are not
+//! independent), so on its own it can never call a cell water: it tips cells that other
+//! cues leave uncertain.
 
 use serde::{Deserialize, Serialize};
 
@@ -133,8 +137,12 @@ impl Evidence {
                 + self.diag_ret as f64 * ln(f.p_water_return, 1.0 - f.p_dropout)),
             reflect: cap(self.reflect as f64 * ln(f.p_reflect_detect, f.p_reflect_false)),
             bottom: cap(self.depth_n as f64 * ln(f.p_bottom_detect, f.p_bottom_false)),
-            reflectivity: cap(self.dark as f64 * ln(f.p_dark_wet, f.p_dark_dry)
-                + self.lit as f64 * ln(1.0 - f.p_dark_wet, 1.0 - f.p_dark_dry)),
+            // The returns of one cell see one surface: one observation, by majority.
+            reflectivity: match (self.dark, self.lit) {
+                (0, 0) => 0.0,
+                (d, l) if d > l => ln(f.p_dark_wet, f.p_dark_dry),
+                _ => ln(1.0 - f.p_dark_wet, 1.0 - f.p_dark_dry),
+            },
         }
     }
 
@@ -169,8 +177,8 @@ pub struct CueLogOdds {
 ///   floating leaf) 10 % of the time;
 /// * reflections: a confirmed run (below ground, behind a gap, range wrapping backward) is
 ///   found on 80 % of reflecting water rays and on 2 % of dry rays (stereo mismatches);
-/// * bottom returns: 80 % against 2 % (a return below the shore level, at a depth the optics
-///   say is visible, on dry ground needs a hole or a mismatch);
+/// * bottom returns: 80 % against 10 % (a return below the shore level, at a depth the
+///   optics say is visible, on dry ground needs a hole, a ditch or rough ground);
 /// * reflectivity: the dark threshold is set so that about 15 % of dry ground is dark, and
 ///   wet ground is dark 60 % of the time: a weak cue by design;
 /// * `prior = 0.05`, `cue_cap = ln 100`.
@@ -198,7 +206,7 @@ impl Default for Fusion {
             p_reflect_detect: 0.8,
             p_reflect_false: 0.02,
             p_bottom_detect: 0.8,
-            p_bottom_false: 0.02,
+            p_bottom_false: 0.10,
             p_dark_wet: 0.6,
             p_dark_dry: 0.15,
             cue_cap: 100f64.ln(),
