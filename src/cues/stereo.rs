@@ -16,8 +16,9 @@
 //!   symmetry: each mirrored point is paired with its nearest real point (kiddo k-d tree),
 //!   and `L` moves by half the median height difference, a few times (a one-parameter ICP).
 //!   A vertical planar source (a wall) constrains `L` only at its edges; trees and roofs
-//!   constrain it everywhere. The refined level replaces the shore level of runs within
-//!   `level_tolerance_m` of it (the shore may be a bank above the water, or poorly seen);
+//!   constrain it everywhere. The refined level replaces the shore level of a run when the
+//!   two differ by more than the shore point's vertical noise (`gate_sigma·σ_v`: the shore
+//!   is a bank above the water, or poorly seen) and by at most `level_tolerance_m`;
 //! * with the intensity image and camera model ([`MirrorCheck`]), the intensities of the
 //!   reflected pixels must correlate (normalised cross-correlation ≥ `min_ncc`) with those
 //!   of the pixels where the mirrored points project; a run whose pixels have no texture
@@ -176,6 +177,8 @@ pub struct StereoCues {
 struct Run {
     slots: Vec<usize>,
     shore: f64,
+    /// Vertical noise (σ) of the shore point the level came from.
+    shore_sigma: f64,
 }
 
 /// Finds reflections in an organized stereo cloud (rows top to bottom as in the image).
@@ -227,13 +230,15 @@ pub fn stereo_reflections(
         let mut run: Vec<usize> = Vec::new();
         let mut run_gap = false;
         let mut run_shore = 0.0;
+        let mut run_shore_sigma = 0.0;
+        let mut sigma_g = 0.0;
         let mut run_min_h = f64::INFINITY;
         // A run is a reflection when it follows a gap and the terrain seen after it, up
         // the column, is *nearer* than the run (range wraps backward: the virtual image
         // lies beyond the far shore). With nothing after it, its own ranges must wrap.
         let close = |run: &mut Vec<usize>,
                      gap: bool,
-                     shore: f64,
+                     shore: (f64, f64),
                      next_h: Option<f64>,
                      runs: &mut Vec<Run>,
                      rej: &mut usize| {
@@ -255,7 +260,11 @@ pub fn stereo_reflections(
                 }
             };
             if slots.len() >= cfg.min_run && gap && wraps {
-                runs.push(Run { slots, shore });
+                runs.push(Run {
+                    slots,
+                    shore: shore.0,
+                    shore_sigma: shore.1,
+                });
             } else {
                 *rej += 1;
             }
@@ -294,7 +303,7 @@ pub fn stereo_reflections(
                 close(
                     &mut run,
                     run_gap,
-                    run_shore,
+                    (run_shore, run_shore_sigma),
                     Some(h),
                     &mut runs,
                     &mut rejected_geometry,
@@ -304,6 +313,7 @@ pub fn stereo_reflections(
                 // A new run (also right after one that nearer terrain ended).
                 run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
                 run_shore = zg;
+                run_shore_sigma = sigma_g;
                 run_min_h = h;
                 run.push(s);
                 continue;
@@ -311,13 +321,14 @@ pub fn stereo_reflections(
             if p.z - zg <= cfg.above_gate_m {
                 z_g = Some(p.z);
                 h_g = h;
+                sigma_g = vertical;
                 invalid_since_ground = 0;
             }
         }
         close(
             &mut run,
             run_gap,
-            run_shore,
+            (run_shore, run_shore_sigma),
             None,
             &mut runs,
             &mut rejected_geometry,
@@ -386,8 +397,15 @@ pub fn stereo_reflections(
     let mut corrected = cloud.clone();
     let (mut confirmed, mut rejected_image, mut reflected_points) = (0, 0, 0);
     for run in &runs {
+        // The shore level stands unless the symmetry level says it is measurably off (a
+        // bank, a poorly seen shore) and still close enough to be the same water.
         let level = match symmetry_level {
-            Some(l) if (l - run.shore).abs() <= cfg.level_tolerance_m => l,
+            Some(l)
+                if (l - run.shore).abs() <= cfg.level_tolerance_m
+                    && (l - run.shore).abs() > cfg.gate_sigma * run.shore_sigma =>
+            {
+                l
+            }
             _ => run.shore,
         };
         let mirrored: Vec<Point3<f64>> = run

@@ -355,3 +355,35 @@ fn wrong_image_size_and_unorganized_clouds_are_errors() {
     assert!(stereo_reflections(&flat, RES, 0.0, None, &StereoCueConfig::default()).is_err());
     assert!(GrayImage::new(3, 3, vec![0.0; 8]).is_err());
 }
+
+#[test]
+fn symmetry_gives_the_level_when_the_shore_is_a_bank_above_it() {
+    // The near shore is a 12 cm bank: its level is not the water's. Tree crowns only (a
+    // vertical plane gives no level by symmetry).
+    let mut w = pond_world();
+    w.bank = 0.12;
+    w.boxes.clear();
+    w.spheres = (0..9)
+        .map(|i| {
+            (
+                Point3::new(15.5 + (i % 2) as f64, -6.0 + 1.5 * i as f64, 2.5),
+                1.3,
+            )
+        })
+        .collect();
+    let r = render(&w, 320, 240);
+    let out = stereo_reflections(&r.cloud, RES, 0.0, None, &StereoCueConfig::default()).unwrap();
+    let l = out.symmetry_level.unwrap_or_else(|| {
+        panic!(
+            "no symmetry level: {} runs, {} pairs, {} reflected, {} rejected",
+            out.runs, out.pairs, out.reflected_points, out.rejected_geometry
+        )
+    });
+    assert!(
+        l.abs() < 0.03,
+        "symmetry level {l} m (the bank is at 0.12 m)"
+    );
+    // The evidence carries the water level, not the bank's.
+    let lv = out.evidence.total().level_mm().unwrap();
+    assert!(lv.abs() < 30.0, "{lv} mm");
+}
