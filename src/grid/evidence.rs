@@ -320,6 +320,17 @@ mod tests {
     }
 
     #[test]
+    fn storage_per_cell() {
+        assert_eq!(EVIDENCE_BYTES_PER_CELL, 38);
+        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 56 + 38);
+        eprintln!(
+            "tile map cell: {} bytes (CellStats), evidence {} bytes (Evidence)",
+            std::mem::size_of::<crate::grid::CellStats>(),
+            std::mem::size_of::<Evidence>()
+        );
+    }
+
+    #[test]
     fn depth_statistics_of_known_samples() {
         let mut e = Evidence::default();
         for d in [0.10, 0.20, 0.30] {

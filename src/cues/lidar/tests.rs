@@ -138,6 +138,12 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
         })
         .collect();
     assert!(expected.len() > 20, "{} diagnostic beams", expected.len());
+    eprintln!(
+        "vertical scanner: interval [{start:.3}, {end:.3}] m, pond [{a:.3}, {b:.3}] m, {} missing \
+         beams inside it, {} no-return events",
+        expected.len(),
+        out.stats.noret
+    );
     assert_eq!(out.stats.noret as usize, expected.len());
     let water_missing = shots
         .iter()
@@ -225,6 +231,7 @@ fn bottom_returns_give_depth_within_five_centimetres() {
             }
         }
         let rms = (se / n as f64).sqrt();
+        eprintln!("bottom returns over {depth} m of water: {n} samples, depth RMS {rms:.4} m");
         assert!(rms <= 0.05, "depth RMS {rms} m at {depth} m");
         // Without refraction correction the raw depths would be far off: the test can fail.
         let raw_rms = {
