@@ -172,7 +172,9 @@ impl LidarCueModel {
             r.validate()?;
         }
         match &beams {
-            BeamModel::Infer { max_gap_fraction } if !(*max_gap_fraction >= 0.0) => {
+            BeamModel::Infer { max_gap_fraction }
+                if max_gap_fraction.is_nan() || *max_gap_fraction < 0.0 =>
+            {
                 return Err(Error::invalid(
                     "beam model max_gap_fraction",
                     format!("{max_gap_fraction} is not a number ≥ 0"),
@@ -229,7 +231,7 @@ impl LidarCueModel {
     /// Greatest depth (m) whose bottom returns at `lookahead` (table, linear in between;
     /// 0 beyond the table).
     pub fn max_visible_depth(&self, lookahead: f64) -> f64 {
-        if !(lookahead >= 0.0) {
+        if lookahead.is_nan() || lookahead < 0.0 {
             return 0.0;
         }
         let t = lookahead / self.table_step;
@@ -522,13 +524,13 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
             clockwise,
         } => {
             let sign = if *clockwise { -1.0 } else { 1.0 };
-            for r in 0..rows {
+            for (r, &el) in elevations_rad.iter().enumerate().take(rows) {
                 for c in 0..cols {
                     let i = r * cols + c;
                     if local[i].is_none() {
                         let az = azimuth0_rad
                             + sign * 2.0 * std::f64::consts::PI * c as f64 / cols as f64;
-                        local[i] = Some(from_angles(az, elevations_rad[r]));
+                        local[i] = Some(from_angles(az, el));
                     }
                 }
             }

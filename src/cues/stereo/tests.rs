@@ -247,7 +247,7 @@ fn still_pond_reflections_find_the_water_and_put_trees_back_above_it() {
     for (k, e) in out.evidence.iter() {
         let (x, _) = centre_of(RES, *k);
         assert!(
-            e.reflect == 0 || (x >= 6.0 - RES && x <= 14.0 + RES),
+            e.reflect == 0 || (6.0 - RES..=14.0 + RES).contains(&x),
             "evidence at x = {x}"
         );
     }
