@@ -33,7 +33,7 @@ pub mod lidar;
 pub mod reflectivity;
 pub mod stereo;
 
-use std::collections::BTreeMap;
+use std::collections::HashMap;
 
 use crate::grid::{key_of, quantize_mm, CellKey, Evidence};
 
@@ -47,7 +47,9 @@ pub use stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig, St
 pub struct EvidenceMap {
     resolution: f64,
     z_ref: f64,
-    cells: BTreeMap<CellKey, Evidence>,
+    /// Hashed for speed; every read-out is sorted by key, so nothing depends on the
+    /// hasher's order (and merging evidence is commutative).
+    cells: HashMap<CellKey, Evidence>,
 }
 
 impl EvidenceMap {
@@ -55,7 +57,7 @@ impl EvidenceMap {
         EvidenceMap {
             resolution,
             z_ref,
-            cells: BTreeMap::new(),
+            cells: HashMap::new(),
         }
     }
 
@@ -98,7 +100,9 @@ impl EvidenceMap {
 
     /// Cells in key order.
     pub fn iter(&self) -> impl Iterator<Item = (&CellKey, &Evidence)> {
-        self.cells.iter()
+        let mut v: Vec<_> = self.cells.iter().collect();
+        v.sort_unstable_by_key(|(k, _)| **k);
+        v.into_iter()
     }
 
     /// Merges another map (same resolution and reference).
@@ -110,7 +114,9 @@ impl EvidenceMap {
 
     /// The batch for [`crate::grid::RollingGrid::apply_evidence`], in key order.
     pub fn into_batch(self) -> Vec<(CellKey, Evidence)> {
-        self.cells.into_iter().collect()
+        let mut v: Vec<_> = self.cells.into_iter().collect();
+        v.sort_unstable_by_key(|(k, _)| *k);
+        v
     }
 
     /// Sum of all cells' evidence.

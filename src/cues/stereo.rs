@@ -348,9 +348,33 @@ pub fn stereo_reflections(
         let m = shores.len() / 2;
         shores.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
         let mut level = shores[m];
+        // Reflected points to pair: at most 4096, by a fixed stride (deterministic).
+        let all: Vec<usize> = runs.iter().flat_map(|r| r.slots.iter().copied()).collect();
+        let stride = all.len().div_ceil(4096).max(1);
+        let reflected: Vec<usize> = all.iter().copied().step_by(stride).collect();
+        // Sources: real points above the level, inside the reflected points' footprint.
+        let (mut x0, mut y0, mut x1, mut y1) = (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for &s in &reflected {
+            x0 = x0.min(pts[s].x);
+            y0 = y0.min(pts[s].y);
+            x1 = x1.max(pts[s].x);
+            y1 = y1.max(pts[s].y);
+        }
+        let pad = cfg.pair_radius_m;
         let sources: Vec<[f64; 3]> = (0..cloud.len())
             .filter(|&s| {
-                cloud.is_valid(s) && !in_run[s] && pts[s].z > level - cfg.level_tolerance_m
+                cloud.is_valid(s)
+                    && !in_run[s]
+                    && pts[s].z > level - cfg.level_tolerance_m
+                    && pts[s].x >= x0 - pad
+                    && pts[s].x <= x1 + pad
+                    && pts[s].y >= y0 - pad
+                    && pts[s].y <= y1 + pad
             })
             .map(|s| [pts[s].x, pts[s].y, pts[s].z])
             .collect();
@@ -358,7 +382,6 @@ pub fn stereo_reflections(
             let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&sources)
                 .map_err(|e| Error::invalid("stereo reflection pairing", format!("{e:?}")))?;
             let r2 = cfg.pair_radius_m * cfg.pair_radius_m;
-            let reflected: Vec<usize> = runs.iter().flat_map(|r| r.slots.iter().copied()).collect();
             for _ in 0..6 {
                 let mut dz: Vec<f64> = reflected
                     .iter()
