@@ -18,7 +18,11 @@ fn tarn(args: &[&str]) -> std::process::Output {
 #[test]
 fn rellis_scan_json_report() {
     let out = tarn(&[PLY, "--rings", "64", "--dry-limit-m", "40", "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["height_estimated"], true);
     let h = v["height_m"].as_f64().unwrap();
@@ -31,7 +35,13 @@ fn rellis_scan_json_report() {
 
 #[test]
 fn bad_input_is_a_clear_error() {
-    let out = tarn(&["/nonexistent/scan.bin", "--rings", "64", "--dry-limit-m", "40"]);
+    let out = tarn(&[
+        "/nonexistent/scan.bin",
+        "--rings",
+        "64",
+        "--dry-limit-m",
+        "40",
+    ]);
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/nonexistent/scan.bin"), "{err}");
