@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::grid::{CellKey, TileMap};
+use crate::grid::{CellKey, Fusion, TileMap};
 
 /// Cell class codes of the export contract.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -123,6 +123,66 @@ impl HazardMap {
         }
     }
 
+    /// The map with water from the cues' evidence (see [`crate::grid::Evidence`] for the
+    /// fusion rule): `water` is the fused probability of every cell; cells observed only
+    /// through water evidence (no returns: a no-return region, reflection crossings) are
+    /// included at their measured water level. Provisional until the water stage (issue 8):
+    /// a cell with `water ≥ 0.9` is class Water, `z` its water level when one was measured,
+    /// `depth` the mean refraction-corrected bottom-return depth (NaN when unknown), and
+    /// hazard ShallowWater when that depth is at most `fording_depth_m`, else DeepWater.
+    pub fn with_water(tiles: &TileMap, fusion: &Fusion, fording_depth_m: f64) -> Self {
+        let cells = tiles
+            .observed()
+            .filter_map(|(key, c)| {
+                let p = c.ev.water_probability(fusion);
+                let level = c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3);
+                let elevation = tiles.elevation(&c);
+                let water = p >= 0.9;
+                let z = if water {
+                    level.or(elevation)
+                } else {
+                    elevation.or(level)
+                }?;
+                let (x, y) = tiles.centre_of(key);
+                let depth = if water {
+                    c.ev.depth_m().unwrap_or(f64::NAN)
+                } else {
+                    0.0
+                };
+                let (class, hazard) = if water {
+                    let shallow = depth <= fording_depth_m;
+                    (
+                        Class::Water,
+                        if shallow {
+                            Hazard::ShallowWater
+                        } else {
+                            Hazard::DeepWater
+                        },
+                    )
+                } else {
+                    (Class::Ground, Hazard::Free)
+                };
+                Some(MapCell {
+                    key,
+                    x,
+                    y,
+                    z,
+                    elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
+                    water: p as f32,
+                    depth: depth as f32,
+                    class,
+                    hazard,
+                    hits: c.hits,
+                    below: c.below,
+                })
+            })
+            .collect();
+        HazardMap {
+            resolution: tiles.resolution(),
+            cells,
+        }
+    }
+
     /// Inclusive key bounds of the cells.
     pub fn key_bounds(&self) -> Option<(CellKey, CellKey)> {
         let first = self.cells.first()?.key;
@@ -141,5 +201,43 @@ impl HazardMap {
             n[c.class as usize] += 1;
         }
         n
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{CellStats, Evidence};
+
+    #[test]
+    fn water_evidence_reaches_the_map() {
+        let mut t = TileMap::new(0.1, 0.0).unwrap();
+        let mut ground = CellStats::default();
+        ground.add(100, 65536);
+        t.add(CellKey::new(0, 0), &ground);
+        // Observed with no return only: no elevation, a level of 0.05 m, water.
+        let mut ev = Evidence {
+            noret: 20,
+            ..Evidence::default()
+        };
+        ev.add_level(50);
+        ev.add_depth(0.2);
+        t.add(
+            CellKey::new(1, 0),
+            &CellStats {
+                ev,
+                ..CellStats::default()
+            },
+        );
+        let m = HazardMap::with_water(&t, &Fusion::default(), 0.3);
+        assert_eq!(m.cells.len(), 2);
+        let (g, w) = (&m.cells[0], &m.cells[1]);
+        assert_eq!(g.class, Class::Ground);
+        assert!((g.water - 0.05).abs() < 1e-6 && g.depth == 0.0);
+        assert_eq!(w.class, Class::Water);
+        assert_eq!(w.hazard, Hazard::ShallowWater);
+        assert!((w.z - 0.05).abs() < 1e-9 && (w.depth - 0.2).abs() < 1e-6);
+        // The geometry-only map leaves the evidence-only cell out.
+        assert_eq!(HazardMap::from_elevation(&t).cells.len(), 1);
     }
 }

@@ -9,6 +9,7 @@
 
 pub mod build;
 pub mod classify;
+pub mod cues;
 pub mod error;
 pub mod eval;
 pub mod geom;

@@ -7,6 +7,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::evidence::Evidence;
+
 /// Reference standard deviation for weights: a point with σ = 1 cm has weight [`W_UNIT`].
 pub const SIGMA_REF_M: f64 = 0.01;
 /// Quantized weight of a point with σ = [`SIGMA_REF_M`].
@@ -56,6 +58,8 @@ pub struct CellStats {
     /// Lowest and highest fused elevation, mm (`i32::MAX` / `i32::MIN` when empty).
     pub zmin: i32,
     pub zmax: i32,
+    /// Water evidence from the cues (see [`Evidence`]).
+    pub ev: Evidence,
 }
 
 impl Default for CellStats {
@@ -68,15 +72,17 @@ impl Default for CellStats {
             swzz: 0,
             zmin: i32::MAX,
             zmax: i32::MIN,
+            ev: Evidence::default(),
         }
     }
 }
 
 impl CellStats {
-    /// True when nothing at all was recorded in the cell.
+    /// True when nothing at all was recorded in the cell: no point and no water evidence
+    /// ("never observed"). A cell holding only no-return evidence is observed.
     #[inline]
     pub fn is_empty(&self) -> bool {
-        self.hits == 0 && self.below == 0
+        self.hits == 0 && self.below == 0 && self.ev.is_empty()
     }
 
     /// Fuses one quantized measurement.
@@ -102,6 +108,7 @@ impl CellStats {
         self.swzz += o.swzz;
         self.zmin = self.zmin.min(o.zmin);
         self.zmax = self.zmax.max(o.zmax);
+        self.ev.merge(&o.ev);
     }
 
     /// Weighted mean elevation in mm relative to the reference, if any point was fused.

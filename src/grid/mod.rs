@@ -11,10 +11,12 @@
 //! sums ([`CellStats`]), so grids and tile maps merge exactly.
 
 mod cell;
+mod evidence;
 mod ingest;
 mod tiles;
 
 pub use cell::{quantize_mm, quantize_weight, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
+pub use evidence::{CueLogOdds, Evidence, Fusion, EVIDENCE_BYTES_PER_CELL};
 pub use ingest::{IngestStats, RangeNoise};
 pub use tiles::{TileMap, TILE_CELLS};
 
@@ -131,6 +133,13 @@ pub(crate) struct Layers {
     pub swzz: Vec<i128>,
     pub zmin: Vec<i32>,
     pub zmax: Vec<i32>,
+    /// Evidence: noret, diag_ret, reflect, dark, lit.
+    pub ev_counts: Vec<[u16; 5]>,
+    pub ev_level_n: Vec<u32>,
+    pub ev_level_sum: Vec<i64>,
+    /// Evidence: depth count, Σ depth mm.
+    pub ev_depth: Vec<[u32; 2]>,
+    pub ev_depth_sq: Vec<u64>,
 }
 
 impl Layers {
@@ -144,11 +153,52 @@ impl Layers {
             swzz: vec![e.swzz; n],
             zmin: vec![e.zmin; n],
             zmax: vec![e.zmax; n],
+            ev_counts: vec![[0; 5]; n],
+            ev_level_n: vec![0; n],
+            ev_level_sum: vec![0; n],
+            ev_depth: vec![[0; 2]; n],
+            ev_depth_sq: vec![0; n],
         }
     }
 
-    /// Bytes of layer storage per cell.
-    pub const BYTES_PER_CELL: usize = 4 + 4 + 8 + 16 + 16 + 4 + 4;
+    /// Bytes of layer storage per cell: 56 for the elevation statistics, the rest evidence.
+    pub const BYTES_PER_CELL: usize = 4 + 4 + 8 + 16 + 16 + 4 + 4 + EVIDENCE_BYTES_PER_CELL;
+
+    #[inline]
+    pub fn get_ev(&self, i: usize) -> Evidence {
+        let c = self.ev_counts[i];
+        let d = self.ev_depth[i];
+        Evidence {
+            noret: c[0],
+            diag_ret: c[1],
+            reflect: c[2],
+            dark: c[3],
+            lit: c[4],
+            level_n: self.ev_level_n[i],
+            level_sum_mm: self.ev_level_sum[i],
+            depth_n: d[0],
+            depth_sum_mm: d[1],
+            depth_sq_mm2: self.ev_depth_sq[i],
+        }
+    }
+
+    #[inline]
+    pub fn set_ev(&mut self, i: usize, e: &Evidence) {
+        self.ev_counts[i] = [e.noret, e.diag_ret, e.reflect, e.dark, e.lit];
+        self.ev_level_n[i] = e.level_n;
+        self.ev_level_sum[i] = e.level_sum_mm;
+        self.ev_depth[i] = [e.depth_n, e.depth_sum_mm];
+        self.ev_depth_sq[i] = e.depth_sq_mm2;
+    }
+
+    #[inline]
+    fn ev_is_empty_at(&self, i: usize) -> bool {
+        self.ev_counts[i] == [0; 5]
+            && self.ev_level_n[i] == 0
+            && self.ev_level_sum[i] == 0
+            && self.ev_depth[i] == [0; 2]
+            && self.ev_depth_sq[i] == 0
+    }
 
     #[inline]
     pub fn get(&self, i: usize) -> CellStats {
@@ -160,6 +210,7 @@ impl Layers {
             swzz: self.swzz[i],
             zmin: self.zmin[i],
             zmax: self.zmax[i],
+            ev: self.get_ev(i),
         }
     }
 
@@ -172,18 +223,33 @@ impl Layers {
         self.swzz[i] = c.swzz;
         self.zmin[i] = c.zmin;
         self.zmax[i] = c.zmax;
+        self.set_ev(i, &c.ev);
     }
 
     #[inline]
     pub fn merge_at(&mut self, i: usize, c: &CellStats) {
-        let mut m = self.get(i);
-        m.merge(c);
-        self.set(i, &m);
+        self.hits[i] += c.hits;
+        self.below[i] += c.below;
+        self.sw[i] += c.sw;
+        self.swz[i] += c.swz;
+        self.swzz[i] += c.swzz;
+        self.zmin[i] = self.zmin[i].min(c.zmin);
+        self.zmax[i] = self.zmax[i].max(c.zmax);
+        if !c.ev.is_empty() {
+            self.merge_ev_at(i, &c.ev);
+        }
+    }
+
+    #[inline]
+    pub fn merge_ev_at(&mut self, i: usize, e: &Evidence) {
+        let mut m = self.get_ev(i);
+        m.merge(e);
+        self.set_ev(i, &m);
     }
 
     #[inline]
     pub fn is_empty_at(&self, i: usize) -> bool {
-        self.hits[i] == 0 && self.below[i] == 0
+        self.hits[i] == 0 && self.below[i] == 0 && self.ev_is_empty_at(i)
     }
 }
 
@@ -411,6 +477,39 @@ impl RollingGrid {
             }
         }
         Ok(())
+    }
+}
+
+impl RollingGrid {
+    /// Merges water evidence into the cell `k`; `false` (and nothing recorded) when `k` is
+    /// outside the window.
+    pub fn add_evidence(&mut self, k: CellKey, e: &Evidence) -> bool {
+        match self.index(k) {
+            Some(i) => {
+                self.layers.merge_ev_at(i, e);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Merges a batch of per-cell evidence; returns how many entries fell outside the
+    /// window (dropped). The result does not depend on the batch's order.
+    pub fn apply_evidence(&mut self, batch: &[(CellKey, Evidence)]) -> usize {
+        batch
+            .iter()
+            .filter(|(k, e)| !self.add_evidence(*k, e))
+            .count()
+    }
+
+    /// Water evidence of an in-window cell.
+    pub fn evidence(&self, k: CellKey) -> Option<Evidence> {
+        self.index(k).map(|i| self.layers.get_ev(i))
+    }
+
+    /// Water level and elevation helper: the grid's reference height plus `mm`.
+    pub fn z_of_mm(&self, mm: f64) -> f64 {
+        self.cfg.z_ref + mm * 1e-3
     }
 }
 

@@ -3,6 +3,7 @@
 mod build_cmd;
 mod classify_cmd;
 mod cloud_cmd;
+mod cues_cmd;
 mod log_cmd;
 mod optics_cmd;
 mod sim_cmd;
@@ -46,6 +47,9 @@ enum Command {
     /// Lidar propagation over water: bottom returns, maximum measurable depth, and the
     /// lookahead interval where a missing return is diagnostic of water.
     LidarModel(optics_cmd::LidarModelArgs),
+    /// Water cues of one organized lidar scan: no-return evidence inside the optics'
+    /// diagnostic interval, bottom and specular returns, reflectivity drop.
+    Cues(cues_cmd::CuesArgs),
     /// What a file holds. A ROS 2 log (.mcap): topics, types, counts, time span, frames that
     /// would be built. A point cloud (.ply, KITTI .bin): points, returns, channels, bounds.
     Info {
@@ -112,6 +116,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::LidarModel(a)) => optics_cmd::lidar_model(a),
         Some(Command::TrainColor(a)) => classify_cmd::train(a),
         Some(Command::Classify(a)) => classify_cmd::classify(a),
+        Some(Command::Cues(a)) => cues_cmd::run(&a),
         Some(Command::Info {
             input,
             json,

@@ -1,0 +1,646 @@
+//! Lidar water cues (paper section 3): no-return regions inside the optics' diagnostic
+//! interval, refraction-corrected bottom returns, specular returns from beyond the water,
+//! and the reflectivity drop of wet ground.
+//!
+//! Each scan line (a column of a spinning lidar from the steepest ring out, or the row of a
+//! single-row vertical scanner ordered by beam elevation) is walked in the order of
+//! increasing lookahead, keeping the *local ground level*: the last return within
+//! `below_gate_m`/`above_gate_m` of the level, starting from the sensor height. Then:
+//!
+//! * a **missing** beam is cast against the level; if it meets it at a lookahead inside
+//!   [`LidarCueModel::interval`] (the optics' diagnostic interval for water at least
+//!   `min_depth_m` deep, for this sensor's height, wavelength and water clarity) the cell
+//!   it meets gets a no-return count; outside the interval a missing return says nothing;
+//! * a **ground** return inside the interval counts as a diagnostic beam that returned;
+//! * a return more than `below_gate_m` **below** the level is corrected for refraction and
+//!   the speed of light ([`crate::optics::LidarWaterModel::correct_bottom_return`]); if the
+//!   corrected depth is one the optics say this sensor can see at that lookahead, it is a
+//!   bottom return (a depth sample for the corrected point's cell); otherwise it cannot
+//!   come from the bottom and is a specular return from beyond the water: the cell where
+//!   its ray crosses the level gets reflection evidence and the point, mirrored about the
+//!   level, is put back where the object is.
+
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::reflectivity::{ReflectivityConfig, ReflectivitySample};
+use super::EvidenceMap;
+use crate::error::{Error, Result};
+use crate::geom::PointCloud;
+use crate::optics::{LidarModelConfig, LidarWaterModel};
+
+/// Where the directions of missing beams come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BeamModel {
+    /// Inferred from the organized scan itself: the direction of a missing slot is
+    /// interpolated (azimuth and elevation, linearly in column index) between the nearest
+    /// valid slots of its row, across at most `max_gap_fraction` of the row (cyclic for a
+    /// multi-row spinning scan). Slots with no valid neighbour on both sides say nothing.
+    Infer { max_gap_fraction: f64 },
+    /// A spinning lidar: elevation per row (rad) and azimuth of column `c`
+    /// `azimuth0_rad ∓ 2π c / cols` (minus when `clockwise`).
+    Spinning {
+        elevations_rad: Vec<f64>,
+        azimuth0_rad: f64,
+        clockwise: bool,
+    },
+    /// One direction per slot (row-major), in the cloud's frame; need not be unit length.
+    Directions(Vec<[f32; 3]>),
+}
+
+impl Default for BeamModel {
+    fn default() -> Self {
+        BeamModel::Infer {
+            max_gap_fraction: 0.25,
+        }
+    }
+}
+
+/// Gates and thresholds of the lidar cues.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LidarCueConfig {
+    /// Shallowest water whose missing returns are to be diagnostic (m); 0 gives the
+    /// interval from the zero-depth cutoff to the dry-ground limit.
+    pub min_depth_m: f64,
+    /// A return more than this below the local ground level is a below-level return (m).
+    pub below_gate_m: f64,
+    /// A return more than this above the local ground level is not ground (vegetation,
+    /// obstacles); it neither moves the level nor counts as a diagnostic return (m).
+    pub above_gate_m: f64,
+    /// Slack on the optics' greatest visible depth when telling bottom from specular (m).
+    pub depth_tolerance_m: f64,
+    /// A below-level return too deep for a bottom return is taken as specular only when
+    /// at least this far below the level (m): the mirror image of an object, not rough
+    /// ground or vegetation dipping under the last ground return. Shallower ones are
+    /// counted as unexplained and give no evidence.
+    pub specular_min_depth_m: f64,
+}
+
+impl Default for LidarCueConfig {
+    fn default() -> Self {
+        LidarCueConfig {
+            min_depth_m: 0.0,
+            below_gate_m: 0.10,
+            above_gate_m: 0.30,
+            depth_tolerance_m: 0.05,
+            specular_min_depth_m: 0.5,
+        }
+    }
+}
+
+impl LidarCueConfig {
+    pub fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("min_depth_m", self.min_depth_m),
+            ("below_gate_m", self.below_gate_m),
+            ("above_gate_m", self.above_gate_m),
+            ("depth_tolerance_m", self.depth_tolerance_m),
+            ("specular_min_depth_m", self.specular_min_depth_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::invalid(
+                    format!("lidar cue {name}"),
+                    format!("{v} is not a finite number ≥ 0"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Counts of what the lidar cues saw in one scan.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct LidarCueStats {
+    pub slots: u64,
+    pub missing: u64,
+    /// Missing slots whose direction could not be known (no model, no neighbours).
+    pub no_direction: u64,
+    /// Missing beams that meet the ground level at all.
+    pub missing_cast: u64,
+    /// Missing beams meeting the ground inside the diagnostic interval.
+    pub noret: u64,
+    /// Ground returns inside the diagnostic interval.
+    pub diag_ret: u64,
+    pub bottom: u64,
+    pub specular: u64,
+    /// Below-level returns neither bottom nor deep enough to be specular.
+    pub unexplained: u64,
+    pub dark: u64,
+    pub lit: u64,
+}
+
+/// The output of [`LidarCueModel::run`].
+#[derive(Debug, Clone)]
+pub struct LidarCues {
+    pub evidence: EvidenceMap,
+    /// The input cloud with specular returns mirrored about the water level (put where the
+    /// object is) and bottom returns removed (NaN: their depth is in the evidence), ready to
+    /// be fused into the elevation map instead of the raw cloud.
+    pub corrected: PointCloud,
+    pub stats: LidarCueStats,
+    /// The scan's dark threshold (the `dark_quantile` of its ground returns' normalised
+    /// reflectivity) when the reflectivity cue ran.
+    pub reflectivity_threshold: Option<f64>,
+}
+
+/// A lidar sensor's cue model: the optics for its height, wavelength and water clarity,
+/// the diagnostic interval, a table of the greatest visible depth against lookahead, and
+/// its beam model. Build it once per sensor (and again if its height changes).
+#[derive(Debug, Clone)]
+pub struct LidarCueModel {
+    optics: LidarWaterModel,
+    beams: BeamModel,
+    cfg: LidarCueConfig,
+    reflectivity: Option<ReflectivityConfig>,
+    interval: Option<(f64, f64)>,
+    table_step: f64,
+    depth_table: Vec<f64>,
+}
+
+impl LidarCueModel {
+    /// `optics.height_m` is the sensor's height above the ground (and a water level there).
+    pub fn new(
+        optics: LidarModelConfig,
+        beams: BeamModel,
+        cfg: LidarCueConfig,
+        reflectivity: Option<ReflectivityConfig>,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        if let Some(r) = &reflectivity {
+            r.validate()?;
+        }
+        match &beams {
+            BeamModel::Infer { max_gap_fraction }
+                if max_gap_fraction.is_nan() || *max_gap_fraction < 0.0 =>
+            {
+                return Err(Error::invalid(
+                    "beam model max_gap_fraction",
+                    format!("{max_gap_fraction} is not a number ≥ 0"),
+                ))
+            }
+            BeamModel::Spinning {
+                elevations_rad,
+                azimuth0_rad,
+                ..
+            } if !(elevations_rad.iter().all(|v| v.is_finite()) && azimuth0_rad.is_finite()) => {
+                return Err(Error::invalid("beam model", "non-finite beam angle"))
+            }
+            BeamModel::Directions(d) if !d.iter().flatten().all(|v| v.is_finite()) => {
+                return Err(Error::invalid("beam model", "non-finite beam direction"))
+            }
+            _ => {}
+        }
+        let optics = LidarWaterModel::new(optics)?;
+        let interval = optics.diagnostic_interval(cfg.min_depth_m)?;
+        let end = optics
+            .dry_limit()
+            .unwrap_or(optics.config().height_m)
+            .max(1.0)
+            * 1.2;
+        let table_step = (end / 400.0).max(0.02);
+        let n = (end / table_step).ceil() as usize + 2;
+        let depth_table = (0..n)
+            .map(|i| optics.max_depth(i as f64 * table_step))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(LidarCueModel {
+            optics,
+            beams,
+            cfg,
+            reflectivity,
+            interval,
+            table_step,
+            depth_table,
+        })
+    }
+
+    pub fn optics(&self) -> &LidarWaterModel {
+        &self.optics
+    }
+
+    pub fn config(&self) -> &LidarCueConfig {
+        &self.cfg
+    }
+
+    /// Lookaheads (m) where a missing return is diagnostic of water.
+    pub fn interval(&self) -> Option<(f64, f64)> {
+        self.interval
+    }
+
+    /// Greatest depth (m) whose bottom returns at `lookahead` (table, linear in between;
+    /// 0 beyond the table).
+    pub fn max_visible_depth(&self, lookahead: f64) -> f64 {
+        if lookahead.is_nan() || lookahead < 0.0 {
+            return 0.0;
+        }
+        let t = lookahead / self.table_step;
+        let i = t as usize;
+        if i + 1 >= self.depth_table.len() {
+            return 0.0;
+        }
+        let f = t - i as f64;
+        self.depth_table[i] * (1.0 - f) + self.depth_table[i + 1] * f
+    }
+
+    #[inline]
+    fn in_interval(&self, d: f64) -> bool {
+        matches!(self.interval, Some((a, b)) if d >= a && d <= b)
+    }
+
+    /// Runs the cues on one organized scan. `resolution` and `z_ref` are the grid's.
+    pub fn run(&self, cloud: &PointCloud, resolution: f64, z_ref: f64) -> Result<LidarCues> {
+        cloud.validate()?;
+        let n = cloud.len();
+        if let BeamModel::Directions(d) = &self.beams {
+            if d.len() != n {
+                return Err(Error::invalid(
+                    "beam model",
+                    format!("{} directions for a scan of {n} slots", d.len()),
+                ));
+            }
+        }
+        if let BeamModel::Spinning { elevations_rad, .. } = &self.beams {
+            if elevations_rad.len() != cloud.rows {
+                return Err(Error::invalid(
+                    "beam model",
+                    format!(
+                        "{} ring elevations for a scan of {} rows",
+                        elevations_rad.len(),
+                        cloud.rows
+                    ),
+                ));
+            }
+        }
+        let dirs = beam_directions(cloud, &self.beams);
+        let lines = scan_lines(cloud, &dirs);
+        let o = cloud.sensor_origin_in_map();
+        let level0 = o.z - self.optics.config().height_m;
+        let events: Vec<Vec<Event>> = lines
+            .par_iter()
+            .map(|line| self.walk(cloud, &dirs, line, o, level0))
+            .collect();
+
+        let mut ev = EvidenceMap::new(resolution, z_ref);
+        let mut corrected = cloud.clone();
+        let to_frame = cloud.frame_to_map.inverse();
+        let mut stats = LidarCueStats {
+            slots: n as u64,
+            missing: (n - cloud.valid_count()) as u64,
+            no_direction: dirs
+                .iter()
+                .enumerate()
+                .filter(|(i, d)| d.is_none() && !cloud.is_valid(*i))
+                .count() as u64,
+            ..LidarCueStats::default()
+        };
+        let mut samples: Vec<ReflectivitySample> = Vec::new();
+        for e in events.iter().flatten() {
+            match *e {
+                Event::MissingCast => stats.missing_cast += 1,
+                Event::Unexplained => stats.unexplained += 1,
+                Event::NoRet { x, y, level } => {
+                    stats.missing_cast += 1;
+                    stats.noret += 1;
+                    ev.add_with_level(x, y, level, |e| e.noret = e.noret.saturating_add(1));
+                }
+                Event::Ground {
+                    slot,
+                    x,
+                    y,
+                    diag,
+                    cos_inc,
+                    range,
+                } => {
+                    if diag {
+                        stats.diag_ret += 1;
+                        if let Some(e) = ev.at(x, y) {
+                            e.diag_ret = e.diag_ret.saturating_add(1);
+                        }
+                    }
+                    if self.reflectivity.is_some() {
+                        samples.push(ReflectivitySample {
+                            slot,
+                            x,
+                            y,
+                            cos_inc,
+                            range,
+                        });
+                    }
+                }
+                Event::Bottom {
+                    slot,
+                    x,
+                    y,
+                    level,
+                    depth,
+                } => {
+                    stats.bottom += 1;
+                    ev.add_with_level(x, y, level, |e| e.add_depth(depth));
+                    corrected.xyz[slot] = [f32::NAN; 3];
+                }
+                Event::Specular {
+                    slot,
+                    cx,
+                    cy,
+                    level,
+                    mirrored,
+                } => {
+                    stats.specular += 1;
+                    ev.add_with_level(cx, cy, level, |e| e.reflect = e.reflect.saturating_add(1));
+                    let p = to_frame * mirrored;
+                    corrected.xyz[slot] = [p.x as f32, p.y as f32, p.z as f32];
+                }
+            }
+        }
+        let mut reference = None;
+        if let Some(rc) = &self.reflectivity {
+            if let Some(r) = super::reflectivity::apply(cloud, rc, &samples, &mut ev) {
+                stats.dark = r.dark;
+                stats.lit = r.lit;
+                reference = Some(r.threshold);
+            }
+        }
+        Ok(LidarCues {
+            evidence: ev,
+            corrected,
+            stats,
+            reflectivity_threshold: reference,
+        })
+    }
+
+    fn walk(
+        &self,
+        cloud: &PointCloud,
+        dirs: &[Option<Vector3<f64>>],
+        line: &[u32],
+        o: Point3<f64>,
+        level0: f64,
+    ) -> Vec<Event> {
+        let cfg = &self.cfg;
+        let mut level = level0;
+        let mut out = Vec::new();
+        for &s in line {
+            let s = s as usize;
+            if cloud.is_valid(s) {
+                let p = cloud.point_in_map(s);
+                let dz = p.z - level;
+                let v = p - o;
+                let range = v.norm();
+                if dz < -cfg.below_gate_m && v.z < 0.0 && o.z > level {
+                    // Below the level: bottom or specular.
+                    let u = v / range;
+                    let t = (o.z - level) / -u.z;
+                    let c = o + u * t;
+                    let d_c = (c.x - o.x).hypot(c.y - o.y);
+                    let Ok(q) = self.optics.correct_bottom_return(o, p, level) else {
+                        continue;
+                    };
+                    let depth = level - q.z;
+                    if depth <= self.max_visible_depth(d_c) + cfg.depth_tolerance_m {
+                        out.push(Event::Bottom {
+                            slot: s,
+                            x: q.x,
+                            y: q.y,
+                            level,
+                            depth,
+                        });
+                    } else if level - p.z < cfg.specular_min_depth_m {
+                        out.push(Event::Unexplained);
+                    } else {
+                        out.push(Event::Specular {
+                            slot: s,
+                            cx: c.x,
+                            cy: c.y,
+                            level,
+                            mirrored: Point3::new(p.x, p.y, 2.0 * level - p.z),
+                        });
+                    }
+                } else if dz <= cfg.above_gate_m {
+                    level = p.z;
+                    let d = v.x.hypot(v.y);
+                    let cos_inc = if range > 0.0 { -v.z / range } else { 0.0 };
+                    out.push(Event::Ground {
+                        slot: s,
+                        x: p.x,
+                        y: p.y,
+                        diag: self.in_interval(d),
+                        cos_inc,
+                        range,
+                    });
+                }
+            } else if let Some(u) = dirs[s] {
+                if u.z >= -1e-6 || o.z <= level {
+                    continue;
+                }
+                let t = (o.z - level) / -u.z;
+                let hit = o + u * t;
+                let d = (hit.x - o.x).hypot(hit.y - o.y);
+                if self.in_interval(d) {
+                    out.push(Event::NoRet {
+                        x: hit.x,
+                        y: hit.y,
+                        level,
+                    });
+                } else {
+                    out.push(Event::MissingCast);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// What one slot of a scan line contributed.
+#[derive(Debug, Clone, Copy)]
+enum Event {
+    MissingCast,
+    Unexplained,
+    NoRet {
+        x: f64,
+        y: f64,
+        level: f64,
+    },
+    Ground {
+        slot: usize,
+        x: f64,
+        y: f64,
+        diag: bool,
+        cos_inc: f64,
+        range: f64,
+    },
+    Bottom {
+        slot: usize,
+        x: f64,
+        y: f64,
+        level: f64,
+        depth: f64,
+    },
+    Specular {
+        slot: usize,
+        cx: f64,
+        cy: f64,
+        level: f64,
+        mirrored: Point3<f64>,
+    },
+}
+
+/// Map-frame unit direction of every slot: from the point for real returns, from the beam
+/// model for missing ones (`None` where it cannot be known).
+pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vector3<f64>>> {
+    let rot = cloud.frame_to_map.rotation;
+    let so = cloud.sensor_origin;
+    let (rows, cols) = (cloud.rows, cloud.cols);
+    let from_point = |i: usize| {
+        let [x, y, z] = cloud.xyz[i];
+        let v = Vector3::new(x as f64 - so.x, y as f64 - so.y, z as f64 - so.z);
+        let nv = v.norm();
+        (nv > 0.0).then(|| v / nv)
+    };
+    let from_angles =
+        |az: f64, el: f64| Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+    let mut local: Vec<Option<Vector3<f64>>> = (0..cloud.len())
+        .map(|i| {
+            if cloud.is_valid(i) {
+                from_point(i)
+            } else {
+                None
+            }
+        })
+        .collect();
+    match model {
+        BeamModel::Directions(d) => {
+            for (i, l) in local.iter_mut().enumerate() {
+                if l.is_none() {
+                    let v = Vector3::new(d[i][0] as f64, d[i][1] as f64, d[i][2] as f64);
+                    let nv = v.norm();
+                    *l = (nv > 0.0).then(|| v / nv);
+                }
+            }
+        }
+        BeamModel::Spinning {
+            elevations_rad,
+            azimuth0_rad,
+            clockwise,
+        } => {
+            let sign = if *clockwise { -1.0 } else { 1.0 };
+            for (r, &el) in elevations_rad.iter().enumerate().take(rows) {
+                for c in 0..cols {
+                    let i = r * cols + c;
+                    if local[i].is_none() {
+                        let az = azimuth0_rad
+                            + sign * 2.0 * std::f64::consts::PI * c as f64 / cols as f64;
+                        local[i] = Some(from_angles(az, el));
+                    }
+                }
+            }
+        }
+        BeamModel::Infer { max_gap_fraction } => {
+            let cyclic = rows > 1;
+            let max_gap = ((cols as f64 * max_gap_fraction).floor() as usize).max(1);
+            let angles = |v: &Vector3<f64>| (v.y.atan2(v.x), v.z.clamp(-1.0, 1.0).asin());
+            for r in 0..rows {
+                let row = &local[r * cols..(r + 1) * cols];
+                let valid: Vec<usize> = (0..cols).filter(|&c| row[c].is_some()).collect();
+                if valid.is_empty() {
+                    continue;
+                }
+                let mut fill: Vec<(usize, Vector3<f64>)> = Vec::new();
+                // Consecutive valid pairs (and the wrap-around pair when cyclic).
+                let mut pairs: Vec<(usize, usize)> =
+                    valid.windows(2).map(|w| (w[0], w[1])).collect();
+                if cyclic {
+                    pairs.push((valid[valid.len() - 1], valid[0] + cols));
+                }
+                for (a, b) in pairs {
+                    let gap = b - a;
+                    if gap < 2 || gap - 1 > max_gap {
+                        continue;
+                    }
+                    let (az_a, el_a) = angles(&row[a].unwrap());
+                    let (az_b, el_b) = angles(&row[b % cols].unwrap());
+                    let mut daz = az_b - az_a;
+                    let tau = 2.0 * std::f64::consts::PI;
+                    daz -= tau * (daz / tau).round();
+                    for k in 1..gap {
+                        let t = k as f64 / gap as f64;
+                        fill.push((
+                            (a + k) % cols,
+                            from_angles(az_a + daz * t, el_a + (el_b - el_a) * t),
+                        ));
+                    }
+                }
+                for (c, v) in fill {
+                    local[r * cols + c] = Some(v);
+                }
+            }
+        }
+    }
+    local.into_iter().map(|d| d.map(|v| rot * v)).collect()
+}
+
+/// Scan lines in order of increasing lookahead: columns ordered by each row's median
+/// elevation (multi-row scans), or the single row ordered by slot elevation.
+fn scan_lines(cloud: &PointCloud, dirs: &[Option<Vector3<f64>>]) -> Vec<Vec<u32>> {
+    let (rows, cols) = (cloud.rows, cloud.cols);
+    if rows <= 1 {
+        let mut line: Vec<(f64, u32)> = dirs
+            .iter()
+            .enumerate()
+            .filter_map(|(i, d)| d.map(|v| (v.z, i as u32)))
+            .collect();
+        line.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        return vec![line.into_iter().map(|(_, i)| i).collect()];
+    }
+    let mut order: Vec<(f64, usize)> = (0..rows)
+        .filter_map(|r| {
+            let mut el: Vec<f64> = (0..cols)
+                .filter_map(|c| dirs[r * cols + c].map(|v| v.z))
+                .collect();
+            if el.is_empty() {
+                return None;
+            }
+            let m = el.len() / 2;
+            el.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
+            Some((el[m], r))
+        })
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    (0..cols)
+        .map(|c| {
+            order
+                .iter()
+                .map(|&(_, r)| (r * cols + c) as u32)
+                .filter(|&i| dirs[i as usize].is_some())
+                .collect()
+        })
+        .collect()
+}
+
+/// The sensor's height above the ground, estimated from the scan itself: the median of
+/// `sensor z − point z` over the returns of the steepest downward beams (depression
+/// between 10° and 45°, the ground ring around the vehicle), in the map frame. `None`
+/// when fewer than 20 such returns exist.
+pub fn estimate_sensor_height(cloud: &PointCloud) -> Option<f64> {
+    let o = cloud.sensor_origin_in_map();
+    let (lo, hi) = (10f64.to_radians().sin(), 45f64.to_radians().sin());
+    let mut h: Vec<f64> = (0..cloud.len())
+        .filter(|&i| cloud.is_valid(i))
+        .filter_map(|i| {
+            let v = cloud.point_in_map(i) - o;
+            let s = -v.z / v.norm();
+            (s >= lo && s <= hi).then_some(-v.z)
+        })
+        .collect();
+    if h.len() < 20 {
+        return None;
+    }
+    // The ground is the lowest surface: take the median of the lower half, which ignores
+    // vegetation and obstacles above it.
+    h.sort_by(|a, b| b.total_cmp(a));
+    let lower = &h[..h.len() / 2];
+    Some(lower[lower.len() / 2])
+}
+
+#[cfg(test)]
+mod tests;

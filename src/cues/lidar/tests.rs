@@ -1,0 +1,477 @@
+use super::*;
+use crate::cues::testutil::TestRng;
+use crate::grid::{key_of, GridConfig, RollingGrid};
+use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig};
+
+const RES: f64 = 0.1;
+
+/// The paper's sensor (1 m high, dry ground lost at 11 m) at 905 nm in pure water.
+fn optics(height: f64) -> LidarModelConfig {
+    LidarModelConfig {
+        height_m: height,
+        ..LidarModelConfig::paper(Attenuation::PureWater {
+            wavelength_nm: 905.0,
+        })
+    }
+}
+
+/// Flat ground at z = 0 with a pond (level 0, flat bottom at −depth) where `in_pond(x, y)`.
+struct Scene<'a> {
+    model: LidarWaterModel,
+    depth: f64,
+    in_pond: &'a dyn Fn(f64, f64) -> bool,
+}
+
+/// What the simulated beam did.
+enum Shot {
+    Missing { lookahead: f64, over_water: bool },
+    Ground(Point3<f64>),
+    Bottom { apparent: Point3<f64>, depth: f64 },
+}
+
+impl Scene<'_> {
+    fn shoot(&self, o: Point3<f64>, u: Vector3<f64>) -> Option<Shot> {
+        if u.z >= 0.0 {
+            return None;
+        }
+        let t = o.z / -u.z;
+        let hit = o + u * t;
+        let d = (hit.x - o.x).hypot(hit.y - o.y);
+        if (self.in_pond)(hit.x, hit.y) {
+            if self.model.return_ratio(d, self.depth).unwrap() >= self.model.min_power_ratio() {
+                let g = self.model.geometry(d, self.depth).unwrap();
+                let dir = Vector3::new(hit.x - o.x, hit.y - o.y, 0.0) / d;
+                let b = o + dir * g.bottom_distance - Vector3::z() * (o.z + self.depth);
+                let apparent = apparent_bottom_point(o, b, 0.0, 1.33).unwrap();
+                Some(Shot::Bottom {
+                    apparent,
+                    depth: self.depth,
+                })
+            } else {
+                Some(Shot::Missing {
+                    lookahead: d,
+                    over_water: true,
+                })
+            }
+        } else if self.model.dry_ratio(d).unwrap() >= self.model.min_power_ratio() {
+            Some(Shot::Ground(hit))
+        } else {
+            Some(Shot::Missing {
+                lookahead: d,
+                over_water: false,
+            })
+        }
+    }
+}
+
+/// A single-row vertical scanner in the x–z plane, `n` beams from 60° to 1° below the
+/// horizon; range noise `sigma` along the beam.
+fn vertical_scan(
+    scene: &Scene,
+    n: usize,
+    sigma: f64,
+    seed: u64,
+) -> (PointCloud, Vec<[f32; 3]>, Vec<Shot>) {
+    let o = Point3::new(0.0, 0.0, scene.model.config().height_m);
+    let mut rng = TestRng(seed);
+    let (mut xyz, mut dirs, mut shots) = (Vec::new(), Vec::new(), Vec::new());
+    for k in 0..n {
+        let dep = (60.0 - 59.0 * k as f64 / (n - 1) as f64).to_radians();
+        let u = Vector3::new(dep.cos(), 0.0, -dep.sin());
+        dirs.push([u.x as f32, u.y as f32, u.z as f32]);
+        let shot = scene.shoot(o, u).unwrap();
+        let p = match &shot {
+            Shot::Missing { .. } => [f32::NAN; 3],
+            Shot::Ground(p) | Shot::Bottom { apparent: p, .. } => {
+                let v = p - o;
+                let q = p + v / v.norm() * (sigma * rng.normal());
+                [q.x as f32, q.y as f32, q.z as f32]
+            }
+        };
+        xyz.push(p);
+        shots.push(shot);
+    }
+    let mut c = PointCloud::organized(1, n, xyz).unwrap();
+    c.sensor_origin = o;
+    (c, dirs, shots)
+}
+
+fn shallow_pond_scene(model: &LidarWaterModel) -> (f64, f64) {
+    // The pond starts before the diagnostic interval and ends inside it, so both bottom
+    // returns and no-returns occur, with dry returning ground beyond.
+    let (start, end) = model.diagnostic_interval(0.0).unwrap().unwrap();
+    let bottom_seen = model.max_lookahead_for_depth(0.2).unwrap().unwrap();
+    (0.5 * bottom_seen, 0.5 * (start + end))
+}
+
+#[test]
+fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
+    let cue = LidarCueModel::new(
+        optics(1.0),
+        BeamModel::Directions(Vec::new()),
+        LidarCueConfig::default(),
+        None,
+    )
+    .unwrap();
+    let (start, end) = cue.interval().unwrap();
+    let (a, b) = shallow_pond_scene(cue.optics());
+    let pond = move |x: f64, _y: f64| x >= a && x <= b;
+    let scene = Scene {
+        model: cue.optics().clone(),
+        depth: 0.175,
+        in_pond: &pond,
+    };
+    let (cloud, dirs, shots) = vertical_scan(&scene, 600, 0.0, 1);
+    let cue = LidarCueModel {
+        beams: BeamModel::Directions(dirs),
+        ..cue
+    };
+    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    // Every missing beam over water inside the interval gives one no-return; nothing else.
+    let expected: Vec<f64> = shots
+        .iter()
+        .filter_map(|s| match s {
+            Shot::Missing { lookahead, .. } if *lookahead >= start && *lookahead <= end => {
+                Some(*lookahead)
+            }
+            _ => None,
+        })
+        .collect();
+    assert!(expected.len() > 20, "{} diagnostic beams", expected.len());
+    eprintln!(
+        "vertical scanner: interval [{start:.3}, {end:.3}] m, pond [{a:.3}, {b:.3}] m, {} missing \
+         beams inside it, {} no-return events",
+        expected.len(),
+        out.stats.noret
+    );
+    assert_eq!(out.stats.noret as usize, expected.len());
+    let water_missing = shots
+        .iter()
+        .filter(|s| {
+            matches!(
+                s,
+                Shot::Missing {
+                    over_water: true,
+                    ..
+                }
+            )
+        })
+        .count();
+    assert!(water_missing >= expected.len());
+    for (k, e) in out.evidence.iter() {
+        if e.noret > 0 {
+            let (x, _) = crate::grid::centre_of(RES, *k);
+            assert!(x >= start - RES && x <= end + RES, "noret at x = {x}");
+            assert!(
+                x >= a - RES && x <= b + RES,
+                "noret outside the pond at x = {x}"
+            );
+        }
+    }
+    // Ground beyond the pond inside the interval returned: counted as diagnostic returns.
+    assert!(out.stats.diag_ret > 0);
+    for (k, e) in out.evidence.iter() {
+        if e.diag_ret > 0 {
+            let (x, _) = crate::grid::centre_of(RES, *k);
+            assert!(
+                x > b - RES && x >= start - RES && x <= end + RES,
+                "diag_ret at {x}"
+            );
+        }
+    }
+}
+
+#[test]
+fn bottom_returns_give_depth_within_five_centimetres() {
+    let base = LidarCueModel::new(
+        optics(1.0),
+        BeamModel::Directions(Vec::new()),
+        LidarCueConfig::default(),
+        None,
+    )
+    .unwrap();
+    let (a, b) = shallow_pond_scene(base.optics());
+    let pond = move |x: f64, _y: f64| x >= a && x <= b;
+    for depth in [0.15, 0.20] {
+        let scene = Scene {
+            model: base.optics().clone(),
+            depth,
+            in_pond: &pond,
+        };
+        let (cloud, dirs, shots) = vertical_scan(&scene, 600, 0.01, 7);
+        let cue = LidarCueModel {
+            beams: BeamModel::Directions(dirs),
+            ..base.clone()
+        };
+        let out = cue.run(&cloud, RES, 0.0).unwrap();
+        let n_bottom = shots
+            .iter()
+            .filter(|s| matches!(s, Shot::Bottom { .. }))
+            .count();
+        assert!(
+            n_bottom > 20,
+            "{n_bottom} bottom returns, pond {a}..{b}, bottom seen to {:?}",
+            base.optics().max_lookahead_for_depth(depth)
+        );
+        assert!(
+            out.stats.bottom as usize >= n_bottom * 9 / 10,
+            "{:?}",
+            out.stats
+        );
+        let (mut se, mut n) = (0.0, 0usize);
+        for (k, e) in out.evidence.iter() {
+            if e.depth_n > 0 {
+                let (x, _) = crate::grid::centre_of(RES, *k);
+                assert!(x >= a - RES && x <= b + RES);
+                let err = e.depth_m().unwrap() - depth;
+                se += err * err * e.depth_n as f64;
+                n += e.depth_n as usize;
+                // The level the bottom was measured against is the shore's.
+                assert!(e.level_mm().unwrap().abs() < 20.0);
+            }
+        }
+        let rms = (se / n as f64).sqrt();
+        eprintln!("bottom returns over {depth} m of water: {n} samples, depth RMS {rms:.4} m");
+        assert!(rms <= 0.05, "depth RMS {rms} m at {depth} m");
+        // Without refraction correction the raw depths would be far off: the test can fail.
+        let raw_rms = {
+            let v: Vec<f64> = shots
+                .iter()
+                .filter_map(|s| match s {
+                    Shot::Bottom { apparent, depth } => Some(-apparent.z - depth),
+                    _ => None,
+                })
+                .collect();
+            (v.iter().map(|e| e * e).sum::<f64>() / v.len() as f64).sqrt()
+        };
+        assert!(raw_rms > 2.0 * rms, "raw {raw_rms} corrected {rms}");
+        // Bottom returns are taken out of the elevation cloud.
+        assert_eq!(
+            out.corrected.valid_count() + out.stats.bottom as usize,
+            cloud.valid_count()
+        );
+    }
+}
+
+#[test]
+fn deep_below_level_return_is_specular_and_mirrored_back() {
+    let cue = LidarCueModel::new(
+        optics(1.0),
+        BeamModel::Infer {
+            max_gap_fraction: 0.25,
+        },
+        LidarCueConfig::default(),
+        None,
+    )
+    .unwrap();
+    let o = Point3::new(0.0, 0.0, 1.0);
+    // Ground at 2, 3, 4 m, then a return 2 m below the level seen at 8 m horizontal: the
+    // mirror image of a point 2 m up a tree. No bottom is visible 2 m deep there.
+    let mut pts: Vec<[f32; 3]> = [2.0f32, 3.0, 4.0].iter().map(|&x| [x, 0.0, 0.0]).collect();
+    pts.push([8.0, 0.0, -2.0]);
+    let mut cloud = PointCloud::organized(1, 4, pts).unwrap();
+    cloud.sensor_origin = o;
+    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    assert_eq!(out.stats.specular, 1);
+    assert_eq!(out.stats.bottom, 0);
+    assert_eq!(out.corrected.xyz[3], [8.0, 0.0, 2.0]);
+    // The ray crosses the level at x = 8 · 1/3.
+    let k = key_of(RES, 8.0 / 3.0, 0.0);
+    assert_eq!(out.evidence.get(k).unwrap().reflect, 1);
+    assert_eq!(out.evidence.total().reflect, 1);
+}
+
+/// A spinning lidar: `rings` elevations, `cols` azimuths, 1.8 m high, with the beams of
+/// missing returns unknown to the cue (inferred from the scan).
+fn spinning_scan(
+    scene: &Scene,
+    rings: usize,
+    cols: usize,
+) -> (PointCloud, Vec<Shot>, Vec<Vector3<f64>>) {
+    let o = Point3::new(0.0, 0.0, scene.model.config().height_m);
+    let (mut xyz, mut shots, mut dirs) = (Vec::new(), Vec::new(), Vec::new());
+    for r in 0..rings {
+        // Ring 0 the top beam, as on an Ouster: +5° down to −25°.
+        let el = (5.0 - 30.0 * r as f64 / (rings - 1) as f64).to_radians();
+        for c in 0..cols {
+            let az = -2.0 * std::f64::consts::PI * c as f64 / cols as f64;
+            let u = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+            dirs.push(u);
+            match scene.shoot(o, u) {
+                None => {
+                    xyz.push([f32::NAN; 3]);
+                    shots.push(Shot::Missing {
+                        lookahead: f64::INFINITY,
+                        over_water: false,
+                    });
+                }
+                Some(s) => {
+                    xyz.push(match &s {
+                        Shot::Missing { .. } => [f32::NAN; 3],
+                        Shot::Ground(p) | Shot::Bottom { apparent: p, .. } => {
+                            [p.x as f32, p.y as f32, p.z as f32]
+                        }
+                    });
+                    shots.push(s);
+                }
+            }
+        }
+    }
+    let mut c = PointCloud::organized(rings, cols, xyz).unwrap();
+    c.sensor_origin = o;
+    (c, shots, dirs)
+}
+
+#[test]
+fn spinning_lidar_with_inferred_beams_finds_the_pond_and_only_the_pond() {
+    let cue = LidarCueModel::new(
+        optics(1.8),
+        BeamModel::default(),
+        LidarCueConfig::default(),
+        None,
+    )
+    .unwrap();
+    let (start, end) = cue.interval().unwrap();
+    let centre = 0.5 * (start + end);
+    let radius = 0.35 * (end - start).max(2.0);
+    let pond = move |x: f64, y: f64| (x - centre).hypot(y) <= radius;
+    let scene = Scene {
+        model: cue.optics().clone(),
+        depth: 0.5,
+        in_pond: &pond,
+    };
+    let (cloud, shots, _) = spinning_scan(&scene, 32, 1024);
+    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    let expected = shots
+        .iter()
+        .filter(|s| matches!(s, Shot::Missing { lookahead, over_water: true } if *lookahead >= start && *lookahead <= end))
+        .count();
+    assert!(expected > 50, "{expected}");
+    // Inferred directions recover nearly all of them.
+    assert!(
+        out.stats.noret as usize >= expected * 9 / 10 && out.stats.noret as usize <= expected,
+        "{} of {expected}",
+        out.stats.noret
+    );
+    for (k, e) in out.evidence.iter() {
+        if e.noret > 0 {
+            let (x, y) = crate::grid::centre_of(RES, *k);
+            assert!(
+                (x - centre).hypot(y) <= radius + 2.0 * RES,
+                "noret at ({x}, {y})"
+            );
+        }
+    }
+    // Fused into a grid, the pond's cells read as water and the dry cells do not.
+    let mut g = RollingGrid::new(
+        GridConfig {
+            size_cells: 400,
+            ..GridConfig::default()
+        },
+        0.0,
+        0.0,
+    )
+    .unwrap();
+    g.ingest(&out.corrected, &crate::grid::RangeNoise::LIDAR)
+        .unwrap();
+    assert_eq!(g.apply_evidence(&out.evidence.clone().into_batch()), 0);
+    let f = crate::grid::Fusion::default();
+    let (mut dry_water, mut dry) = (0, 0);
+    for (k, c) in g.observed() {
+        let (x, y) = g.centre_of(k);
+        if !pond(x, y) && (x - centre).hypot(y) > radius + 2.0 * RES {
+            dry += 1;
+            if c.ev.water_probability(&f) > 0.5 {
+                dry_water += 1;
+            }
+        }
+    }
+    assert!(dry > 1000);
+    assert_eq!(dry_water, 0, "{dry_water} of {dry} dry cells called water");
+}
+
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let cue = LidarCueModel::new(
+        optics(1.8),
+        BeamModel::default(),
+        LidarCueConfig::default(),
+        Some(ReflectivityConfig::default()),
+    )
+    .unwrap();
+    let (start, end) = cue.interval().unwrap();
+    let c0 = 0.5 * (start + end);
+    let pond = move |x: f64, y: f64| (x - c0).hypot(y) <= 2.0;
+    let scene = Scene {
+        model: cue.optics().clone(),
+        depth: 0.3,
+        in_pond: &pond,
+    };
+    let (mut cloud, _, _) = spinning_scan(&scene, 16, 512);
+    let mut rng = TestRng(3);
+    cloud.intensity = Some(
+        (0..cloud.len())
+            .map(|_| (10.0 + rng.uniform()) as f32)
+            .collect(),
+    );
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| cue.run(&cloud, RES, 0.0).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.evidence.clone().into_batch(), b.evidence.into_batch());
+    assert_eq!(a.stats, b.stats);
+}
+
+#[test]
+fn bad_beam_models_are_errors_not_panics() {
+    let cue = LidarCueModel::new(
+        optics(1.0),
+        BeamModel::Directions(vec![[1.0, 0.0, -1.0]; 3]),
+        LidarCueConfig::default(),
+        None,
+    )
+    .unwrap();
+    let cloud = PointCloud::organized(1, 4, vec![[f32::NAN; 3]; 4]).unwrap();
+    let e = cue.run(&cloud, RES, 0.0).unwrap_err().to_string();
+    assert!(e.contains("3 directions"), "{e}");
+    let bad = LidarCueConfig {
+        below_gate_m: f64::NAN,
+        ..LidarCueConfig::default()
+    };
+    assert!(LidarCueModel::new(optics(1.0), BeamModel::default(), bad, None).is_err());
+    let spin = LidarCueModel::new(
+        optics(1.0),
+        BeamModel::Spinning {
+            elevations_rad: vec![0.0; 5],
+            azimuth0_rad: 0.0,
+            clockwise: true,
+        },
+        LidarCueConfig::default(),
+        None,
+    )
+    .unwrap();
+    let e = spin.run(
+        &PointCloud::organized(2, 2, vec![[f32::NAN; 3]; 4]).unwrap(),
+        RES,
+        0.0,
+    );
+    assert!(e.unwrap_err().to_string().contains("5 ring elevations"));
+}
+
+#[test]
+fn sensor_height_is_estimated_from_the_ground_ring() {
+    let pond = |_x: f64, _y: f64| false;
+    let model = LidarWaterModel::new(optics(1.73)).unwrap();
+    let scene = Scene {
+        model,
+        depth: 0.0,
+        in_pond: &pond,
+    };
+    let (cloud, _, _) = spinning_scan(&scene, 32, 256);
+    let h = estimate_sensor_height(&cloud).unwrap();
+    assert!((h - 1.73).abs() < 1e-3, "{h}");
+}

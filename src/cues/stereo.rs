@@ -1,0 +1,526 @@
+//! Stereo reflections in still water (paper section 2.3, Figure 4).
+//!
+//! Stereo matches the reflection of a tree in a pond as if it were a real object: the
+//! triangulated points are the tree's *virtual image*, mirrored below the water level. Up
+//! an image column (bottom to top, increasing range on the ground) they show as a run of
+//! points below the local ground, behind a gap (the water between the shore and where the
+//! reflection's points sit), whose range *wraps backward* (the reflection of the tree top
+//! is seen first, closest to the camera in the image, and is the farthest point).
+//!
+//! For a confirmed run, with water level `L`:
+//! * the ray to each reflected point crosses `z = L` where the water is: that cell gets a
+//!   reflection count (and a level sample);
+//! * the point mirrored about `L` is the real object: [`StereoCues::corrected`] holds the
+//!   cloud with every reflected point replaced by its mirror image;
+//! * `L` starts at the shore level (the last ground before the run) and is refined by
+//!   symmetry: each mirrored point is paired with its nearest real point (kiddo k-d tree),
+//!   and `L` moves by half the median height difference, a few times (a one-parameter ICP).
+//!   A vertical planar source (a wall) constrains `L` only at its edges; trees and roofs
+//!   constrain it everywhere. The refined level replaces the shore level of a run when the
+//!   two differ by more than the shore point's vertical noise (`gate_sigma·σ_v`: the shore
+//!   is a bank above the water, or poorly seen) and by at most `level_tolerance_m`;
+//! * with the intensity image and camera model ([`MirrorCheck`]), the intensities of the
+//!   reflected pixels must correlate (normalised cross-correlation ≥ `min_ncc`) with those
+//!   of the pixels where the mirrored points project; a run whose pixels have no texture
+//!   to correlate keeps its geometric verdict.
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+
+use super::EvidenceMap;
+use crate::error::{Error, Result};
+use crate::geom::camera::CameraModel;
+use crate::geom::PointCloud;
+use crate::grid::RangeNoise;
+
+/// A single-channel image (row-major, `width × height`), e.g. the left camera's intensity.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GrayImage {
+    pub width: usize,
+    pub height: usize,
+    pub pixels: Vec<f32>,
+}
+
+impl GrayImage {
+    pub fn new(width: usize, height: usize, pixels: Vec<f32>) -> Result<Self> {
+        if width.checked_mul(height) != Some(pixels.len()) || width == 0 || height == 0 {
+            return Err(Error::invalid(
+                "gray image",
+                format!("{} pixels do not fill {width} × {height}", pixels.len()),
+            ));
+        }
+        Ok(GrayImage {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    /// Bilinear sample at pixel coordinates (pixel centres at integers); `None` outside.
+    pub fn sample(&self, u: f64, v: f64) -> Option<f64> {
+        if !(u >= 0.0 && v >= 0.0 && u <= (self.width - 1) as f64 && v <= (self.height - 1) as f64)
+        {
+            return None;
+        }
+        let (x0, y0) = (u.floor() as usize, v.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
+        let (fx, fy) = (u - x0 as f64, v - y0 as f64);
+        let p = |x: usize, y: usize| self.pixels[y * self.width + x] as f64;
+        let top = p(x0, y0) * (1.0 - fx) + p(x1, y0) * fx;
+        let bot = p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx;
+        Some(top * (1.0 - fy) + bot * fy)
+    }
+}
+
+/// The image and camera for the mirror-image correlation check. The stereo cloud may be a
+/// whole-factor downsample of the image: element (row, col) lies on the ray of pixel
+/// `(k·col + (k−1)/2, k·row + (k−1)/2)` with `k = image width / cloud width`.
+#[derive(Debug, Clone, Copy)]
+pub struct MirrorCheck<'a> {
+    pub camera: &'a CameraModel,
+    pub image: &'a GrayImage,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StereoCueConfig {
+    /// Range noise of the stereo points (sets the below-ground gate).
+    pub noise: RangeNoise,
+    /// A point starts a run when more than `max(gate_min_m, gate_sigma·σ_v)` below the
+    /// local ground, `σ_v = σ(r)·|sin δ|` the vertical part of the range error along a ray
+    /// of depression `δ`.
+    pub gate_sigma: f64,
+    pub gate_min_m: f64,
+    /// Points more than this above the local ground are objects, not ground (m).
+    pub above_gate_m: f64,
+    /// Horizontal jump from the last ground to the first point of a run that makes a gap (m).
+    pub gap_min_m: f64,
+    /// Fewest points in a run.
+    pub min_run: usize,
+    /// For a run with no terrain after it in its column: the fraction of its steps whose
+    /// range must decrease (wrap backward).
+    pub wrap_fraction: f64,
+    /// Pairing radius of mirrored points and their sources (m).
+    pub pair_radius_m: f64,
+    /// Fewest pairs for a symmetry level.
+    pub min_pairs: usize,
+    /// A run's shore level is replaced by the symmetry level when within this (m).
+    pub level_tolerance_m: f64,
+    /// Smallest normalised cross-correlation that confirms a run (with an image).
+    pub min_ncc: f64,
+}
+
+impl Default for StereoCueConfig {
+    fn default() -> Self {
+        StereoCueConfig {
+            noise: RangeNoise::STEREO,
+            gate_sigma: 3.0,
+            gate_min_m: 0.15,
+            above_gate_m: 0.30,
+            gap_min_m: 0.5,
+            min_run: 3,
+            wrap_fraction: 0.6,
+            pair_radius_m: 0.3,
+            min_pairs: 10,
+            level_tolerance_m: 0.3,
+            min_ncc: 0.5,
+        }
+    }
+}
+
+impl StereoCueConfig {
+    pub fn validate(&self) -> Result<()> {
+        self.noise.validate()?;
+        let pos = |v: f64| v.is_finite() && v >= 0.0;
+        let ok = pos(self.gate_sigma)
+            && pos(self.gate_min_m)
+            && pos(self.above_gate_m)
+            && pos(self.gap_min_m)
+            && (0.0..=1.0).contains(&self.wrap_fraction)
+            && self.pair_radius_m.is_finite()
+            && self.pair_radius_m > 0.0
+            && pos(self.level_tolerance_m)
+            && (-1.0..=1.0).contains(&self.min_ncc)
+            && self.min_run >= 2;
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                "stereo cue config",
+                format!("{self:?}: gates and radii must be finite and ≥ 0, min_run ≥ 2, fractions in range"),
+            ))
+        }
+    }
+}
+
+/// The output of [`stereo_reflections`].
+#[derive(Debug, Clone)]
+pub struct StereoCues {
+    pub evidence: EvidenceMap,
+    /// The input cloud with every reflected point replaced by its mirror image (the real
+    /// object), in the cloud's frame: fuse this instead of the raw cloud.
+    pub corrected: PointCloud,
+    /// The water level from reflection symmetry, if enough pairs were found (map z, m).
+    pub symmetry_level: Option<f64>,
+    /// Reflected/source pairs behind `symmetry_level`.
+    pub pairs: usize,
+    /// Runs confirmed, runs rejected by geometry, runs rejected by the image check.
+    pub runs: usize,
+    pub rejected_geometry: usize,
+    pub rejected_image: usize,
+    /// Points found to be reflections.
+    pub reflected_points: usize,
+}
+
+/// One candidate run: slots (bottom to top) and the shore level before it.
+struct Run {
+    slots: Vec<usize>,
+    shore: f64,
+    /// Vertical noise (σ) of the shore point the level came from.
+    shore_sigma: f64,
+}
+
+/// Finds reflections in an organized stereo cloud (rows top to bottom as in the image).
+/// `resolution` and `z_ref` are the grid's.
+pub fn stereo_reflections(
+    cloud: &PointCloud,
+    resolution: f64,
+    z_ref: f64,
+    check: Option<MirrorCheck<'_>>,
+    cfg: &StereoCueConfig,
+) -> Result<StereoCues> {
+    cloud.validate()?;
+    cfg.validate()?;
+    if !cloud.is_organized() {
+        return Err(Error::invalid(
+            "stereo cloud",
+            "the reflection cue needs an organized cloud (rows × cols)",
+        ));
+    }
+    let k = match check {
+        Some(c) => {
+            if c.image.width % cloud.cols != 0
+                || c.image.width / cloud.cols == 0
+                || c.image.height != cloud.rows * (c.image.width / cloud.cols)
+            {
+                return Err(Error::invalid(
+                    "stereo image",
+                    format!(
+                        "a {}×{} image is not a whole-factor upsample of the {}×{} cloud",
+                        c.image.width, c.image.height, cloud.cols, cloud.rows
+                    ),
+                ));
+            }
+            c.image.width / cloud.cols
+        }
+        None => 1,
+    };
+    let (rows, cols) = (cloud.rows, cloud.cols);
+    let o = cloud.sensor_origin_in_map();
+    let pts: Vec<Point3<f64>> = (0..cloud.len()).map(|i| cloud.point_in_map(i)).collect();
+
+    // 1. Candidate runs up each column.
+    let mut runs: Vec<Run> = Vec::new();
+    let mut rejected_geometry = 0;
+    for c in 0..cols {
+        let mut z_g: Option<f64> = None;
+        let mut h_g = 0.0;
+        let mut invalid_since_ground = 0usize;
+        let mut run: Vec<usize> = Vec::new();
+        let mut run_gap = false;
+        let mut run_shore = 0.0;
+        let mut run_shore_sigma = 0.0;
+        let mut sigma_g = 0.0;
+        let mut run_min_h = f64::INFINITY;
+        // A run is a reflection when it follows a gap and the terrain seen after it, up
+        // the column, is *nearer* than the run (range wraps backward: the virtual image
+        // lies beyond the far shore). With nothing after it, its own ranges must wrap.
+        let close = |run: &mut Vec<usize>,
+                     gap: bool,
+                     shore: (f64, f64),
+                     next_h: Option<f64>,
+                     runs: &mut Vec<Run>,
+                     rej: &mut usize| {
+            if run.is_empty() {
+                return;
+            }
+            let slots = std::mem::take(run);
+            let rng = |s: usize| (pts[s] - o).norm();
+            let hor = |s: usize| (pts[s].x - o.x).hypot(pts[s].y - o.y);
+            let wraps = match next_h {
+                Some(hn) => {
+                    let min_h = slots.iter().map(|&s| hor(s)).fold(f64::INFINITY, f64::min);
+                    hn < min_h - cfg.gap_min_m
+                }
+                None => {
+                    let steps = slots.len() - 1;
+                    let back = slots.windows(2).filter(|w| rng(w[1]) < rng(w[0])).count();
+                    steps > 0 && back as f64 >= cfg.wrap_fraction * steps as f64
+                }
+            };
+            if slots.len() >= cfg.min_run && gap && wraps {
+                runs.push(Run {
+                    slots,
+                    shore: shore.0,
+                    shore_sigma: shore.1,
+                });
+            } else {
+                *rej += 1;
+            }
+        };
+        for r in (0..rows).rev() {
+            let s = r * cols + c;
+            if !cloud.is_valid(s) {
+                if run.is_empty() {
+                    invalid_since_ground += 1;
+                }
+                continue;
+            }
+            let p = pts[s];
+            let h = (p.x - o.x).hypot(p.y - o.y);
+            let Some(zg) = z_g else {
+                z_g = Some(p.z);
+                h_g = h;
+                continue;
+            };
+            // Stereo error lies along the ray: its vertical part is σ(r)·|sin(depression)|.
+            let range = (p - o).norm();
+            let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
+            let gate = cfg.gate_min_m.max(cfg.gate_sigma * vertical);
+            let below = p.z < zg - gate && p.z < o.z;
+            if let Some(&last) = run.last() {
+                // Inside a run, points below the level whose range keeps wrapping backward
+                // are the upper part of the same virtual image.
+                // Terrain much nearer than the run (the far shore) ends it.
+                let wrapping = range < (pts[last] - o).norm();
+                let nearer = h < run_min_h - cfg.gap_min_m;
+                if !nearer && (below || (p.z < zg && wrapping)) {
+                    run_min_h = run_min_h.min(h);
+                    run.push(s);
+                    continue;
+                }
+                close(
+                    &mut run,
+                    run_gap,
+                    (run_shore, run_shore_sigma),
+                    Some(h),
+                    &mut runs,
+                    &mut rejected_geometry,
+                );
+            }
+            if below {
+                // A new run (also right after one that nearer terrain ended).
+                run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
+                run_shore = zg;
+                run_shore_sigma = sigma_g;
+                run_min_h = h;
+                run.push(s);
+                continue;
+            }
+            if p.z - zg <= cfg.above_gate_m {
+                z_g = Some(p.z);
+                h_g = h;
+                sigma_g = vertical;
+                invalid_since_ground = 0;
+            }
+        }
+        close(
+            &mut run,
+            run_gap,
+            (run_shore, run_shore_sigma),
+            None,
+            &mut runs,
+            &mut rejected_geometry,
+        );
+    }
+
+    // 2. Water level by symmetry (one-parameter ICP against the non-reflected points).
+    let mut in_run = vec![false; cloud.len()];
+    for r in &runs {
+        for &s in &r.slots {
+            in_run[s] = true;
+        }
+    }
+    let (mut symmetry_level, mut pairs) = (None, 0);
+    if !runs.is_empty() {
+        let mut shores: Vec<f64> = runs.iter().map(|r| r.shore).collect();
+        let m = shores.len() / 2;
+        shores.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
+        let mut level = shores[m];
+        // Reflected points to pair: at most 4096, by a fixed stride (deterministic).
+        let all: Vec<usize> = runs.iter().flat_map(|r| r.slots.iter().copied()).collect();
+        let stride = all.len().div_ceil(4096).max(1);
+        let reflected: Vec<usize> = all.iter().copied().step_by(stride).collect();
+        // Sources: real points above the level, inside the reflected points' footprint.
+        let (mut x0, mut y0, mut x1, mut y1) = (
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for &s in &reflected {
+            x0 = x0.min(pts[s].x);
+            y0 = y0.min(pts[s].y);
+            x1 = x1.max(pts[s].x);
+            y1 = y1.max(pts[s].y);
+        }
+        let pad = cfg.pair_radius_m;
+        let sources: Vec<[f64; 3]> = (0..cloud.len())
+            .filter(|&s| {
+                cloud.is_valid(s)
+                    && !in_run[s]
+                    && pts[s].z > level - cfg.level_tolerance_m
+                    && pts[s].x >= x0 - pad
+                    && pts[s].x <= x1 + pad
+                    && pts[s].y >= y0 - pad
+                    && pts[s].y <= y1 + pad
+            })
+            .map(|s| [pts[s].x, pts[s].y, pts[s].z])
+            .collect();
+        if sources.len() >= cfg.min_pairs.max(1) {
+            let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&sources)
+                .map_err(|e| Error::invalid("stereo reflection pairing", format!("{e:?}")))?;
+            let r2 = cfg.pair_radius_m * cfg.pair_radius_m;
+            for _ in 0..6 {
+                let mut dz: Vec<f64> = reflected
+                    .iter()
+                    .filter_map(|&s| {
+                        let p = pts[s];
+                        let q = [p.x, p.y, 2.0 * level - p.z];
+                        let nn = tree
+                            .query(&q)
+                            .nearest_one::<SquaredEuclidean<f64>>()
+                            .execute();
+                        (nn.distance <= r2).then(|| sources[nn.item as usize][2] - q[2])
+                    })
+                    .collect();
+                if dz.len() < cfg.min_pairs {
+                    pairs = 0;
+                    break;
+                }
+                pairs = dz.len();
+                let m = dz.len() / 2;
+                dz.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
+                let step = 0.5 * dz[m];
+                level += step;
+                if step.abs() < 1e-4 {
+                    break;
+                }
+            }
+            if pairs >= cfg.min_pairs {
+                symmetry_level = Some(level);
+            }
+        }
+    }
+
+    // 3. Image check, evidence, corrected points.
+    let to_frame = cloud.frame_to_map.inverse();
+    let mut ev = EvidenceMap::new(resolution, z_ref);
+    let mut corrected = cloud.clone();
+    let (mut confirmed, mut rejected_image, mut reflected_points) = (0, 0, 0);
+    for run in &runs {
+        // The shore level stands unless the symmetry level says it is measurably off (a
+        // bank, a poorly seen shore) and still close enough to be the same water.
+        let level = match symmetry_level {
+            Some(l)
+                if (l - run.shore).abs() <= cfg.level_tolerance_m
+                    && (l - run.shore).abs() > cfg.gate_sigma * run.shore_sigma =>
+            {
+                l
+            }
+            _ => run.shore,
+        };
+        let mirrored: Vec<Point3<f64>> = run
+            .slots
+            .iter()
+            .map(|&s| Point3::new(pts[s].x, pts[s].y, 2.0 * level - pts[s].z))
+            .collect();
+        if let Some(chk) = check {
+            let kk = k as f64;
+            let half = (kk - 1.0) / 2.0;
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            for (&s, m) in run.slots.iter().zip(&mirrored) {
+                let (row, col) = (s / cols, s % cols);
+                let here = chk
+                    .image
+                    .sample(kk * col as f64 + half, kk * row as f64 + half);
+                // Use the mirrored point only where the camera sees it (the stereo point at
+                // its pixel is the mirrored point itself, not something in front of it).
+                let there = chk.camera.project(&(to_frame * m)).and_then(|[u, v]| {
+                    let (cr, cc) = (((v - half) / kk).round(), ((u - half) / kk).round());
+                    if !(cr >= 0.0 && cc >= 0.0 && (cr as usize) < rows && (cc as usize) < cols) {
+                        return None;
+                    }
+                    let t = cr as usize * cols + cc as usize;
+                    let seen = cloud.is_valid(t) && !in_run[t] && {
+                        let d = (pts[t] - m).norm();
+                        d <= cfg
+                            .pair_radius_m
+                            .max(cfg.gate_sigma * cfg.noise.sigma((m - o).norm()))
+                    };
+                    if seen {
+                        chk.image.sample(u, v)
+                    } else {
+                        None
+                    }
+                });
+                if let (Some(x), Some(y)) = (here, there) {
+                    a.push(x);
+                    b.push(y);
+                }
+            }
+            if let Some(r) = ncc(&a, &b) {
+                if r < cfg.min_ncc {
+                    rejected_image += 1;
+                    continue;
+                }
+            }
+        }
+        confirmed += 1;
+        for (&s, m) in run.slots.iter().zip(&mirrored) {
+            let p = pts[s];
+            let t = (o.z - level) / (o.z - p.z);
+            let cx = o.x + (p.x - o.x) * t;
+            let cy = o.y + (p.y - o.y) * t;
+            ev.add_with_level(cx, cy, level, |e| e.reflect = e.reflect.saturating_add(1));
+            let q = to_frame * m;
+            corrected.xyz[s] = [q.x as f32, q.y as f32, q.z as f32];
+            reflected_points += 1;
+        }
+    }
+    Ok(StereoCues {
+        evidence: ev,
+        corrected,
+        symmetry_level,
+        pairs,
+        runs: confirmed,
+        rejected_geometry,
+        rejected_image,
+        reflected_points,
+    })
+}
+
+/// Normalised cross-correlation; `None` with fewer than 3 samples or no texture.
+fn ncc(a: &[f64], b: &[f64]) -> Option<f64> {
+    let n = a.len();
+    if n < 3 {
+        return None;
+    }
+    let ma = a.iter().sum::<f64>() / n as f64;
+    let mb = b.iter().sum::<f64>() / n as f64;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma) * (x - ma);
+        sbb += (y - mb) * (y - mb);
+    }
+    let scale = (ma.abs() + mb.abs()).max(1e-12);
+    if saa.sqrt() < 1e-6 * scale * n as f64 || sbb.sqrt() < 1e-6 * scale * n as f64 {
+        return None;
+    }
+    Some(sab / (saa * sbb).sqrt())
+}
+
+#[cfg(test)]
+mod tests;

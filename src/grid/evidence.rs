@@ -1,0 +1,355 @@
+//! Per-cell water evidence: exact, mergeable integer counts and sums, and the documented
+//! fusion rule that turns them into a water probability at readout.
+//!
+//! Every field is a count or an integer sum, so merging is exactly commutative and
+//! associative, like [`super::CellStats`]. The five event counts are `u16` and saturate
+//! (saturating addition of non-negative numbers, `min(a + b, 65535)`, is still commutative
+//! and associative); the sums that feed a mean (level, depth) are exact `u32`/`i64`/`u64`.
+//!
+//! "Never observed" and "observed, no return" stay apart: a cell whose only record is
+//! `noret > 0` is *observed* (a lidar beam was cast into it and nothing came back), while a
+//! cell with no hits and no evidence at all is unknown.
+//!
+//! ## Fusion rule
+//!
+//! The water log-odds of a cell is the prior plus, per cue, the sum over its events of the
+//! log-likelihood ratio `ln P(event | water) / P(event | dry)`, each cue's total clamped to
+//! `±cue_cap` (neighbouring beams and pixels of one patch are not independent; the cap
+//! keeps one cue from making a cell more than `e^cap : 1` certain on its own). The
+//! probabilities are sensor physics or per-scan constructions, not fitted to a scene:
+//!
+//! | event | P(· given water) | P(· given dry) | source |
+//! | --- | --- | --- | --- |
+//! | missing lidar return, ground hit inside the diagnostic interval | `1 − p_water_return` | `p_dropout` | optics: water returns nothing there, dry ground does |
+//! | lidar return inside the diagnostic interval | `p_water_return` | `1 − p_dropout` | same |
+//! | reflection ray (stereo or lidar specular) crossing the level here | `p_reflect_detect` | `p_reflect_false` | run geometry: below ground, gap, range wrapping |
+//! | refraction-consistent bottom return | `p_bottom_detect` | `p_bottom_false` | optics: depth within what the sensor can see |
+//! | cell mostly dark (normalised reflectivity below the scan's threshold) | `p_dark_wet` | `p_dark_dry` | per-scan quantile |
+//! | cell mostly not dark | `1 − p_dark_wet` | `1 − p_dark_dry` | same |
+//!
+//! The reflectivity cue counts once per cell (its returns see one surface and are not
+//! independent), so on its own it can never call a cell water: it tips cells that other
+//! cues leave uncertain.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Water evidence of one cell. `Default` is "no evidence".
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Evidence {
+    /// Missing lidar beams whose ground hit falls in this cell inside the no-return
+    /// diagnostic interval ("observed, no return").
+    pub noret: u16,
+    /// Lidar returns from this cell at a lookahead inside the diagnostic interval (beams
+    /// that could have been diagnostic but returned): `noret / (noret + diag_ret)` is the
+    /// no-return fraction.
+    pub diag_ret: u16,
+    /// Reflection rays (stereo reflections, lidar specular returns) crossing the water
+    /// level in this cell.
+    pub reflect: u16,
+    /// Returns whose range- and incidence-normalised reflectivity is below the scan's
+    /// dark threshold.
+    pub dark: u16,
+    /// Returns tested for reflectivity and not dark.
+    pub lit: u16,
+    /// Water-level samples (mm relative to the grid's `z_ref`) that came with `noret`,
+    /// `reflect` and bottom-return events: count and exact sum.
+    pub level_n: u32,
+    pub level_sum_mm: i64,
+    /// Refraction-corrected bottom returns: count, Σ depth (mm), Σ depth² (mm²).
+    /// Depths are clamped to 0..=65535 mm.
+    pub depth_n: u32,
+    pub depth_sum_mm: u32,
+    pub depth_sq_mm2: u64,
+}
+
+/// Bytes of evidence storage per cell in the window's structure-of-arrays layers.
+pub const EVIDENCE_BYTES_PER_CELL: usize = 5 * 2 + 4 + 8 + 4 + 4 + 8;
+
+impl Evidence {
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        *self == Evidence::default()
+    }
+
+    /// The commutative, associative combine.
+    #[inline]
+    pub fn merge(&mut self, o: &Evidence) {
+        self.noret = self.noret.saturating_add(o.noret);
+        self.diag_ret = self.diag_ret.saturating_add(o.diag_ret);
+        self.reflect = self.reflect.saturating_add(o.reflect);
+        self.dark = self.dark.saturating_add(o.dark);
+        self.lit = self.lit.saturating_add(o.lit);
+        self.level_n = self.level_n.saturating_add(o.level_n);
+        self.level_sum_mm = self.level_sum_mm.saturating_add(o.level_sum_mm);
+        self.depth_n = self.depth_n.saturating_add(o.depth_n);
+        self.depth_sum_mm = self.depth_sum_mm.saturating_add(o.depth_sum_mm);
+        self.depth_sq_mm2 = self.depth_sq_mm2.saturating_add(o.depth_sq_mm2);
+    }
+
+    /// Records one water-level sample (mm relative to `z_ref`).
+    #[inline]
+    pub fn add_level(&mut self, level_mm: i32) {
+        self.level_n = self.level_n.saturating_add(1);
+        self.level_sum_mm = self.level_sum_mm.saturating_add(level_mm as i64);
+    }
+
+    /// Records one corrected bottom-return depth (metres; clamped to 0..=65.535 m).
+    #[inline]
+    pub fn add_depth(&mut self, depth_m: f64) {
+        let mm = (depth_m * 1000.0).round().clamp(0.0, 65535.0) as u32;
+        self.depth_n = self.depth_n.saturating_add(1);
+        self.depth_sum_mm = self.depth_sum_mm.saturating_add(mm);
+        self.depth_sq_mm2 = self.depth_sq_mm2.saturating_add(mm as u64 * mm as u64);
+    }
+
+    /// Mean water level, mm relative to the grid's `z_ref`.
+    pub fn level_mm(&self) -> Option<f64> {
+        (self.level_n > 0).then(|| self.level_sum_mm as f64 / self.level_n as f64)
+    }
+
+    /// Mean bottom-return depth, metres.
+    pub fn depth_m(&self) -> Option<f64> {
+        (self.depth_n > 0).then(|| self.depth_sum_mm as f64 / self.depth_n as f64 * 1e-3)
+    }
+
+    /// Standard deviation of the bottom-return depths, metres.
+    pub fn depth_std_m(&self) -> Option<f64> {
+        let m = self.depth_sum_mm as f64 / self.depth_n as f64;
+        (self.depth_n > 0).then(|| {
+            ((self.depth_sq_mm2 as f64 / self.depth_n as f64 - m * m).max(0.0)).sqrt() * 1e-3
+        })
+    }
+
+    /// Fraction of diagnostic beams that came back empty; `None` when no beam was diagnostic.
+    pub fn noret_fraction(&self) -> Option<f64> {
+        let n = self.noret as u32 + self.diag_ret as u32;
+        (n > 0).then(|| self.noret as f64 / n as f64)
+    }
+
+    /// Per-cue log-likelihood ratios (before the prior), see the module documentation.
+    pub fn cue_log_odds(&self, f: &Fusion) -> CueLogOdds {
+        let cap = |v: f64| v.clamp(-f.cue_cap, f.cue_cap);
+        let ln = |a: f64, b: f64| (a / b).ln();
+        CueLogOdds {
+            noret: cap(self.noret as f64 * ln(1.0 - f.p_water_return, f.p_dropout)
+                + self.diag_ret as f64 * ln(f.p_water_return, 1.0 - f.p_dropout)),
+            reflect: cap(self.reflect as f64 * ln(f.p_reflect_detect, f.p_reflect_false)),
+            bottom: cap(self.depth_n as f64 * ln(f.p_bottom_detect, f.p_bottom_false)),
+            // The returns of one cell see one surface: one observation, by majority.
+            reflectivity: match (self.dark, self.lit) {
+                (0, 0) => 0.0,
+                (d, l) if d > l => ln(f.p_dark_wet, f.p_dark_dry),
+                _ => ln(1.0 - f.p_dark_wet, 1.0 - f.p_dark_dry),
+            },
+        }
+    }
+
+    /// Fused water log-odds: the prior plus every cue's capped log-likelihood ratio.
+    pub fn water_log_odds(&self, f: &Fusion) -> f64 {
+        let c = self.cue_log_odds(f);
+        (f.prior / (1.0 - f.prior)).ln() + c.noret + c.reflect + c.bottom + c.reflectivity
+    }
+
+    /// Fused water probability, 0..1.
+    pub fn water_probability(&self, f: &Fusion) -> f64 {
+        let l = self.water_log_odds(f);
+        1.0 / (1.0 + (-l).exp())
+    }
+}
+
+/// Each cue's contribution to a cell's log-odds (natural log).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CueLogOdds {
+    pub noret: f64,
+    pub reflect: f64,
+    pub bottom: f64,
+    pub reflectivity: f64,
+}
+
+/// The likelihoods of the fusion rule (see the module documentation). The defaults are
+/// stated assumptions about sensors, not fits to a scene:
+///
+/// * `p_dropout = 0.05`: a dry ground beam returns nothing 5 % of the time (the RELLIS-3D
+///   Ouster ground rings lose 1–6 %);
+/// * `p_water_return = 0.10`: a water beam inside the interval still returns (a ripple, a
+///   floating leaf) 10 % of the time;
+/// * reflections: a confirmed run (below ground, behind a gap, range wrapping backward) is
+///   found on 80 % of reflecting water rays and on 2 % of dry rays (stereo mismatches);
+/// * bottom returns: 80 % against 10 % (a return below the shore level, at a depth the
+///   optics say is visible, on dry ground needs a hole, a ditch or rough ground);
+/// * reflectivity: the dark threshold is set so that about 15 % of dry ground is dark, and
+///   wet ground is dark 60 % of the time: a weak cue by design;
+/// * `prior = 0.05`, `cue_cap = ln 100`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Fusion {
+    pub prior: f64,
+    pub p_dropout: f64,
+    pub p_water_return: f64,
+    pub p_reflect_detect: f64,
+    pub p_reflect_false: f64,
+    pub p_bottom_detect: f64,
+    pub p_bottom_false: f64,
+    pub p_dark_wet: f64,
+    pub p_dark_dry: f64,
+    pub cue_cap: f64,
+}
+
+impl Default for Fusion {
+    fn default() -> Self {
+        Fusion {
+            prior: 0.05,
+            p_dropout: 0.05,
+            p_water_return: 0.10,
+            p_reflect_detect: 0.8,
+            p_reflect_false: 0.02,
+            p_bottom_detect: 0.8,
+            p_bottom_false: 0.10,
+            p_dark_wet: 0.6,
+            p_dark_dry: 0.15,
+            cue_cap: 100f64.ln(),
+        }
+    }
+}
+
+impl Fusion {
+    /// Every probability must lie strictly inside (0, 1) and the cap be positive.
+    pub fn validate(&self) -> Result<()> {
+        for (name, p) in [
+            ("prior", self.prior),
+            ("p_dropout", self.p_dropout),
+            ("p_water_return", self.p_water_return),
+            ("p_reflect_detect", self.p_reflect_detect),
+            ("p_reflect_false", self.p_reflect_false),
+            ("p_bottom_detect", self.p_bottom_detect),
+            ("p_bottom_false", self.p_bottom_false),
+            ("p_dark_wet", self.p_dark_wet),
+            ("p_dark_dry", self.p_dark_dry),
+        ] {
+            if !(p > 0.0 && p < 1.0) {
+                return Err(Error::invalid(
+                    format!("fusion {name}"),
+                    format!("{p} is not a probability strictly between 0 and 1"),
+                ));
+            }
+        }
+        if !(self.cue_cap.is_finite() && self.cue_cap > 0.0) {
+            return Err(Error::invalid(
+                "fusion cue_cap",
+                format!("{} is not a finite positive number", self.cue_cap),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn arb_evidence() -> impl Strategy<Value = Evidence> {
+        (
+            prop::array::uniform5(any::<u16>()),
+            0u32..1000,
+            -1_000_000i64..1_000_000,
+            prop::collection::vec(0.0f64..3.0, 0..5),
+        )
+            .prop_map(|(c, ln, ls, depths)| {
+                let mut e = Evidence {
+                    noret: c[0],
+                    diag_ret: c[1],
+                    reflect: c[2],
+                    dark: c[3],
+                    lit: c[4],
+                    level_n: ln,
+                    level_sum_mm: ls,
+                    ..Evidence::default()
+                };
+                for d in depths {
+                    e.add_depth(d);
+                }
+                e
+            })
+    }
+
+    proptest! {
+        #[test]
+        fn merge_is_commutative_and_associative(
+            a in arb_evidence(), b in arb_evidence(), c in arb_evidence()
+        ) {
+            let mut ab_c = a; ab_c.merge(&b); ab_c.merge(&c);
+            let mut bc = b; bc.merge(&c);
+            let mut a_bc = a; a_bc.merge(&bc);
+            let mut cba = c; cba.merge(&b); cba.merge(&a);
+            prop_assert_eq!(ab_c, a_bc);
+            prop_assert_eq!(ab_c, cba);
+        }
+
+        #[test]
+        fn more_no_returns_never_lower_the_water_probability(n in 0u16..200, r in 0u16..200) {
+            let f = Fusion::default();
+            let e = Evidence { noret: n, diag_ret: r, ..Evidence::default() };
+            let e2 = Evidence { noret: n + 1, diag_ret: r, ..Evidence::default() };
+            prop_assert!(e2.water_probability(&f) >= e.water_probability(&f));
+            let e3 = Evidence { noret: n, diag_ret: r + 1, ..Evidence::default() };
+            prop_assert!(e3.water_probability(&f) <= e.water_probability(&f));
+        }
+    }
+
+    #[test]
+    fn no_evidence_reads_the_prior_and_one_cue_is_capped() {
+        let f = Fusion::default();
+        assert!((Evidence::default().water_probability(&f) - f.prior).abs() < 1e-12);
+        let e = Evidence {
+            reflect: 1000,
+            ..Evidence::default()
+        };
+        // ln(0.05/0.95) + ln 100 = ln(100/19): p = 100/119.
+        assert!((e.water_probability(&f) - 100.0 / 119.0).abs() < 1e-9);
+        // One no-return and one return inside the interval: ln(0.9/0.05) + ln(0.1/0.95).
+        let e = Evidence {
+            noret: 1,
+            diag_ret: 1,
+            ..Evidence::default()
+        };
+        let l = e.cue_log_odds(&f).noret;
+        assert!((l - (18.0f64 * 0.1 / 0.95).ln()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn storage_per_cell() {
+        assert_eq!(EVIDENCE_BYTES_PER_CELL, 38);
+        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 56 + 38);
+        eprintln!(
+            "tile map cell: {} bytes (CellStats), evidence {} bytes (Evidence)",
+            std::mem::size_of::<crate::grid::CellStats>(),
+            std::mem::size_of::<Evidence>()
+        );
+    }
+
+    #[test]
+    fn depth_statistics_of_known_samples() {
+        let mut e = Evidence::default();
+        for d in [0.10, 0.20, 0.30] {
+            e.add_depth(d);
+        }
+        assert!((e.depth_m().unwrap() - 0.2).abs() < 1e-12);
+        assert!((e.depth_std_m().unwrap() - (0.02f64 / 3.0).sqrt()).abs() < 1e-9);
+        e.add_depth(-1.0);
+        assert_eq!(e.depth_n, 4);
+        assert_eq!(e.depth_sum_mm, 600);
+    }
+
+    #[test]
+    fn invalid_fusion_is_rejected() {
+        let f = Fusion {
+            p_dropout: 0.0,
+            ..Fusion::default()
+        };
+        let e = f.validate().unwrap_err().to_string();
+        assert!(e.contains("p_dropout"), "{e}");
+    }
+}
