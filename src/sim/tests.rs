@@ -524,3 +524,84 @@ proptest::proptest! {
         }
     }
 }
+
+/// What a camera at (x0, 0, h) sees on the pond `look` m ahead (+x) and on dry soil `look`
+/// m to its right (−y).
+fn water_and_ground_from(
+    hours: f64,
+    sky: &str,
+    x0: f64,
+    h: f64,
+    look: f64,
+) -> (Radiance, Radiance) {
+    let t = scene_text(
+        0.5,
+        &format!("[sky]\nkind = \"{sky}\"\ntime_of_day = {hours}\n"),
+    );
+    let w = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
+    let light = Light::new(&w);
+    let o = Point3::new(x0, 0.0, h);
+    let e = ((h + 0.2) / look).atan();
+    let to_water = Vector3::new(e.cos(), 0.0, -e.sin());
+    let e_g = (h / look).atan();
+    let to_ground = Vector3::new(0.0, -e_g.cos(), -e_g.sin());
+    assert!(matches!(
+        w.cast(&o, &to_water, 100.0).unwrap().surface,
+        Surface::Water { .. }
+    ));
+    let g = w.cast(&o, &to_ground, 100.0).unwrap();
+    assert!(
+        matches!(g.surface, Surface::Solid { .. }) && w.water_at(g.point.x, g.point.y).is_none()
+    );
+    (
+        radiance(&w, &light, &o, &to_water, 300.0),
+        radiance(&w, &light, &o, &to_ground, 300.0),
+    )
+}
+
+fn water_and_ground(hours: f64, sky: &str) -> (Radiance, Radiance) {
+    water_and_ground_from(hours, sky, 0.0, 1.5, 12.0)
+}
+
+#[test]
+fn mwir_water_is_warmer_than_ground_at_night_and_cooler_by_day() {
+    let (w, g) = water_and_ground(2.0, "clear");
+    assert!(
+        w.mwir > g.mwir + 2.0,
+        "night: water {} K, ground {} K",
+        w.mwir,
+        g.mwir
+    );
+    let (w, g) = water_and_ground(14.0, "clear");
+    assert!(
+        w.mwir < g.mwir - 2.0,
+        "day: water {} K, ground {} K",
+        w.mwir,
+        g.mwir
+    );
+}
+
+#[test]
+fn swir_water_is_dark_at_moderate_incidence_and_bright_at_grazing() {
+    // From 5 m up, 5 m ahead: incidence about 45°, Fresnel R about 3 %.
+    let (moderate, g) = water_and_ground_from(12.0, "overcast", 6.0, 5.0, 5.0);
+    assert!(
+        moderate.swir < 0.2 * g.swir,
+        "SWIR water {} vs soil {}",
+        moderate.swir,
+        g.swir
+    );
+    // From 1.5 m, 12 m ahead: about 82°, the surface reflection takes over.
+    let (grazing, _) = water_and_ground(12.0, "overcast");
+    assert!(
+        grazing.swir > 3.0 * moderate.swir,
+        "{} vs {}",
+        grazing.swir,
+        moderate.swir
+    );
+    // Night is darker than noon in the visible.
+    let lum = |r: &Radiance| r.rgb.iter().sum::<f64>();
+    let (w_noon, g_noon) = water_and_ground(12.0, "clear");
+    let (w_night, g_night) = water_and_ground(0.5, "clear");
+    assert!(lum(&g_night) < 0.1 * lum(&g_noon) && lum(&w_night) < lum(&w_noon));
+}
