@@ -85,6 +85,36 @@ pub struct MapCell {
     pub below: u32,
 }
 
+impl MapCell {
+    /// The record of a tile-map cell with the given surface, water and class.
+    #[allow(clippy::too_many_arguments)]
+    fn of(
+        tiles: &TileMap,
+        key: CellKey,
+        c: &crate::grid::CellStats,
+        z: f64,
+        water: f32,
+        depth: f32,
+        class: Class,
+        hazard: Hazard,
+    ) -> Self {
+        let (x, y) = tiles.centre_of(key);
+        MapCell {
+            key,
+            x,
+            y,
+            z,
+            elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
+            water,
+            depth,
+            class,
+            hazard,
+            hits: c.hits,
+            below: c.below,
+        }
+    }
+}
+
 /// A map ready for export: observed cells in a deterministic order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HazardMap {
@@ -101,20 +131,16 @@ impl HazardMap {
             .observed()
             .filter_map(|(key, c)| {
                 let z = tiles.elevation(&c)?;
-                let (x, y) = tiles.centre_of(key);
-                Some(MapCell {
+                Some(MapCell::of(
+                    tiles,
                     key,
-                    x,
-                    y,
+                    &c,
                     z,
-                    elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
-                    water: 0.0,
-                    depth: 0.0,
-                    class: Class::Ground,
-                    hazard: Hazard::Free,
-                    hits: c.hits,
-                    below: c.below,
-                })
+                    0.0,
+                    0.0,
+                    Class::Ground,
+                    Hazard::Free,
+                ))
             })
             .collect();
         HazardMap {
@@ -143,7 +169,6 @@ impl HazardMap {
                 } else {
                     elevation.or(level)
                 }?;
-                let (x, y) = tiles.centre_of(key);
                 let depth = if water {
                     c.ev.depth_m().unwrap_or(f64::NAN)
                 } else {
@@ -162,19 +187,16 @@ impl HazardMap {
                 } else {
                     (Class::Ground, Hazard::Free)
                 };
-                Some(MapCell {
+                Some(MapCell::of(
+                    tiles,
                     key,
-                    x,
-                    y,
+                    &c,
                     z,
-                    elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
-                    water: p as f32,
-                    depth: depth as f32,
+                    p as f32,
+                    depth as f32,
                     class,
                     hazard,
-                    hits: c.hits,
-                    below: c.below,
-                })
+                ))
             })
             .collect();
         HazardMap {
