@@ -26,14 +26,7 @@ fn write_log(path: &std::path::Path, compression: LogCompression) {
     )
     .unwrap();
     let t0: i64 = 1_700_000_000_000_000_000;
-    let ts = |parent: &str, child: &str, ns: i64, p| TransformStamped {
-        header: Header {
-            stamp: Time::from_nanos(ns),
-            frame_id: parent.into(),
-        },
-        child_frame_id: child.into(),
-        child_to_parent: p,
-    };
+    let ts = TransformStamped::new;
     w.write_tf(
         "/tf_static",
         &TfMessage {

@@ -22,14 +22,7 @@ fn vm_hwm_kb() -> Option<u64> {
 fn write(scans: usize, path: &str) -> tarn::Result<()> {
     let mut w = LogWriter::create(path, &WriteOptions::default())?;
     let t0: i64 = 1_700_000_000_000_000_000;
-    let ts = |parent: &str, child: &str, ns: i64, p| TransformStamped {
-        header: Header {
-            stamp: Time::from_nanos(ns),
-            frame_id: parent.into(),
-        },
-        child_frame_id: child.into(),
-        child_to_parent: p,
-    };
+    let ts = TransformStamped::new;
     w.write_tf(
         "/tf_static",
         &TfMessage {

@@ -10,7 +10,7 @@ use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::grid::GridConfig;
 use tarn::io::mcap_log::{LogWriter, WriteOptions};
 use tarn::io::ply;
-use tarn::io::ros::{Header, TfMessage, Time, TransformStamped};
+use tarn::io::ros::{Header, TfMessage, TransformStamped};
 
 const NS: u64 = 1_000_000_000;
 const SLOPE: f64 = 0.05;
@@ -36,10 +36,7 @@ fn lidar_ext() -> Pose {
 }
 
 fn hdr(ns: u64, f: &str) -> Header {
-    Header {
-        stamp: Time::from_nanos(ns as i64),
-        frame_id: f.into(),
-    }
+    Header::new(f, ns as i64)
 }
 
 /// A 16-ring scan of the plane z = SLOPE·x, seen from `sensor_to_map`, with ±1 cm noise.
@@ -68,11 +65,7 @@ fn scan(sensor_to_map: &Pose, k: u64) -> PointCloud {
 
 fn write_log(path: &Path, frames: u64) {
     let mut w = LogWriter::create(path, &WriteOptions::default()).unwrap();
-    let ext = TransformStamped {
-        header: hdr(0, "base_link"),
-        child_frame_id: "lidar".into(),
-        child_to_parent: lidar_ext(),
-    };
+    let ext = TransformStamped::new("base_link", "lidar", 0, lidar_ext());
     w.write_tf(
         "/tf_static",
         &TfMessage {
@@ -84,11 +77,7 @@ fn write_log(path: &Path, frames: u64) {
     for k in 0..=frames {
         let ns = k * NS / 10;
         let t = ns as f64 * 1e-9;
-        let tf = TransformStamped {
-            header: hdr(ns, "map"),
-            child_frame_id: "base_link".into(),
-            child_to_parent: base(t),
-        };
+        let tf = TransformStamped::new("map", "base_link", ns as i64, base(t));
         w.write_tf(
             "/tf",
             &TfMessage {

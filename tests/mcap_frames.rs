@@ -9,8 +9,7 @@ use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::io::frames::{Frame, FrameStream, LogConfig};
 use tarn::io::mcap_log::{summarize, LogCompression, LogReader, LogWriter, WriteOptions};
 use tarn::io::ros::{
-    cloud_to_pointcloud2, Endian, Header, Image, ImageMsg, Pixels, TfMessage, Time,
-    TransformStamped,
+    cloud_to_pointcloud2, Endian, Header, Image, ImageMsg, Pixels, TfMessage, TransformStamped,
 };
 
 const NS: i64 = 1_000_000_000;
@@ -37,18 +36,11 @@ fn cam_ext() -> Pose {
 }
 
 fn hdr(ns: i64, f: &str) -> Header {
-    Header {
-        stamp: Time::from_nanos(ns),
-        frame_id: f.into(),
-    }
+    Header::new(f, ns)
 }
 
 fn ts(parent: &str, child: &str, ns: i64, p: Pose) -> TransformStamped {
-    TransformStamped {
-        header: hdr(ns, parent),
-        child_frame_id: child.into(),
-        child_to_parent: p,
-    }
+    TransformStamped::new(parent, child, ns, p)
 }
 
 fn scan(k: usize) -> PointCloud {

@@ -235,18 +235,10 @@ impl TfBuffer {
 mod tests {
     use super::*;
     use crate::geom::pose_xyz_rpy;
-    use crate::io::ros::{Header, Time};
     use proptest::prelude::*;
 
     fn ts(parent: &str, child: &str, ns: i64, p: Pose) -> TransformStamped {
-        TransformStamped {
-            header: Header {
-                stamp: Time::from_nanos(ns),
-                frame_id: parent.into(),
-            },
-            child_frame_id: child.into(),
-            child_to_parent: p,
-        }
+        TransformStamped::new(parent, child, ns, p)
     }
 
     fn close(a: &Pose, b: &Pose) -> bool {

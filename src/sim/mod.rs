@@ -124,11 +124,7 @@ fn header(t: f64, frame: &str) -> Header {
 }
 
 fn tf(t: f64, parent: &str, child: &str, pose: Pose) -> TransformStamped {
-    TransformStamped {
-        header: header(t, parent),
-        child_frame_id: child.into(),
-        child_to_parent: pose,
-    }
+    TransformStamped::new(parent, child, stamp_ns(t), pose)
 }
 
 /// Frame names of the simulated sensors.

@@ -51,6 +51,14 @@ pub struct Header {
 }
 
 impl Header {
+    /// A header for `frame_id` stamped `stamp_ns` nanoseconds.
+    pub fn new(frame_id: &str, stamp_ns: i64) -> Self {
+        Header {
+            stamp: Time::from_nanos(stamp_ns),
+            frame_id: frame_id.into(),
+        }
+    }
+
     fn read(r: &mut CdrReader) -> CdrResult<Self> {
         Ok(Header {
             stamp: Time::read(r)?,
@@ -71,6 +79,17 @@ pub struct TransformStamped {
     pub header: Header,
     pub child_frame_id: String,
     pub child_to_parent: Pose,
+}
+
+impl TransformStamped {
+    /// The pose of `child` in `parent` at `stamp_ns` nanoseconds.
+    pub fn new(parent: &str, child: &str, stamp_ns: i64, child_to_parent: Pose) -> Self {
+        TransformStamped {
+            header: Header::new(parent, stamp_ns),
+            child_frame_id: child.into(),
+            child_to_parent,
+        }
+    }
 }
 
 /// `tf2_msgs/msg/TFMessage`.
