@@ -17,6 +17,7 @@ use crate::geom::PointCloud;
 use crate::grid::{key_of, CellKey, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap};
 use crate::hazard::HazardMap;
 use crate::io::export;
+use crate::mapper::{Mapper, MapperConfig, StageTimes};
 
 /// Parameters of an offline build.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -341,8 +342,16 @@ pub struct LogBuildReport {
     pub log_duration_s: f64,
     /// Log duration over build time (offline speed).
     pub x_realtime: f64,
+    /// The cues that ran (`lidar`, `reflectivity`, `stereo`, `mirror`).
+    pub cues: Vec<String>,
+    /// The lidar height the cue model used (given, or estimated from the first scans).
+    pub lidar_height_m: Option<f64>,
+    /// The lidar cues' no-return diagnostic interval (lookahead, m).
+    pub diagnostic_interval_m: Option<(f64, f64)>,
     pub lidar_points: IngestStats,
     pub stereo_points: IngestStats,
+    /// What the cues found, summed over frames.
+    pub cue_counts: CueCounts,
     pub frames: crate::io::frames::FrameStats,
     /// Messages or frames that could not be used, with where and why.
     pub errors: Vec<String>,
@@ -351,22 +360,137 @@ pub struct LogBuildReport {
     pub cells_observed: usize,
     pub tiles: usize,
     pub elevation_range_m: Option<(f64, f64)>,
+    /// What the map holds: water cells, area, depths, hazards.
+    pub water: WaterSummary,
     pub timings_s: Timings,
+    /// Sum over frames of each stage of [`crate::mapper::Mapper::update`] (s).
+    pub stage_totals_s: StageTimes,
+    /// Per-frame latency of each stage (ms).
+    pub stage_latency_ms: Vec<StageLatency>,
+}
+
+/// Cue events summed over a build.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CueCounts {
+    pub lidar_noret: u64,
+    pub lidar_diag_ret: u64,
+    pub lidar_bottom: u64,
+    pub lidar_specular: u64,
+    pub lidar_dark: u64,
+    pub stereo_runs: u64,
+    pub stereo_reflected_points: u64,
+    pub evidence_cells: u64,
+    pub evidence_dropped: u64,
+}
+
+impl CueCounts {
+    fn add(&mut self, r: &crate::cues::FrameCuesReport) {
+        if let Some(l) = &r.lidar {
+            self.lidar_noret += l.noret;
+            self.lidar_diag_ret += l.diag_ret;
+            self.lidar_bottom += l.bottom;
+            self.lidar_specular += l.specular;
+            self.lidar_dark += l.dark;
+        }
+        self.stereo_runs += r.stereo_runs as u64;
+        self.stereo_reflected_points += r.stereo_reflected_points as u64;
+        self.evidence_cells += r.evidence_cells as u64;
+        self.evidence_dropped += r.evidence_dropped as u64;
+    }
+}
+
+/// The water in a hazard map.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct WaterSummary {
+    pub water_cells: usize,
+    pub water_area_m2: f64,
+    /// Water cells with a measured depth, and their depths.
+    pub depth_cells: usize,
+    pub depth_mean_m: Option<f64>,
+    pub depth_max_m: Option<f64>,
+    /// Cells per hazard code: free, shallow water, deep or unknown-depth water, obstacle.
+    pub hazard_cells: [usize; 4],
+    /// Cells with any water evidence (probability above the prior).
+    pub cells_with_evidence: usize,
+}
+
+impl WaterSummary {
+    pub fn of(map: &HazardMap, fusion: &crate::grid::Fusion) -> Self {
+        use crate::hazard::Class;
+        let mut s = WaterSummary::default();
+        let mut depths = Vec::new();
+        for c in &map.cells {
+            s.hazard_cells[c.hazard as usize] += 1;
+            if c.water as f64 > fusion.prior + 1e-6 {
+                s.cells_with_evidence += 1;
+            }
+            if c.class == Class::Water {
+                s.water_cells += 1;
+                if c.depth.is_finite() {
+                    depths.push(c.depth as f64);
+                }
+            }
+        }
+        s.water_area_m2 = s.water_cells as f64 * map.resolution * map.resolution;
+        s.depth_cells = depths.len();
+        if !depths.is_empty() {
+            s.depth_mean_m = Some(depths.iter().sum::<f64>() / depths.len() as f64);
+            s.depth_max_m = depths.iter().copied().reduce(f64::max);
+        }
+        s
+    }
+}
+
+/// Median, 95th percentile and maximum of one stage's per-frame time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageLatency {
+    pub stage: String,
+    pub median_ms: f64,
+    pub p95_ms: f64,
+    pub max_ms: f64,
+}
+
+/// Latency statistics per stage of a sequence of per-frame stage times (nearest-rank
+/// percentiles).
+pub fn stage_latency(times: &[StageTimes]) -> Vec<StageLatency> {
+    StageTimes::NAMES
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let mut v: Vec<f64> = times.iter().map(|t| t.values()[k] * 1e3).collect();
+            v.sort_by(f64::total_cmp);
+            let rank = |q: f64| {
+                if v.is_empty() {
+                    0.0
+                } else {
+                    v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
+                }
+            };
+            StageLatency {
+                stage: name.to_string(),
+                median_ms: rank(0.5),
+                p95_ms: rank(0.95),
+                max_ms: v.last().copied().unwrap_or(0.0),
+            }
+        })
+        .collect()
 }
 
 /// Settings of a log build.
 #[derive(Debug, Clone, Default)]
 pub struct LogBuildConfig {
-    pub grid: GridConfig,
+    /// The pipeline: grid, fusion, vehicle, sensors and cues.
+    pub mapper: MapperConfig,
     pub log: crate::io::frames::LogConfig,
     /// Use this topic for frames; by default the lidar topic, or the stereo topic when the
     /// log has no lidar messages.
     pub frame_topic: Option<String>,
 }
 
-/// Builds the elevation map of a ROS 2 log: each frame's lidar and stereo clouds are fused
-/// at their own poses into a rolling window centred on the vehicle; cells that leave it go
-/// to the global tile map. `progress(bytes_read, bytes_total)`.
+/// Builds the map of a ROS 2 log through the online [`Mapper`] (one code path for online
+/// and offline): each frame is fused at its pose into a rolling window centred on the
+/// vehicle, with the configured cues; cells that leave it go to the global tile map. At the
+/// end the hazard map of everything is exported. `progress(bytes_read, bytes_total)`.
 ///
 /// A damaged or truncated log still gives the map of everything before the damage; the
 /// report says where reading stopped.
@@ -380,7 +504,7 @@ pub fn build_log(
     use crate::io::mcap_log;
 
     let t0 = Instant::now();
-    cfg.grid.validate()?;
+    let mut mapper = Mapper::new(cfg.mapper.clone())?;
     let summary = mcap_log::summarize(input)?;
     let mut log_cfg = cfg.log.clone();
     log_cfg.frame_topic = match &cfg.frame_topic {
@@ -401,12 +525,13 @@ pub fn build_log(
         }
     };
     let mut stream = FrameStream::open(input, &log_cfg)?;
-    let mut grid: Option<RollingGrid> = None;
-    let mut tiles = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
+    let mut counts = CueCounts::default();
     let mut errors = Vec::new();
     let mut frames_fused = 0u64;
     let mut t_fuse = 0.0;
+    let mut stage_totals = StageTimes::default();
+    let mut per_frame = Vec::new();
     while let Some(item) = stream.next() {
         let (done, total) = stream.progress();
         progress(done, total);
@@ -418,36 +543,31 @@ pub fn build_log(
             }
         };
         let t = Instant::now();
-        let c = frame.base_to_map.translation.vector;
-        let g = match grid.as_mut() {
-            Some(g) => {
-                g.recenter(c.x, c.y, &mut tiles)?;
-                g
+        match mapper.update(&frame) {
+            Ok(r) => {
+                if let Some(s) = r.lidar_points() {
+                    lidar.merge(s);
+                }
+                if let Some(s) = r.stereo_points() {
+                    stereo.merge(s);
+                }
+                counts.add(&r.cues);
+                stage_totals.add(&r.times_s);
+                per_frame.push(r.times_s);
+                frames_fused += 1;
             }
-            None => grid.insert(RollingGrid::new(cfg.grid.clone(), c.x, c.y)?),
-        };
-        let at = |what: &str, e: Error| format!("frame at {:.6} s, {what}: {e}", frame.stamp);
-        if let Some(cloud) = &frame.lidar {
-            match g.ingest(cloud, &RangeNoise::LIDAR) {
-                Ok(s) => lidar.merge(&s),
-                Err(e) => errors.push(at("lidar", e)),
-            }
+            Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
         }
-        if let Some(cloud) = &frame.stereo {
-            match g.ingest(cloud, &RangeNoise::STEREO) {
-                Ok(s) => stereo.merge(&s),
-                Err(e) => errors.push(at("stereo", e)),
-            }
-        }
-        frames_fused += 1;
         t_fuse += t.elapsed().as_secs_f64();
     }
-    if let Some(g) = grid.as_mut() {
-        g.flush(&mut tiles);
-    }
+    let cues = cue_names(mapper.config());
+    let lidar_height_m = mapper.lidar_height();
+    let diagnostic_interval_m = mapper.diagnostic_interval();
+    let fusion = mapper.config().fusion;
+    let (gcfg, res) = (mapper.config().grid.clone(), mapper.config().grid.resolution);
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let map = HazardMap::from_elevation(&tiles);
+    let (tiles, map) = mapper.finish_map();
     export::write_map_files(out, &map)?;
     let t_export = t2.elapsed().as_secs_f64();
     let total = t0.elapsed().as_secs_f64();
@@ -455,27 +575,56 @@ pub fn build_log(
         tarn_version: env!("CARGO_PKG_VERSION").to_string(),
         input: input.to_path_buf(),
         output: out.to_path_buf(),
-        resolution_m: cfg.grid.resolution,
-        window_cells: cfg.grid.size_cells,
+        resolution_m: res,
+        window_cells: gcfg.size_cells,
         frame_topic: log_cfg.frame_topic.clone(),
         frames_fused,
         log_duration_s: summary.duration_s,
         x_realtime: summary.duration_s / total.max(1e-9),
+        cues,
+        lidar_height_m,
+        diagnostic_interval_m,
         lidar_points: lidar,
         stereo_points: stereo,
+        cue_counts: counts,
         frames: stream.stats().clone(),
         errors,
         damage: summary.damage.clone(),
         cells_observed: map.cells.len(),
         tiles: tiles.tile_count(),
         elevation_range_m: export::elevation_range(&map.cells),
+        water: WaterSummary::of(&map, &fusion),
         timings_s: Timings {
             read: t_read_fuse - t_fuse,
             fuse: t_fuse,
             export: t_export,
             total,
         },
+        stage_totals_s: stage_totals,
+        stage_latency_ms: stage_latency(&per_frame),
     };
     export::write_json(&out.join("report.json"), &report)?;
     Ok(report)
+}
+
+/// The cues a config runs, by name.
+pub fn cue_names(cfg: &MapperConfig) -> Vec<String> {
+    let mut v = Vec::new();
+    if let Some(l) = &cfg.lidar {
+        if l.cues {
+            v.push("lidar".to_string());
+        }
+        if l.cues && l.reflectivity {
+            v.push("reflectivity".to_string());
+        }
+    }
+    if let Some(s) = &cfg.stereo {
+        if s.reflections {
+            v.push("stereo".to_string());
+        }
+        if s.reflections && s.mirror_check {
+            v.push("mirror".to_string());
+        }
+    }
+    v
 }

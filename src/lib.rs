@@ -16,6 +16,7 @@ pub mod geom;
 pub mod grid;
 pub mod hazard;
 pub mod io;
+pub mod mapper;
 pub mod optics;
 pub mod project;
 pub mod sim;

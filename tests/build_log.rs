@@ -8,6 +8,7 @@ use nalgebra::{Point3, Vector3};
 use tarn::build::{build_log, LogBuildConfig};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::grid::GridConfig;
+use tarn::mapper::MapperConfig;
 use tarn::io::mcap_log::{LogWriter, WriteOptions};
 use tarn::io::ply;
 use tarn::io::ros::{Header, TfMessage, TransformStamped};
@@ -101,9 +102,12 @@ fn map_of_a_drive_matches_the_terrain() {
     let log = dir.path().join("drive.mcap");
     write_log(&log, 100);
     let cfg = LogBuildConfig {
-        grid: GridConfig {
-            size_cells: 200, // a 20 m window: the drive (20 m) makes it roll
-            ..GridConfig::default()
+        mapper: MapperConfig {
+            grid: GridConfig {
+                size_cells: 200, // a 20 m window: the drive (20 m) makes it roll
+                ..GridConfig::default()
+            },
+            ..MapperConfig::default()
         },
         ..Default::default()
     };

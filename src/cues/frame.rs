@@ -68,6 +68,19 @@ impl FrameCues {
     /// merges the evidence.
     pub fn apply(&self, frame: &Frame, grid: &mut RollingGrid) -> Result<FrameCuesReport> {
         let mut rep = FrameCuesReport::default();
+        self.apply_lidar(frame, grid, &mut rep)?;
+        self.apply_stereo(frame, grid, &mut rep)?;
+        Ok(rep)
+    }
+
+    /// The lidar half of [`FrameCues::apply`]: runs only when a lidar cue model is
+    /// configured and the frame has a lidar cloud.
+    pub fn apply_lidar(
+        &self,
+        frame: &Frame,
+        grid: &mut RollingGrid,
+        rep: &mut FrameCuesReport,
+    ) -> Result<()> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(model), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
             let out = model.run(cloud, res, z_ref)?;
@@ -77,6 +90,18 @@ impl FrameCues {
             rep.evidence_cells += batch.len();
             rep.evidence_dropped += grid.apply_evidence(&batch);
         }
+        Ok(())
+    }
+
+    /// The stereo half of [`FrameCues::apply`]: runs only when the stereo cue is configured
+    /// and the frame has a stereo cloud.
+    pub fn apply_stereo(
+        &self,
+        frame: &Frame,
+        grid: &mut RollingGrid,
+        rep: &mut FrameCuesReport,
+    ) -> Result<()> {
+        let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(scfg), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
             let gray = match (&frame.image, self.cfg.mirror_check) {
                 (Some(img), true) if img.camera.is_some() => Some(gray_of(&img.image)?),
@@ -98,6 +123,6 @@ impl FrameCues {
             rep.evidence_cells += batch.len();
             rep.evidence_dropped += grid.apply_evidence(&batch);
         }
-        Ok(rep)
+        Ok(())
     }
 }

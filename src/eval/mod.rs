@@ -46,7 +46,12 @@ pub struct BinMetrics {
     pub depth_rms_m: Option<f64>,
     pub terrain_cells: usize,
     pub terrain_rms_m: Option<f64>,
+    /// Dry truth cells whose map z is more than [`SUNK_M`] below the true terrain.
+    pub sunk_cells: usize,
 }
+
+/// How far below the true terrain a dry cell's map z must be to count as sunk (m).
+pub const SUNK_M: f64 = 0.15;
 
 #[derive(Debug, Clone, Default)]
 struct Acc {
@@ -77,6 +82,9 @@ impl Acc {
             }
         } else {
             self.m.dry_cells += 1;
+            if cell.z < t.z - SUNK_M {
+                self.m.sunk_cells += 1;
+            }
             if called {
                 self.m.false_water += 1;
             } else if matches!(t.class, Class::Ground | Class::SnowIce) {
@@ -219,14 +227,57 @@ pub fn evaluate(map: &HazardMap, truth: &HazardMap, info: &TruthInfo) -> Result<
     })
 }
 
-/// Reads `MAPDIR/map.ply`, `TRUTHDIR/truth.ply` and `TRUTHDIR/truth.json` and scores.
-pub fn evaluate_dirs(map_dir: &Path, truth_dir: &Path) -> Result<EvalReport> {
+/// Scores the cells whose distance to the path is in `[lo, hi)` m, like one bin of
+/// [`evaluate`] (`range` is "lo-hi").
+pub fn evaluate_band(
+    map: &HazardMap,
+    truth: &HazardMap,
+    info: &TruthInfo,
+    lo: f64,
+    hi: f64,
+) -> Result<BinMetrics> {
+    if !(truth.resolution > 0.0) {
+        return Err(Error::invalid(
+            "truth",
+            format!("resolution {} must be > 0", truth.resolution),
+        ));
+    }
+    if !(lo >= 0.0 && hi > lo) {
+        return Err(Error::invalid(
+            "range band",
+            format!("{lo}-{hi} m must satisfy 0 ≤ lo < hi"),
+        ));
+    }
+    let res = truth.resolution;
+    let index: HashMap<CellKey, &MapCell> = truth.cells.iter().map(|c| (c.key, c)).collect();
+    let path: Vec<[f64; 2]> = info.trajectory.iter().map(|p| [p.x, p.y]).collect();
+    let mut acc = Acc::default();
+    for c in &map.cells {
+        let d = distance_to_path(&path, c.x, c.y);
+        if d >= lo && d < hi {
+            let key = CellKey::new((c.x / res).floor() as i64, (c.y / res).floor() as i64);
+            acc.add(c, index.get(&key).copied());
+        }
+    }
+    let mut m = acc.finish();
+    m.range = format!("{lo}-{hi}");
+    Ok(m)
+}
+
+/// Reads `MAPDIR/map.ply`, `TRUTHDIR/truth.ply` and `TRUTHDIR/truth.json`.
+pub fn read_dirs(map_dir: &Path, truth_dir: &Path) -> Result<(HazardMap, HazardMap, TruthInfo)> {
     let map = crate::io::mapfile::read_map_ply(&map_dir.join("map.ply"))?;
     let truth = crate::io::mapfile::read_map_ply(&truth_dir.join("truth.ply"))?;
     let jp = truth_dir.join("truth.json");
     let text = std::fs::read_to_string(&jp).map_err(|e| Error::io(&jp, e))?;
     let info: TruthInfo = serde_json::from_str(&text)
         .map_err(|e| Error::format(&jp, format!("line {}", e.line()), e.to_string()))?;
+    Ok((map, truth, info))
+}
+
+/// Reads `MAPDIR/map.ply`, `TRUTHDIR/truth.ply` and `TRUTHDIR/truth.json` and scores.
+pub fn evaluate_dirs(map_dir: &Path, truth_dir: &Path) -> Result<EvalReport> {
+    let (map, truth, info) = read_dirs(map_dir, truth_dir)?;
     evaluate(&map, &truth, &info)
 }
 
@@ -241,6 +292,59 @@ mod tests {
         assert_eq!(distance_to_path(&p, 13.0, 5.0), 3.0);
         assert_eq!(distance_to_path(&p, -4.0, 3.0), 5.0);
         assert_eq!(distance_to_path(&p[..1], 3.0, 4.0), 5.0);
+    }
+
+    #[test]
+    fn a_band_scores_only_its_cells_and_counts_sunk_ones() {
+        use crate::hazard::Hazard;
+        use crate::sim::{TruthInfo, TruthPose};
+        let cell = |kx: i64, z: f64, class: Class| MapCell {
+            key: CellKey::new(kx, 0),
+            x: (kx as f64 + 0.5) * 1.0,
+            y: 0.5,
+            z,
+            elevation_std: 0.0,
+            water: 0.0,
+            depth: 0.0,
+            class,
+            hazard: Hazard::Free,
+            hits: 1,
+            below: 0,
+        };
+        let truth = HazardMap {
+            resolution: 1.0,
+            cells: (0..40).map(|k| cell(k, 0.0, if k == 12 { Class::Water } else { Class::Ground })).collect(),
+        };
+        // Ground at 0; the map sinks cell 8 (a reflection fused as terrain) and calls 12 water.
+        let mut map = truth.clone();
+        map.cells[8].z = -0.5;
+        map.cells[20].z = -0.1;
+        let info = TruthInfo {
+            scene: "t".into(),
+            description: String::new(),
+            seed: 0,
+            resolution: 1.0,
+            fording_depth_m: 0.3,
+            origin: [0.0, 0.0],
+            size: [40.0, 1.0],
+            trajectory: vec![TruthPose {
+                stamp: 0.0,
+                x: 0.0,
+                y: 0.5,
+                z: 0.0,
+                yaw: 0.0,
+            }],
+            water_bodies: Vec::new(),
+            class_counts: [0; 6],
+            topics: Vec::new(),
+        };
+        let b = evaluate_band(&map, &truth, &info, 5.0, 25.0).unwrap();
+        // Cells 5..=24 have centres at 5.5..24.5 m.
+        assert_eq!(b.observed_cells, 20);
+        assert_eq!((b.water_cells, b.water_detected), (1, 1));
+        assert_eq!(b.sunk_cells, 1);
+        assert_eq!(b.range, "5-25");
+        assert!(evaluate_band(&map, &truth, &info, 5.0, 5.0).is_err());
     }
 
     #[test]

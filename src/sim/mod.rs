@@ -4,7 +4,8 @@
 //! [`simulate`] turns a [`Scene`] into `DIR/log.mcap` (the DESIGN.md contract topics, only
 //! for the sensors the rig configures), `DIR/truth.ply` (the `map.ply` schema: one vertex
 //! per truth cell), `DIR/truth.json` ([`TruthInfo`]) and `DIR/scene.ply` (the terrain and
-//! object mesh the rays were cast against). `maps/README.md` documents the formats.
+//! object mesh the rays were cast against), and `DIR/mapper.toml` ([`mapper_config`]: the
+//! rig as the mapper is told about it). `maps/README.md` documents the formats.
 //!
 //! `sim` sits beside the pipeline: it uses every module, no pipeline module uses it.
 
@@ -17,6 +18,7 @@ mod world;
 #[cfg(test)]
 mod tests;
 
+use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
@@ -152,6 +154,47 @@ pub fn write_scene_mesh(w: &World, path: &Path) -> Result<()> {
         &verts,
         &w.triangles,
     )
+}
+
+/// The [`MapperConfig`](crate::mapper::MapperConfig) of a scene's rig: what the operator of
+/// that vehicle knows about its sensors — the lidar's wavelength, sensitivity (dry limit and
+/// reference albedo), aperture, mounting height above base_link (which the simulator puts on
+/// the terrain) and range noise; the stereo range noise from its disparity noise
+/// (`σ_z = z² σ_d / (f B)`); the fording depth. The water clarity is a configured
+/// assumption: the first water body's attenuation when the scene sets one, else pure water.
+/// Every cue on. `tarn simulate` writes it as `DIR/mapper.toml`.
+pub fn mapper_config(scene: &Scene) -> crate::mapper::MapperConfig {
+    use crate::grid::RangeNoise;
+    use crate::mapper::{LidarConfig, MapperConfig, StereoConfig, VehicleConfig};
+    MapperConfig {
+        vehicle: VehicleConfig {
+            fording_depth_m: scene.fording_depth,
+        },
+        lidar: scene.rig.lidar.as_ref().map(|l| LidarConfig {
+            wavelength_nm: l.wavelength_nm,
+            attenuation_per_m: scene.water.iter().find_map(|w| w.attenuation),
+            dry_limit_m: l.dry_limit_m,
+            height_m: Some(l.position[2]),
+            albedo: l.reference_albedo,
+            aperture_diameter_m: l.aperture_m,
+            noise: RangeNoise {
+                sigma0: l.range_noise_m.max(0.01),
+                ..RangeNoise::LIDAR
+            },
+            ..LidarConfig::default()
+        }),
+        stereo: scene.rig.stereo.as_ref().map(|s| {
+            let f_px = s.width as f64 / 2.0 / (s.hfov_deg.to_radians() / 2.0).tan();
+            let mut c = StereoConfig::default();
+            c.cue.noise = RangeNoise {
+                sigma0: 0.005,
+                per_m: 0.0,
+                per_m2: s.disparity_noise_px.max(0.05) / (f_px * s.baseline_m),
+            };
+            c
+        }),
+        ..MapperConfig::default()
+    }
 }
 
 /// Simulates `scene` into `out_dir` (created if missing).
@@ -337,6 +380,13 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         topics,
     };
     crate::io::export::write_json(&out_dir.join("truth.json"), &info)?;
+    let mcfg = mapper_config(scene).to_toml()?;
+    crate::io::export::write_atomic(&out_dir.join("mapper.toml"), |w| {
+        w.write_all(
+            format!("# The mapper config of the rig of scene {:?} (tarn simulate).\n{mcfg}", scene.name)
+                .as_bytes(),
+        )
+    })?;
     write_scene_mesh(&w, &out_dir.join("scene.ply"))?;
     write_s += tw.elapsed().as_secs_f64();
     rep.render_s = render_s;

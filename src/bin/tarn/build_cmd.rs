@@ -7,10 +7,11 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tarn::build::{
     build_file, build_log, check_output_dir, BuildConfig, BuildReport, LogBuildConfig,
-    LogBuildReport,
+    LogBuildReport, WaterSummary,
 };
 use tarn::grid::{GridConfig, RangeNoise};
 use tarn::io::frames::LogConfig;
+use tarn::mapper::MapperConfig;
 
 #[derive(Args)]
 pub struct BuildArgs {
@@ -19,24 +20,34 @@ pub struct BuildArgs {
     /// Output directory (created if needed; files are replaced atomically).
     #[arg(long)]
     pub out: PathBuf,
-    /// Cell size, metres.
-    #[arg(long, default_value_t = 0.10)]
-    pub resolution: f64,
+    /// Cell size, metres [default: 0.10, or the mapper config's].
+    #[arg(long)]
+    pub resolution: Option<f64>,
     /// (cloud) Elevation noise of the input points, metres (one σ).
     #[arg(long, default_value_t = 0.02)]
     pub noise_sigma: f64,
     /// (cloud) Largest window side, cells; larger clouds are built in blocks.
     #[arg(long, default_value_t = 2048)]
     pub max_window_cells: usize,
-    /// (log) Side of the rolling window around the vehicle, cells.
-    #[arg(long, default_value_t = 400)]
-    pub window_cells: usize,
+    /// (log) Side of the rolling window around the vehicle, cells [default: 400, or the
+    /// mapper config's].
+    #[arg(long)]
+    pub window_cells: Option<usize>,
     /// (log) Topic whose clouds make frames (default: lidar, or stereo if the log has no lidar).
     #[arg(long)]
     pub frame_topic: Option<String>,
-    /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
+    /// (log) Mapper configuration (.toml, or JSON): grid, fusion, vehicle, lidar and stereo
+    /// sections, fields of tarn::mapper::MapperConfig, all optional. `tarn simulate` writes
+    /// the one of its rig as DIR/mapper.toml.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// (log) Which water cues run: all, none, or a list of lidar, reflectivity, stereo,
+    /// mirror [default: the config's; all without a config].
+    #[arg(long)]
+    pub cues: Option<String>,
+    /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
+    #[arg(long)]
+    pub log_config: Option<PathBuf>,
     /// Print the report as JSON instead of a summary.
     #[arg(long)]
     pub json: bool,
@@ -48,24 +59,17 @@ impl BuildArgs {
         BuildArgs {
             input,
             out,
-            resolution: 0.10,
+            resolution: None,
             noise_sigma: 0.02,
             max_window_cells: 2048,
-            window_cells: 400,
+            window_cells: None,
             frame_topic: None,
             config: None,
+            cues: None,
+            log_config: None,
             json: false,
         }
     }
-}
-
-/// Where the default scene lives: next to the binary's crate, or in the working directory.
-pub fn default_scene() -> PathBuf {
-    let here = PathBuf::from("maps/default.ply");
-    if here.exists() {
-        return here;
-    }
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("maps/default.ply")
 }
 
 fn progress_bar(template: &str) -> ProgressBar {
@@ -84,11 +88,17 @@ fn is_log(p: &Path) -> bool {
 /// damaged (the map holds everything before the damage).
 pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     check_output_dir(&a.out)?;
-    let grid = GridConfig {
-        resolution: a.resolution,
-        ..GridConfig::default()
-    };
     if !is_log(&a.input) {
+        if a.config.is_some() || a.cues.is_some() || a.log_config.is_some() {
+            anyhow::bail!(
+                "--config, --cues and --log-config are for logs (.mcap); {} is a cloud",
+                a.input.display()
+            );
+        }
+        let grid = GridConfig {
+            resolution: a.resolution.unwrap_or(0.10),
+            ..GridConfig::default()
+        };
         let r = run_cloud(a, grid)?;
         if a.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
@@ -97,30 +107,7 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let log = match &a.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
-            serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a log config", p.display()))?
-        }
-        None => LogConfig::default(),
-    };
-    let cfg = LogBuildConfig {
-        grid: GridConfig {
-            size_cells: a.window_cells,
-            ..grid
-        },
-        log,
-        frame_topic: a.frame_topic.clone(),
-    };
-    let bar =
-        progress_bar("{spinner} reading {bar:40} {binary_bytes}/{binary_total_bytes} ({eta})");
-    let r = build_log(&a.input, &a.out, &cfg, &mut |done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
-    });
-    bar.finish_and_clear();
-    let r = r.with_context(|| format!("building {}", a.input.display()))?;
+    let r = run_log(a)?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
@@ -130,6 +117,50 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         Some(d) => anyhow::bail!("the map holds what came before the damage: {d}"),
         None => Ok(()),
     }
+}
+
+/// The mapper config of `tarn build LOG`: the file's (or the default), then the options.
+pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
+    let mut cfg = match &a.config {
+        Some(p) => MapperConfig::load(p)?,
+        None => MapperConfig::default(),
+    };
+    if let Some(r) = a.resolution {
+        cfg.grid.resolution = r;
+    }
+    if let Some(n) = a.window_cells {
+        cfg.grid.size_cells = n;
+    }
+    if let Some(c) = &a.cues {
+        cfg.set_cues(c)?;
+    }
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// Builds a log with a progress bar (frames and bytes); returns the report.
+pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
+    let log = match &a.log_config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
+            serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a log config", p.display()))?
+        }
+        None => LogConfig::default(),
+    };
+    let cfg = LogBuildConfig {
+        mapper: mapper_config(a)?,
+        log,
+        frame_topic: a.frame_topic.clone(),
+    };
+    let bar =
+        progress_bar("{spinner} mapping {bar:40} {binary_bytes}/{binary_total_bytes} ({eta})");
+    let r = build_log(&a.input, &a.out, &cfg, &mut |done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
+    });
+    bar.finish_and_clear();
+    r.with_context(|| format!("building {}", a.input.display()))
 }
 
 pub fn run_cloud(a: &BuildArgs, grid: GridConfig) -> anyhow::Result<BuildReport> {
@@ -207,6 +238,25 @@ fn print_log_summary(r: &LogBuildReport) {
     if let Some((lo, hi)) = r.elevation_range_m {
         println!("  elevation {lo:.3}..{hi:.3} m");
     }
+    if !r.cues.is_empty() {
+        println!(
+            "  cues {}{}{}",
+            r.cues.join(","),
+            r.lidar_height_m
+                .map_or(String::new(), |h| format!("; lidar {h:.2} m above the ground")),
+            r.diagnostic_interval_m.map_or(String::new(), |(a, b)| format!(
+                ", no-return diagnostic {a:.1}–{b:.1} m"
+            ))
+        );
+        let c = &r.cue_counts;
+        println!(
+            "  lidar no-return {} (returned {}), bottom {}, specular {}, dark {}; stereo runs {} ({} reflected points)",
+            c.lidar_noret, c.lidar_diag_ret, c.lidar_bottom, c.lidar_specular, c.lidar_dark,
+            c.stereo_runs, c.stereo_reflected_points
+        );
+    }
+    print_water(&r.water);
+    print_latency(r);
     for e in r.errors.iter().take(10) {
         println!("  skipped: {e}");
     }
@@ -217,4 +267,45 @@ fn print_log_summary(r: &LogBuildReport) {
         );
     }
     println!("  wrote map.ply terrain.ply map.png report.json");
+}
+
+pub fn print_water(w: &WaterSummary) {
+    let depth = match (w.depth_mean_m, w.depth_max_m) {
+        (Some(m), Some(x)) => format!(
+            "; depth measured in {} cells: mean {m:.2} m, max {x:.2} m; unknown in {}",
+            w.depth_cells,
+            w.water_cells - w.depth_cells
+        ),
+        _ if w.water_cells > 0 => "; depth unknown (no bottom returns)".to_string(),
+        _ => String::new(),
+    };
+    println!(
+        "  water {} cells ({:.1} m²){depth}",
+        w.water_cells, w.water_area_m2
+    );
+    let h = &w.hazard_cells;
+    println!(
+        "  hazards: free {}, shallow water {}, deep or unknown-depth water {}, obstacle {}",
+        h[0], h[1], h[2], h[3]
+    );
+}
+
+pub fn print_latency(r: &LogBuildReport) {
+    let cell = |name: &str| {
+        r.stage_latency_ms
+            .iter()
+            .find(|s| s.stage == name)
+            .map_or("–".to_string(), |s| {
+                format!("{:.1}/{:.1}/{:.1}", s.median_ms, s.p95_ms, s.max_ms)
+            })
+    };
+    println!(
+        "  per frame (ms, median/p95/max): recentre {}, lidar {}, stereo {}, labels {}, water {}, total {}",
+        cell("recentre"),
+        cell("lidar"),
+        cell("stereo"),
+        cell("labels"),
+        cell("water"),
+        cell("total")
+    );
 }

@@ -5,6 +5,7 @@ mod classify_cmd;
 mod cloud_cmd;
 mod cues_cmd;
 mod log_cmd;
+mod main_job;
 mod optics_cmd;
 mod sim_cmd;
 
@@ -25,7 +26,8 @@ use build_cmd::BuildArgs;
     version,
     about = "Terrain maps and water hazards for off-road vehicles",
     long_about = "Terrain maps and water hazards for off-road vehicles.\n\n\
-                  With no command, builds the default scene shipped in maps/ into out/default."
+                  With no command: simulates maps/default.toml into out/default/sim, builds its \
+                  map into out/default, scores it against the truth, and prints what it found."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -41,8 +43,9 @@ enum Compression {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Build a map from a point cloud in the map frame (.ply or KITTI .bin) and write the
-    /// contract files: map.ply, terrain.ply, map.png, report.json.
+    /// Build a map from a ROS 2 log (.mcap: the full pipeline with water cues) or a point
+    /// cloud in the map frame (.ply or KITTI .bin) and write the contract files: map.ply,
+    /// terrain.ply, map.png, report.json.
     Build(BuildArgs),
     /// Lidar propagation over water: bottom returns, maximum measurable depth, and the
     /// lookahead interval where a missing return is diagnostic of water.
@@ -106,10 +109,10 @@ fn is_log(p: &std::path::Path) -> bool {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        None => build_cmd::run(&BuildArgs::defaults(
-            build_cmd::default_scene(),
-            PathBuf::from("out/default"),
-        )),
+        None => main_job::run(
+            &main_job::default_scene_toml(),
+            &PathBuf::from("out/default"),
+        ),
         Some(Command::Build(a)) => build_cmd::run(&a),
         Some(Command::Simulate(a)) => sim_cmd::run_simulate(&a),
         Some(Command::Eval(a)) => sim_cmd::run_eval(&a),

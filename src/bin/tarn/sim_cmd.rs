@@ -55,18 +55,58 @@ pub struct EvalArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Also score this range band from the path, `LO,HI` metres (e.g. 5,25): a row
+    /// (JSON: "band") after the bins.
+    #[arg(long, value_parser = parse_band)]
+    pub band: Option<(f64, f64)>,
+}
+
+fn parse_band(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("{s:?}: expected LO,HI in metres"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<f64>()
+            .map_err(|e| format!("{v:?} in {s:?}: {e}"))
+    };
+    Ok((p(a)?, p(b)?))
 }
 
 pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
-    let r = tarn::eval::evaluate_dirs(&a.map_dir, &a.truth)?;
+    let (map, truth, info) = tarn::eval::read_dirs(&a.map_dir, &a.truth)?;
+    let r = tarn::eval::evaluate(&map, &truth, &info)?;
+    let band = a
+        .band
+        .map(|(lo, hi)| tarn::eval::evaluate_band(&map, &truth, &info, lo, hi))
+        .transpose()?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        let mut v = serde_json::to_value(&r)?;
+        if let Some(b) = &band {
+            v["band"] = serde_json::to_value(b)?;
+        }
+        println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
             "scene {} (map {} m, truth {} m cells)",
             r.scene, r.map_resolution, r.truth_resolution
         );
         print!("{}", r.markdown());
+        if let Some(b) = &band {
+            let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
+            println!(
+                "band {} m: {} observed, water recall {} ({} of {}), false-positive rate {} ({} of {}), sunk dry cells {}",
+                b.range,
+                b.observed_cells,
+                f(b.water_recall),
+                b.water_detected,
+                b.water_cells,
+                f(b.false_positive_rate),
+                b.false_water,
+                b.dry_cells,
+                b.sunk_cells
+            );
+        }
     }
     Ok(())
 }

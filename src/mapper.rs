@@ -1,0 +1,677 @@
+//! The online pipeline (DESIGN.md's data flow): one [`Mapper::update`] per [`Frame`].
+//!
+//! Each update runs these stages, timed separately in its [`FrameReport`]:
+//!
+//! 1. **recentre** — the rolling window follows the vehicle; cells that leave it go to the
+//!    global [`TileMap`] (kept for [`Mapper::finish`]);
+//! 2. **lidar** — the lidar cues ([`crate::cues::LidarCueModel`]: no-return, bottom and
+//!    specular returns, reflectivity) and the ingest of the corrected scan; without lidar
+//!    cues the raw scan is ingested;
+//! 3. **stereo** — the stereo reflection cue ([`crate::cues::stereo_reflections`], with the
+//!    mirror-image check when configured and the frame has a camera image) and the ingest of
+//!    the corrected cloud; without the cue the raw cloud is ingested;
+//! 4. **labels** — image classification projected onto the map: not built here yet (see
+//!    [`Mapper::update`]); the stage is timed so that its cost shows when it lands;
+//! 5. **water** — the hazard map of the window, published as the new snapshot.
+//!
+//! The cue work is [`crate::cues::FrameCues`]'s; the mapper only decides what runs. A sensor
+//! the config leaves out (`lidar`/`stereo` absent) runs no code at all, not even ingest.
+//!
+//! ## Snapshots
+//!
+//! [`Mapper::hazard_map`] returns an `Arc<HazardMap>`: an immutable map of the window as it
+//! was after the last update. Taking it is a reference-count increment. The mapper never
+//! changes a published map; the water stage builds a new one and swaps the pointer
+//! ([`MapSnapshots`], a mutex held only for that swap or for cloning the pointer). So a
+//! planner thread holding a snapshot, or calling [`MapSnapshots::latest`] from another
+//! thread, reads a consistent map while the mapper fuses the next frame.
+//!
+//! ## Determinism
+//!
+//! Cell statistics and evidence are exact integers (see [`crate::grid`]), the cues are
+//! independent of thread count, so the map after any sequence of frames is bit-identical
+//! for any number of rayon threads. `build_log` runs this same code, so an online run and an
+//! offline build of a log give the same map.
+
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::cues::{
+    estimate_sensor_height, BeamModel, FrameCueConfig, FrameCues, FrameCuesReport,
+    LidarCueConfig, LidarCueModel, ReflectivityConfig, StereoCueConfig,
+};
+use crate::error::{Error, Result};
+use crate::grid::{Fusion, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap};
+use crate::hazard::HazardMap;
+use crate::io::frames::Frame;
+use crate::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
+
+/// The vehicle, as far as hazards need it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VehicleConfig {
+    /// Deepest water the vehicle may ford (m).
+    pub fording_depth_m: f64,
+}
+
+impl Default for VehicleConfig {
+    fn default() -> Self {
+        VehicleConfig {
+            fording_depth_m: 0.3,
+        }
+    }
+}
+
+/// The lidar: how its scans are fused and which of its cues run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LidarConfig {
+    /// Run the geometric lidar cues (no-return inside the diagnostic interval, bottom and
+    /// specular returns). Off: the raw scan is fused, nothing else.
+    pub cues: bool,
+    /// Run the reflectivity-drop cue (needs `cues`; uses the scan's intensity or
+    /// reflectivity channel when it has one).
+    pub reflectivity: bool,
+    /// Wavelength (nm): pure-water absorption when `attenuation_per_m` is not given.
+    pub wavelength_nm: f64,
+    /// Water clarity: total attenuation (1/m). Absent: pure water at `wavelength_nm`.
+    pub attenuation_per_m: Option<f64>,
+    /// Lookahead (m) at which level dry ground of `albedo` stops returning (the
+    /// sensitivity).
+    pub dry_limit_m: f64,
+    /// Height of the sensor above the ground (m). Absent: estimated from the first scan
+    /// with enough ground returns ([`estimate_sensor_height`]) and kept.
+    pub height_m: Option<f64>,
+    /// Lambertian albedo of bottom and ground at the wavelength.
+    pub albedo: f64,
+    pub aperture_diameter_m: f64,
+    pub n_water: f64,
+    /// Directions of missing beams are inferred from the scan across at most this fraction
+    /// of a row.
+    pub max_gap_fraction: f64,
+    /// Range noise of the returns.
+    pub noise: RangeNoise,
+    pub cue: LidarCueConfig,
+    pub reflectivity_cue: ReflectivityConfig,
+}
+
+impl Default for LidarConfig {
+    /// A 905 nm spinning lidar whose returns from 30 % ground end at 40 m: the default
+    /// scene's sensor (`maps/default.toml`).
+    fn default() -> Self {
+        LidarConfig {
+            cues: true,
+            reflectivity: true,
+            wavelength_nm: 905.0,
+            attenuation_per_m: None,
+            dry_limit_m: 40.0,
+            height_m: None,
+            albedo: 0.3,
+            aperture_diameter_m: 0.0254,
+            n_water: 1.33,
+            max_gap_fraction: 0.25,
+            noise: RangeNoise::LIDAR,
+            cue: LidarCueConfig::default(),
+            reflectivity_cue: ReflectivityConfig::default(),
+        }
+    }
+}
+
+/// The stereo camera: how its clouds are fused and which of its cues run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StereoConfig {
+    /// Run the stereo reflection cue. Off: the raw cloud is fused.
+    pub reflections: bool,
+    /// Confirm reflections by mirror-image correlation of the camera image (when the frame
+    /// has one with its camera model).
+    pub mirror_check: bool,
+    /// Cue settings, and the range noise used to fuse the cloud.
+    pub cue: StereoCueConfig,
+}
+
+impl Default for StereoConfig {
+    fn default() -> Self {
+        StereoConfig {
+            reflections: true,
+            mirror_check: true,
+            cue: StereoCueConfig::default(),
+        }
+    }
+}
+
+/// Everything the [`Mapper`] needs. Loadable from TOML or JSON ([`MapperConfig::load`]);
+/// unknown keys are errors; [`MapperConfig::validate`] names the field that is wrong.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapperConfig {
+    pub grid: GridConfig,
+    pub fusion: Fusion,
+    pub vehicle: VehicleConfig,
+    /// The lidar; absent: lidar scans are not used at all.
+    pub lidar: Option<LidarConfig>,
+    /// The stereo camera; absent: stereo clouds are not used at all.
+    pub stereo: Option<StereoConfig>,
+}
+
+impl Default for MapperConfig {
+    fn default() -> Self {
+        MapperConfig {
+            grid: GridConfig::default(),
+            fusion: Fusion::default(),
+            vehicle: VehicleConfig::default(),
+            lidar: Some(LidarConfig::default()),
+            stereo: Some(StereoConfig::default()),
+        }
+    }
+}
+
+/// The cue names of [`MapperConfig::set_cues`].
+pub const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
+
+impl MapperConfig {
+    /// Reads a config from a `.toml` file, or JSON for any other extension. Errors name the
+    /// file, and the key and line where parsing failed; then the config is validated.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let is_toml = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+        let cfg: MapperConfig = if is_toml {
+            toml::from_str(&text).map_err(|e| {
+                let loc = e
+                    .span()
+                    .map(|s| format!("line {}", text[..s.start].lines().count().max(1)))
+                    .unwrap_or_else(|| "mapper config".into());
+                Error::format(path, loc, e.message().to_string())
+            })?
+        } else {
+            serde_json::from_str(&text).map_err(|e| {
+                Error::format(
+                    path,
+                    format!("line {} column {}", e.line(), e.column()),
+                    e.to_string(),
+                )
+            })?
+        };
+        cfg.validate()
+            .map_err(|e| Error::format(path, "mapper config", e.to_string()))?;
+        Ok(cfg)
+    }
+
+    /// The config as TOML text (what [`MapperConfig::load`] reads back).
+    pub fn to_toml(&self) -> Result<String> {
+        toml::to_string(self).map_err(|e| Error::invalid("mapper config", e.to_string()))
+    }
+
+    /// Rejects values no mapper can run with; the error names the field
+    /// (`lidar.dry_limit_m`, `fusion.prior`, ...).
+    pub fn validate(&self) -> Result<()> {
+        let named = |section: &str, r: Result<()>| {
+            r.map_err(|e| match e {
+                Error::Invalid { what, message } => Error::invalid(
+                    format!("mapper config {section}: {what}"),
+                    message,
+                ),
+                e => e,
+            })
+        };
+        named("grid", self.grid.validate())?;
+        named("fusion", self.fusion.validate())?;
+        let v = self.vehicle.fording_depth_m;
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(Error::invalid(
+                "mapper config vehicle.fording_depth_m",
+                format!("{v} is not a finite depth ≥ 0 m"),
+            ));
+        }
+        if let Some(l) = &self.lidar {
+            let pos = |name: &str, v: f64| {
+                if v.is_finite() && v > 0.0 {
+                    Ok(())
+                } else {
+                    Err(Error::invalid(
+                        format!("mapper config lidar.{name}"),
+                        format!("{v} is not a finite number > 0"),
+                    ))
+                }
+            };
+            pos("wavelength_nm", l.wavelength_nm)?;
+            pos("dry_limit_m", l.dry_limit_m)?;
+            pos("aperture_diameter_m", l.aperture_diameter_m)?;
+            if let Some(c) = l.attenuation_per_m {
+                pos("attenuation_per_m", c)?;
+            }
+            if let Some(h) = l.height_m {
+                pos("height_m", h)?;
+            }
+            if !(l.albedo > 0.0 && l.albedo <= 1.0) {
+                return Err(Error::invalid(
+                    "mapper config lidar.albedo",
+                    format!("{} is not in (0, 1]", l.albedo),
+                ));
+            }
+            if !(l.n_water.is_finite() && l.n_water >= 1.0) {
+                return Err(Error::invalid(
+                    "mapper config lidar.n_water",
+                    format!("{} is not a refractive index ≥ 1", l.n_water),
+                ));
+            }
+            if !(l.max_gap_fraction.is_finite() && l.max_gap_fraction >= 0.0) {
+                return Err(Error::invalid(
+                    "mapper config lidar.max_gap_fraction",
+                    format!("{} is not a number ≥ 0", l.max_gap_fraction),
+                ));
+            }
+            if l.reflectivity && !l.cues {
+                return Err(Error::invalid(
+                    "mapper config lidar.reflectivity",
+                    "the reflectivity cue runs inside the lidar cues: set lidar.cues too",
+                ));
+            }
+            named("lidar.noise", l.noise.validate())?;
+            named("lidar.cue", l.cue.validate())?;
+            named("lidar.reflectivity_cue", l.reflectivity_cue.validate())?;
+        }
+        if let Some(s) = &self.stereo {
+            if s.mirror_check && !s.reflections {
+                return Err(Error::invalid(
+                    "mapper config stereo.mirror_check",
+                    "the mirror check confirms stereo reflections: set stereo.reflections too",
+                ));
+            }
+            named("stereo.cue", s.cue.validate())?;
+        }
+        Ok(())
+    }
+
+    /// Turns the cues on or off by name: `"all"`, `"none"`, or a comma-separated list of
+    /// [`CUE_NAMES`] (`lidar` — no-return, bottom and specular; `reflectivity`; `stereo` —
+    /// reflections; `mirror` — their mirror-image check). Listed cues run, the others not.
+    /// A cue of a sensor the config leaves out is an error.
+    pub fn set_cues(&mut self, spec: &str) -> Result<()> {
+        let spec = spec.trim();
+        let names: Vec<&str> = match spec {
+            "all" => {
+                let mut v = Vec::new();
+                if self.lidar.is_some() {
+                    v.extend(["lidar", "reflectivity"]);
+                }
+                if self.stereo.is_some() {
+                    v.extend(["stereo", "mirror"]);
+                }
+                v
+            }
+            "none" | "" => Vec::new(),
+            s => s.split(',').map(str::trim).collect(),
+        };
+        for n in &names {
+            if !CUE_NAMES.contains(n) {
+                return Err(Error::invalid(
+                    "cue list",
+                    format!(
+                        "unknown cue {n:?} in {spec:?} (cues: all, none, or {})",
+                        CUE_NAMES.join(",")
+                    ),
+                ));
+            }
+        }
+        let on = |n: &str| names.contains(&n);
+        let need = |n: &str, sensor: &str| {
+            Error::invalid(
+                "cue list",
+                format!("cue {n:?} needs the {sensor}, which the config leaves out"),
+            )
+        };
+        match &mut self.lidar {
+            Some(l) => {
+                l.cues = on("lidar") || on("reflectivity");
+                l.reflectivity = on("reflectivity");
+            }
+            None if on("lidar") || on("reflectivity") => return Err(need("lidar", "lidar")),
+            None => {}
+        }
+        match &mut self.stereo {
+            Some(s) => {
+                s.reflections = on("stereo") || on("mirror");
+                s.mirror_check = on("mirror");
+            }
+            None if on("stereo") || on("mirror") => return Err(need("stereo", "stereo camera")),
+            None => {}
+        }
+        Ok(())
+    }
+
+    /// The optics of the configured lidar at sensor height `height_m`.
+    fn lidar_optics(l: &LidarConfig, height_m: f64) -> LidarModelConfig {
+        LidarModelConfig {
+            height_m,
+            attenuation: match l.attenuation_per_m {
+                Some(c) => Attenuation::PerMetre(c),
+                None => Attenuation::PureWater {
+                    wavelength_nm: l.wavelength_nm,
+                },
+            },
+            albedo: l.albedo,
+            aperture_diameter_m: l.aperture_diameter_m,
+            n_water: l.n_water,
+            sensitivity: Sensitivity::DryLimit(l.dry_limit_m),
+            solid_angle: SolidAngleForm::Exact,
+        }
+    }
+}
+
+/// Wall time of each stage of one update, seconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageTimes {
+    pub recentre: f64,
+    /// Lidar cues and the ingest of the (corrected) scan.
+    pub lidar: f64,
+    /// Stereo reflections and the ingest of the (corrected) cloud.
+    pub stereo: f64,
+    /// Image labels (not built yet: always 0).
+    pub labels: f64,
+    /// The window's hazard map, published as the snapshot.
+    pub water: f64,
+    pub total: f64,
+}
+
+impl StageTimes {
+    pub const NAMES: [&'static str; 6] = ["recentre", "lidar", "stereo", "labels", "water", "total"];
+
+    pub fn values(&self) -> [f64; 6] {
+        [
+            self.recentre,
+            self.lidar,
+            self.stereo,
+            self.labels,
+            self.water,
+            self.total,
+        ]
+    }
+
+    pub fn add(&mut self, o: &StageTimes) {
+        self.recentre += o.recentre;
+        self.lidar += o.lidar;
+        self.stereo += o.stereo;
+        self.labels += o.labels;
+        self.water += o.water;
+        self.total += o.total;
+    }
+}
+
+/// What one frame contributed.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct FrameReport {
+    pub stamp: f64,
+    /// Frames fused so far, this one included.
+    pub frame_index: u64,
+    /// Raw ingest of a scan or cloud whose cue did not run.
+    pub lidar_ingest: Option<IngestStats>,
+    pub stereo_ingest: Option<IngestStats>,
+    /// What the cues did (their ingest of corrected clouds included).
+    pub cues: FrameCuesReport,
+    /// The lidar height used by the cue model (given or estimated), once known.
+    pub lidar_height_m: Option<f64>,
+    /// Cells of the published snapshot, and those called water.
+    pub snapshot_cells: usize,
+    pub snapshot_water_cells: usize,
+    pub times_s: StageTimes,
+}
+
+impl FrameReport {
+    /// Points of the frame's lidar scan offered to the grid (raw or corrected).
+    pub fn lidar_points(&self) -> Option<&IngestStats> {
+        self.cues.lidar_ingest.as_ref().or(self.lidar_ingest.as_ref())
+    }
+
+    pub fn stereo_points(&self) -> Option<&IngestStats> {
+        self.cues.stereo_ingest.as_ref().or(self.stereo_ingest.as_ref())
+    }
+}
+
+/// A handle on the mapper's latest published hazard map, for other threads.
+#[derive(Debug, Clone)]
+pub struct MapSnapshots {
+    latest: Arc<Mutex<Arc<HazardMap>>>,
+}
+
+impl MapSnapshots {
+    /// The latest published map (a pointer copy under a briefly held lock).
+    pub fn latest(&self) -> Arc<HazardMap> {
+        match self.latest.lock() {
+            Ok(g) => Arc::clone(&g),
+            // A panic elsewhere while the pointer was swapped cannot leave it half-written:
+            // the stored Arc is still a whole map.
+            Err(p) => Arc::clone(&p.into_inner()),
+        }
+    }
+
+    fn publish(&self, map: Arc<HazardMap>) {
+        match self.latest.lock() {
+            Ok(mut g) => *g = map,
+            Err(p) => *p.into_inner() = map,
+        }
+    }
+}
+
+/// The online mapper. See the module documentation.
+pub struct Mapper {
+    cfg: MapperConfig,
+    cues: FrameCues,
+    /// The lidar height the cue model was built for.
+    lidar_height: Option<f64>,
+    grid: Option<RollingGrid>,
+    global: TileMap,
+    snapshots: MapSnapshots,
+    frames: u64,
+}
+
+impl Mapper {
+    /// A mapper for `cfg` (validated). With a given lidar height the cue model is built
+    /// here; with `height_m` absent, on the first scan that allows the estimate.
+    pub fn new(cfg: MapperConfig) -> Result<Mapper> {
+        cfg.validate()?;
+        let mut fc = FrameCueConfig {
+            lidar: None,
+            lidar_noise: cfg.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise),
+            stereo: cfg
+                .stereo
+                .as_ref()
+                .filter(|s| s.reflections)
+                .map(|s| s.cue),
+            mirror_check: cfg.stereo.as_ref().is_some_and(|s| s.mirror_check),
+        };
+        let mut lidar_height = None;
+        if let Some(l) = cfg.lidar.as_ref().filter(|l| l.cues) {
+            if let Some(h) = l.height_m {
+                fc.lidar = Some(Self::cue_model(l, h)?);
+                lidar_height = Some(h);
+            }
+        }
+        let global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
+        let empty = Arc::new(HazardMap {
+            resolution: cfg.grid.resolution,
+            cells: Vec::new(),
+        });
+        Ok(Mapper {
+            cfg,
+            cues: FrameCues::new(fc),
+            lidar_height,
+            grid: None,
+            global,
+            snapshots: MapSnapshots {
+                latest: Arc::new(Mutex::new(empty)),
+            },
+            frames: 0,
+        })
+    }
+
+    fn cue_model(l: &LidarConfig, height_m: f64) -> Result<LidarCueModel> {
+        LidarCueModel::new(
+            MapperConfig::lidar_optics(l, height_m),
+            BeamModel::Infer {
+                max_gap_fraction: l.max_gap_fraction,
+            },
+            l.cue,
+            l.reflectivity.then_some(l.reflectivity_cue),
+        )
+    }
+
+    pub fn config(&self) -> &MapperConfig {
+        &self.cfg
+    }
+
+    /// Frames fused so far.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// The lidar height the cue model uses, once known.
+    pub fn lidar_height(&self) -> Option<f64> {
+        self.lidar_height
+    }
+
+    /// The lidar cues' diagnostic interval (m of lookahead), once the cue model exists.
+    pub fn diagnostic_interval(&self) -> Option<(f64, f64)> {
+        self.cues.cfg.lidar.as_ref().and_then(|m| m.interval())
+    }
+
+    /// The rolling window (after the first frame).
+    pub fn grid(&self) -> Option<&RollingGrid> {
+        self.grid.as_ref()
+    }
+
+    /// Fuses one frame. On error (a bad cloud in the frame) the frame's remaining stages
+    /// are skipped; what was fused before the error stays.
+    pub fn update(&mut self, frame: &Frame) -> Result<FrameReport> {
+        let t0 = Instant::now();
+        let mut rep = FrameReport {
+            stamp: frame.stamp,
+            ..FrameReport::default()
+        };
+        let mut times = StageTimes::default();
+
+        // 1. recentre
+        let t = Instant::now();
+        let c = frame.base_to_map.translation.vector;
+        if !(c.x.is_finite() && c.y.is_finite()) {
+            return Err(Error::invalid(
+                format!("frame at {:.6} s", frame.stamp),
+                "vehicle position is not finite",
+            ));
+        }
+        let grid = match self.grid.as_mut() {
+            Some(g) => {
+                g.recenter(c.x, c.y, &mut self.global)?;
+                g
+            }
+            None => self
+                .grid
+                .insert(RollingGrid::new(self.cfg.grid.clone(), c.x, c.y)?),
+        };
+        times.recentre = t.elapsed().as_secs_f64();
+
+        // 2. lidar
+        let t = Instant::now();
+        if let (Some(l), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
+            if l.cues && self.cues.cfg.lidar.is_none() {
+                if let Some(h) = estimate_sensor_height(cloud) {
+                    // Centimetres: the estimate is a median of noisy returns.
+                    let h = (h * 100.0).round() / 100.0;
+                    if h > 0.0 {
+                        self.cues.cfg.lidar = Some(Self::cue_model(l, h)?);
+                        self.lidar_height = Some(h);
+                    }
+                }
+            }
+            if self.cues.cfg.lidar.is_some() {
+                self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
+            } else {
+                rep.lidar_ingest = Some(grid.ingest(cloud, &l.noise)?);
+            }
+        }
+        rep.lidar_height_m = self.lidar_height;
+        times.lidar = t.elapsed().as_secs_f64();
+
+        // 3. stereo
+        let t = Instant::now();
+        if let (Some(s), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
+            if s.reflections {
+                self.cues.apply_stereo(frame, grid, &mut rep.cues)?;
+            } else {
+                rep.stereo_ingest = Some(grid.ingest(cloud, &s.cue.noise)?);
+            }
+        }
+        times.stereo = t.elapsed().as_secs_f64();
+
+        // 4. labels — IMAGE LABELS GO HERE: `FrameLabels::apply(frame, grid)` (colour, SWIR
+        // and MWIR classification projected onto the map as evidence) runs at this point,
+        // configured by a `labels` section of MapperConfig. Not built in this module.
+        let t = Instant::now();
+        times.labels = t.elapsed().as_secs_f64();
+
+        // 5. water: the window's hazard map, published.
+        let t = Instant::now();
+        let map = Arc::new(self.window_map()?);
+        rep.snapshot_cells = map.cells.len();
+        rep.snapshot_water_cells = map.class_counts()[crate::hazard::Class::Water as usize];
+        self.snapshots.publish(map);
+        times.water = t.elapsed().as_secs_f64();
+
+        self.frames += 1;
+        rep.frame_index = self.frames;
+        times.total = t0.elapsed().as_secs_f64();
+        rep.times_s = times;
+        Ok(rep)
+    }
+
+    /// The hazard map of the current window.
+    fn window_map(&self) -> Result<HazardMap> {
+        let mut t = TileMap::new(self.cfg.grid.resolution, self.cfg.grid.z_ref)?;
+        if let Some(g) = &self.grid {
+            t.absorb_window(g)?;
+        }
+        Ok(self.hazard_map_of(&t))
+    }
+
+    /// The hazard map of a tile map under this mapper's fusion and vehicle.
+    pub fn hazard_map_of(&self, tiles: &TileMap) -> HazardMap {
+        HazardMap::with_water(tiles, &self.cfg.fusion, self.cfg.vehicle.fording_depth_m)
+    }
+
+    /// The hazard map of the window after the last update: an immutable snapshot, cheap to
+    /// take (a pointer copy), never changed by later updates.
+    pub fn hazard_map(&self) -> Arc<HazardMap> {
+        self.snapshots.latest()
+    }
+
+    /// A handle another thread can read the latest snapshot through while this mapper
+    /// keeps updating.
+    pub fn snapshots(&self) -> MapSnapshots {
+        self.snapshots.clone()
+    }
+
+    /// Everything the mapper saw: the cells that left the window and the window itself.
+    pub fn finish(mut self) -> TileMap {
+        if let Some(g) = self.grid.as_mut() {
+            g.flush(&mut self.global);
+        }
+        self.global
+    }
+
+    /// [`Mapper::finish`] and the hazard map of all of it.
+    pub fn finish_map(self) -> (TileMap, HazardMap) {
+        let (fusion, ford) = (self.cfg.fusion, self.cfg.vehicle.fording_depth_m);
+        let tiles = self.finish();
+        let map = HazardMap::with_water(&tiles, &fusion, ford);
+        (tiles, map)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,304 @@
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::OnceLock;
+
+use super::*;
+use crate::io::frames::{FrameStream, LogConfig};
+use crate::sim::{simulate, Scene, SimOptions};
+
+/// The default scene, cut down: 6 frames 2 m apart, a 256-column lidar, 160 × 120 stereo.
+fn small_scene() -> Scene {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/maps/default.toml"
+    ))
+    .unwrap();
+    let mut s = Scene::from_toml_str(&text).unwrap();
+    s.trajectory.frames = Some(6);
+    s.trajectory.speed = 20.0;
+    let l = s.rig.lidar.as_mut().unwrap();
+    l.columns = 256;
+    let st = s.rig.stereo.as_mut().unwrap();
+    st.width = 160;
+    st.height = 120;
+    s.rig.swir = None;
+    s.rig.mwir = None;
+    s
+}
+
+struct Sim {
+    _dir: tempfile::TempDir,
+    log: std::path::PathBuf,
+    frames: Vec<Frame>,
+}
+
+fn sim() -> &'static Sim {
+    static SIM: OnceLock<Sim> = OnceLock::new();
+    SIM.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        simulate(&small_scene(), dir.path(), SimOptions { noise: true }).unwrap();
+        let log = dir.path().join("log.mcap");
+        let frames: Vec<Frame> = FrameStream::open(&log, &LogConfig::default())
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect();
+        assert_eq!(frames.len(), 6);
+        assert!(frames.iter().all(|f| f.lidar.is_some() && f.stereo.is_some()));
+        Sim {
+            _dir: dir,
+            log,
+            frames,
+        }
+    })
+}
+
+fn run(cfg: &MapperConfig, frames: &[Frame]) -> (TileMap, Vec<FrameReport>) {
+    let mut m = Mapper::new(cfg.clone()).unwrap();
+    let reps = frames.iter().map(|f| m.update(f).unwrap()).collect();
+    (m.finish(), reps)
+}
+
+#[test]
+fn cues_find_the_pond_and_publish_it() {
+    let (tiles, reps) = run(&MapperConfig::default(), &sim().frames);
+    // The height comes from the scan: the lidar is 1.8 m above base_link on the terrain.
+    let h = reps[0].lidar_height_m.unwrap();
+    assert!((h - 1.8).abs() < 0.1, "height {h}");
+    assert!(reps.iter().any(|r| r.cues.lidar.is_some_and(|l| l.noret > 0)));
+    let map = HazardMap::with_water(&tiles, &Fusion::default(), 0.3);
+    // Water is called only around the pond (centre (22, 6), radius about 7 × 5 m).
+    let water: Vec<_> = map
+        .cells
+        .iter()
+        .filter(|c| c.class == crate::hazard::Class::Water)
+        .collect();
+    assert!(water.len() > 20, "{} water cells", water.len());
+    let near = water
+        .iter()
+        .filter(|c| ((c.x - 22.0) / 8.5).powi(2) + ((c.y - 6.0) / 6.5).powi(2) <= 1.0)
+        .count();
+    assert!(near as f64 >= 0.95 * water.len() as f64, "{near} of {}", water.len());
+}
+
+#[test]
+fn offline_build_is_the_online_map() {
+    let s = sim();
+    let cfg = MapperConfig::default();
+    let mut m = Mapper::new(cfg.clone()).unwrap();
+    for f in &s.frames {
+        m.update(f).unwrap();
+    }
+    let (tiles, online) = m.finish_map();
+    let out = tempfile::tempdir().unwrap();
+    let r = crate::build::build_log(
+        &s.log,
+        out.path(),
+        &crate::build::LogBuildConfig {
+            mapper: cfg,
+            ..Default::default()
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(r.frames_fused, 6);
+    assert_eq!(r.cells_observed, online.cells.len());
+    assert_eq!(r.tiles, tiles.tile_count());
+    let offline = crate::io::mapfile::read_map_ply(&out.path().join("map.ply")).unwrap();
+    assert_eq!(offline.cells.len(), online.cells.len());
+    for (a, b) in offline.cells.iter().zip(&online.cells) {
+        assert_eq!(a.key, b.key);
+        assert_eq!(a.z as f32, b.z as f32);
+        assert_eq!(a.water, b.water);
+        assert_eq!(a.class, b.class);
+        assert_eq!(a.hazard, b.hazard);
+        assert!(a.depth == b.depth || (a.depth.is_nan() && b.depth.is_nan()));
+    }
+    let counts = r.cue_counts;
+    assert!(counts.lidar_noret > 0 && counts.evidence_cells > 0);
+    assert_eq!(r.stage_latency_ms.len(), StageTimes::NAMES.len());
+}
+
+#[test]
+fn without_cues_the_mapper_is_plain_ingest() {
+    // The same sums as fusing every raw cloud into one grid by hand.
+    let s = sim();
+    let mut cfg = MapperConfig::default();
+    cfg.set_cues("none").unwrap();
+    let (tiles, reps) = run(&cfg, &s.frames);
+    assert!(reps.iter().all(|r| r.cues.lidar.is_none() && r.cues.stereo_runs == 0));
+    let mut grid: Option<RollingGrid> = None;
+    let mut global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref).unwrap();
+    for f in &s.frames {
+        let c = f.base_to_map.translation.vector;
+        let g = match grid.as_mut() {
+            Some(g) => {
+                g.recenter(c.x, c.y, &mut global).unwrap();
+                g
+            }
+            None => grid.insert(RollingGrid::new(cfg.grid.clone(), c.x, c.y).unwrap()),
+        };
+        g.ingest(f.lidar.as_ref().unwrap(), &RangeNoise::LIDAR).unwrap();
+        g.ingest(f.stereo.as_ref().unwrap(), &RangeNoise::STEREO)
+            .unwrap();
+    }
+    grid.unwrap().flush(&mut global);
+    assert!(tiles == global);
+    assert!(tiles.observed().all(|(_, c)| c.ev.is_empty()));
+}
+
+#[test]
+fn one_and_two_threads_give_the_same_map() {
+    let frames = &sim().frames;
+    let with = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+            .install(|| run(&MapperConfig::default(), frames).0)
+    };
+    let (a, b) = (with(1), with(2));
+    assert!(a.observed_count() > 1000);
+    assert!(a == b);
+}
+
+#[test]
+fn snapshots_are_readable_while_updating() {
+    let frames = &sim().frames;
+    let mut m = Mapper::new(MapperConfig::default()).unwrap();
+    m.update(&frames[0]).unwrap();
+    let first = m.hazard_map();
+    let copy = (*first).clone();
+    assert!(!first.cells.is_empty());
+    let handle = m.snapshots();
+    let done = AtomicBool::new(false);
+    let seen = std::thread::scope(|s| {
+        let reader = s.spawn(|| {
+            let mut seen = Vec::new();
+            loop {
+                let finished = done.load(Ordering::Acquire);
+                let snap = handle.latest();
+                // Every published map is whole: sorted-unique keys, finite positions.
+                assert!(snap.cells.iter().all(|c| c.x.is_finite() && c.y.is_finite()));
+                if seen.last() != Some(&snap.cells.len()) {
+                    seen.push(snap.cells.len());
+                }
+                if finished {
+                    return seen;
+                }
+                std::thread::yield_now();
+            }
+        });
+        for f in &frames[1..] {
+            m.update(f).unwrap();
+        }
+        done.store(true, Ordering::Release);
+        reader.join().unwrap()
+    });
+    // The reader saw the final map; the first snapshot never changed.
+    assert_eq!(*seen.last().unwrap(), m.hazard_map().cells.len());
+    // (Debug text: NaN elevation_std of evidence-only cells is not == itself.)
+    assert_eq!(format!("{:?}", *first), format!("{copy:?}"));
+    assert!(!Arc::ptr_eq(&first, &m.hazard_map()));
+}
+
+#[test]
+fn a_lidar_only_config_runs_no_stereo_code() {
+    let s = sim();
+    let cfg = MapperConfig {
+        stereo: None,
+        ..MapperConfig::default()
+    };
+    let (tiles, reps) = run(&cfg, &s.frames);
+    for r in &reps {
+        assert!(r.stereo_ingest.is_none() && r.cues.stereo_ingest.is_none());
+        assert_eq!(r.cues.stereo_runs, 0);
+        assert!(r.cues.lidar.is_some());
+    }
+    // The same map as frames that carry no stereo at all.
+    let stripped: Vec<Frame> = s
+        .frames
+        .iter()
+        .map(|f| Frame {
+            stereo: None,
+            image: None,
+            ..f.clone()
+        })
+        .collect();
+    let (t2, _) = run(&MapperConfig::default(), &stripped);
+    assert!(tiles == t2);
+    assert_eq!(crate::build::cue_names(&cfg), ["lidar", "reflectivity"]);
+}
+
+#[test]
+fn given_height_is_used_without_estimating() {
+    let mut cfg = MapperConfig::default();
+    cfg.lidar.as_mut().unwrap().height_m = Some(1.8);
+    let m = Mapper::new(cfg).unwrap();
+    assert_eq!(m.lidar_height(), Some(1.8));
+    let (a, b) = m.diagnostic_interval().unwrap();
+    assert!(a > 0.0 && b <= 40.0 + 1e-9 && a < b, "{a} {b}");
+}
+
+fn load_str(name: &str, text: &str) -> Result<MapperConfig> {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join(name);
+    std::fs::write(&p, text).unwrap();
+    MapperConfig::load(&p)
+}
+
+#[test]
+fn bad_configs_name_the_field() {
+    let cases = [
+        ("[lidar]\ndry_limit_m = -1.0\n", "lidar.dry_limit_m"),
+        ("[lidar]\nheight_m = 0.0\n", "lidar.height_m"),
+        ("[lidar]\nalbedo = 1.5\n", "lidar.albedo"),
+        ("[fusion]\nprior = 1.5\n", "prior"),
+        ("[grid]\nresolution = 0.0\n", "resolution"),
+        ("[vehicle]\nfording_depth_m = -0.1\n", "vehicle.fording_depth_m"),
+        ("[lidar]\nwavelength = 905.0\n", "wavelength"),
+        ("[lidar.cue]\nbelow_gate_m = -1.0\n", "below_gate_m"),
+        ("[stereo]\nreflections = false\n", "stereo.mirror_check"),
+        ("\n\n[sterio]\n", "sterio"),
+    ];
+    for (text, field) in cases {
+        let e = load_str("m.toml", text).unwrap_err().to_string();
+        assert!(e.contains(field), "{text:?}: {e}");
+        assert!(e.contains("m.toml"), "{e}");
+    }
+    // Unknown keys carry their line.
+    let e = load_str("m.toml", "\n\n[sterio]\n").unwrap_err().to_string();
+    assert!(e.contains("line 3"), "{e}");
+    let e = load_str("m.json", r#"{"lidar": {"dry_limit_m": "far"}}"#)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("line 1") && e.contains("m.json"), "{e}");
+    let mut c = MapperConfig::default();
+    let e = c.set_cues("lidar,sonar").unwrap_err().to_string();
+    assert!(e.contains("sonar"), "{e}");
+    let mut c = MapperConfig {
+        lidar: None,
+        ..MapperConfig::default()
+    };
+    assert!(c.set_cues("lidar").unwrap_err().to_string().contains("lidar"));
+}
+
+#[test]
+fn configs_round_trip_through_toml_and_cue_lists() {
+    let mut c = MapperConfig::default();
+    c.lidar.as_mut().unwrap().attenuation_per_m = Some(0.6);
+    c.lidar.as_mut().unwrap().height_m = Some(1.0);
+    c.set_cues("lidar,stereo").unwrap();
+    assert_eq!(crate::build::cue_names(&c), ["lidar", "stereo"]);
+    let back = load_str("c.toml", &c.to_toml().unwrap()).unwrap();
+    assert_eq!(back, c);
+    let json = serde_json::to_string(&c).unwrap();
+    assert_eq!(load_str("c.json", &json).unwrap(), c);
+    c.set_cues("all").unwrap();
+    assert_eq!(
+        crate::build::cue_names(&c),
+        ["lidar", "reflectivity", "stereo", "mirror"]
+    );
+    c.set_cues("none").unwrap();
+    assert!(crate::build::cue_names(&c).is_empty());
+    // An empty file is the default config.
+    assert_eq!(load_str("e.toml", "").unwrap(), MapperConfig::default());
+}
