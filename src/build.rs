@@ -564,7 +564,10 @@ pub fn build_log(
     let lidar_height_m = mapper.lidar_height();
     let diagnostic_interval_m = mapper.diagnostic_interval();
     let fusion = mapper.config().fusion;
-    let (gcfg, res) = (mapper.config().grid.clone(), mapper.config().grid.resolution);
+    let (gcfg, res) = (
+        mapper.config().grid.clone(),
+        mapper.config().grid.resolution,
+    );
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
     let (tiles, map) = mapper.finish_map();

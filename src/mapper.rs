@@ -40,8 +40,8 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::cues::{
-    estimate_sensor_height, BeamModel, FrameCueConfig, FrameCues, FrameCuesReport,
-    LidarCueConfig, LidarCueModel, ReflectivityConfig, StereoCueConfig,
+    estimate_sensor_height, BeamModel, FrameCueConfig, FrameCues, FrameCuesReport, LidarCueConfig,
+    LidarCueModel, ReflectivityConfig, StereoCueConfig,
 };
 use crate::error::{Error, Result};
 use crate::grid::{Fusion, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap};
@@ -213,10 +213,9 @@ impl MapperConfig {
     pub fn validate(&self) -> Result<()> {
         let named = |section: &str, r: Result<()>| {
             r.map_err(|e| match e {
-                Error::Invalid { what, message } => Error::invalid(
-                    format!("mapper config {section}: {what}"),
-                    message,
-                ),
+                Error::Invalid { what, message } => {
+                    Error::invalid(format!("mapper config {section}: {what}"), message)
+                }
                 e => e,
             })
         };
@@ -381,7 +380,8 @@ pub struct StageTimes {
 }
 
 impl StageTimes {
-    pub const NAMES: [&'static str; 6] = ["recentre", "lidar", "stereo", "labels", "water", "total"];
+    pub const NAMES: [&'static str; 6] =
+        ["recentre", "lidar", "stereo", "labels", "water", "total"];
 
     pub fn values(&self) -> [f64; 6] {
         [
@@ -426,11 +426,17 @@ pub struct FrameReport {
 impl FrameReport {
     /// Points of the frame's lidar scan offered to the grid (raw or corrected).
     pub fn lidar_points(&self) -> Option<&IngestStats> {
-        self.cues.lidar_ingest.as_ref().or(self.lidar_ingest.as_ref())
+        self.cues
+            .lidar_ingest
+            .as_ref()
+            .or(self.lidar_ingest.as_ref())
     }
 
     pub fn stereo_points(&self) -> Option<&IngestStats> {
-        self.cues.stereo_ingest.as_ref().or(self.stereo_ingest.as_ref())
+        self.cues
+            .stereo_ingest
+            .as_ref()
+            .or(self.stereo_ingest.as_ref())
     }
 }
 
@@ -479,11 +485,7 @@ impl Mapper {
         let mut fc = FrameCueConfig {
             lidar: None,
             lidar_noise: cfg.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise),
-            stereo: cfg
-                .stereo
-                .as_ref()
-                .filter(|s| s.reflections)
-                .map(|s| s.cue),
+            stereo: cfg.stereo.as_ref().filter(|s| s.reflections).map(|s| s.cue),
             mirror_check: cfg.stereo.as_ref().is_some_and(|s| s.mirror_check),
         };
         let mut lidar_height = None;

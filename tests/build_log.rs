@@ -8,10 +8,10 @@ use nalgebra::{Point3, Vector3};
 use tarn::build::{build_log, LogBuildConfig};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::grid::GridConfig;
-use tarn::mapper::MapperConfig;
 use tarn::io::mcap_log::{LogWriter, WriteOptions};
 use tarn::io::ply;
 use tarn::io::ros::{Header, TfMessage, TransformStamped};
+use tarn::mapper::MapperConfig;
 
 const NS: u64 = 1_000_000_000;
 const SLOPE: f64 = 0.05;

@@ -313,7 +313,9 @@ mod tests {
         };
         let truth = HazardMap {
             resolution: 1.0,
-            cells: (0..40).map(|k| cell(k, 0.0, if k == 12 { Class::Water } else { Class::Ground })).collect(),
+            cells: (0..40)
+                .map(|k| cell(k, 0.0, if k == 12 { Class::Water } else { Class::Ground }))
+                .collect(),
         };
         // Ground at 0; the map sinks cell 8 (a reflection fused as terrain) and calls 12 water.
         let mut map = truth.clone();

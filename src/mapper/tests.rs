@@ -7,11 +7,8 @@ use crate::sim::{simulate, Scene, SimOptions};
 
 /// The default scene, cut down: 6 frames 2 m apart, a 256-column lidar, 160 × 120 stereo.
 fn small_scene() -> Scene {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/maps/default.toml"
-    ))
-    .unwrap();
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/maps/default.toml")).unwrap();
     let mut s = Scene::from_toml_str(&text).unwrap();
     s.trajectory.frames = Some(6);
     s.trajectory.speed = 20.0;
@@ -42,7 +39,9 @@ fn sim() -> &'static Sim {
             .map(|f| f.unwrap())
             .collect();
         assert_eq!(frames.len(), 6);
-        assert!(frames.iter().all(|f| f.lidar.is_some() && f.stereo.is_some()));
+        assert!(frames
+            .iter()
+            .all(|f| f.lidar.is_some() && f.stereo.is_some()));
         Sim {
             _dir: dir,
             log,
@@ -65,7 +64,9 @@ fn cues_put_water_evidence_at_the_pond() {
     // The lidar is 1.8 m above base_link, which the simulator puts on the terrain.
     let h = reps[0].lidar_height_m.unwrap();
     assert!((h - 1.8).abs() < 0.1, "height {h}");
-    assert!(reps.iter().any(|r| r.cues.lidar.is_some_and(|l| l.noret > 0)));
+    assert!(reps
+        .iter()
+        .any(|r| r.cues.lidar.is_some_and(|l| l.noret > 0)));
     let map = HazardMap::with_water(&tiles, &cfg.fusion, 0.3);
     // Cells the evidence makes more likely water than not lie at the pond (centre (22, 6),
     // radius about 7 × 5 m).
@@ -80,7 +81,11 @@ fn cues_put_water_evidence_at_the_pond() {
         map.class_counts()[crate::hazard::Class::Water as usize]
     );
     assert!(wet.len() > 20, "{} wet cells", wet.len());
-    assert!(near as f64 >= 0.95 * wet.len() as f64, "{near} of {}", wet.len());
+    assert!(
+        near as f64 >= 0.95 * wet.len() as f64,
+        "{near} of {}",
+        wet.len()
+    );
 }
 
 #[test]
@@ -128,7 +133,9 @@ fn without_cues_the_mapper_is_plain_ingest() {
     let mut cfg = MapperConfig::default();
     cfg.set_cues("none").unwrap();
     let (tiles, reps) = run(&cfg, &s.frames);
-    assert!(reps.iter().all(|r| r.cues.lidar.is_none() && r.cues.stereo_runs == 0));
+    assert!(reps
+        .iter()
+        .all(|r| r.cues.lidar.is_none() && r.cues.stereo_runs == 0));
     let mut grid: Option<RollingGrid> = None;
     let mut global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref).unwrap();
     for f in &s.frames {
@@ -140,7 +147,8 @@ fn without_cues_the_mapper_is_plain_ingest() {
             }
             None => grid.insert(RollingGrid::new(cfg.grid.clone(), c.x, c.y).unwrap()),
         };
-        g.ingest(f.lidar.as_ref().unwrap(), &RangeNoise::LIDAR).unwrap();
+        g.ingest(f.lidar.as_ref().unwrap(), &RangeNoise::LIDAR)
+            .unwrap();
         g.ingest(f.stereo.as_ref().unwrap(), &RangeNoise::STEREO)
             .unwrap();
     }
@@ -181,7 +189,10 @@ fn snapshots_are_readable_while_updating() {
                 let finished = done.load(Ordering::Acquire);
                 let snap = handle.latest();
                 // Every published map is whole: sorted-unique keys, finite positions.
-                assert!(snap.cells.iter().all(|c| c.x.is_finite() && c.y.is_finite()));
+                assert!(snap
+                    .cells
+                    .iter()
+                    .all(|c| c.x.is_finite() && c.y.is_finite()));
                 if seen.last() != Some(&snap.cells.len()) {
                     seen.push(snap.cells.len());
                 }
@@ -257,7 +268,10 @@ fn bad_configs_name_the_field() {
         ("[lidar]\nalbedo = 1.5\n", "lidar.albedo"),
         ("[fusion]\nprior = 1.5\n", "prior"),
         ("[grid]\nresolution = 0.0\n", "resolution"),
-        ("[vehicle]\nfording_depth_m = -0.1\n", "vehicle.fording_depth_m"),
+        (
+            "[vehicle]\nfording_depth_m = -0.1\n",
+            "vehicle.fording_depth_m",
+        ),
         ("[lidar]\nwavelength = 905.0\n", "wavelength"),
         ("[lidar.cue]\nbelow_gate_m = -1.0\n", "below_gate_m"),
         ("[stereo]\nreflections = false\n", "stereo.mirror_check"),
@@ -269,7 +283,9 @@ fn bad_configs_name_the_field() {
         assert!(e.contains("m.toml"), "{e}");
     }
     // Unknown keys carry their line.
-    let e = load_str("m.toml", "\n\n[sterio]\n").unwrap_err().to_string();
+    let e = load_str("m.toml", "\n\n[sterio]\n")
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("line 3"), "{e}");
     let e = load_str("m.json", r#"{"lidar": {"dry_limit_m": "far"}}"#)
         .unwrap_err()
@@ -282,7 +298,11 @@ fn bad_configs_name_the_field() {
         lidar: None,
         ..MapperConfig::default()
     };
-    assert!(c.set_cues("lidar").unwrap_err().to_string().contains("lidar"));
+    assert!(c
+        .set_cues("lidar")
+        .unwrap_err()
+        .to_string()
+        .contains("lidar"));
 }
 
 #[test]

@@ -383,8 +383,11 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
     let mcfg = mapper_config(scene).to_toml()?;
     crate::io::export::write_atomic(&out_dir.join("mapper.toml"), |w| {
         w.write_all(
-            format!("# The mapper config of the rig of scene {:?} (tarn simulate).\n{mcfg}", scene.name)
-                .as_bytes(),
+            format!(
+                "# The mapper config of the rig of scene {:?} (tarn simulate).\n{mcfg}",
+                scene.name
+            )
+            .as_bytes(),
         )
     })?;
     write_scene_mesh(&w, &out_dir.join("scene.ply"))?;

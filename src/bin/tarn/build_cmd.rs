@@ -242,11 +242,13 @@ fn print_log_summary(r: &LogBuildReport) {
         println!(
             "  cues {}{}{}",
             r.cues.join(","),
-            r.lidar_height_m
-                .map_or(String::new(), |h| format!("; lidar {h:.2} m above the ground")),
-            r.diagnostic_interval_m.map_or(String::new(), |(a, b)| format!(
-                ", no-return diagnostic {a:.1}–{b:.1} m"
-            ))
+            r.lidar_height_m.map_or(String::new(), |h| format!(
+                "; lidar {h:.2} m above the ground"
+            )),
+            r.diagnostic_interval_m
+                .map_or(String::new(), |(a, b)| format!(
+                    ", no-return diagnostic {a:.1}–{b:.1} m"
+                ))
         );
         let c = &r.cue_counts;
         println!(

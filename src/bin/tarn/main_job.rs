@@ -48,7 +48,10 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
         r.x_realtime,
         r.cues.join(",")
     );
-    println!("  cells observed {} at {} m", r.cells_observed, r.resolution_m);
+    println!(
+        "  cells observed {} at {} m",
+        r.cells_observed, r.resolution_m
+    );
     build_cmd::print_water(&r.water);
     build_cmd::print_latency(&r);
     let e = tarn::eval::evaluate_dirs(out, &sim_dir)?;
