@@ -19,6 +19,7 @@ pub mod io;
 pub mod optics;
 pub mod project;
 pub mod sim;
+pub mod water;
 
 pub use error::{Error, Result};
 
