@@ -269,7 +269,16 @@ impl HazardMap {
                     } else {
                         Hazard::DeepWater
                     };
-                    return Some(MapCell::of(tiles, key, &c, z, p, depth, Class::Water, hazard));
+                    return Some(MapCell::of(
+                        tiles,
+                        key,
+                        &c,
+                        z,
+                        p,
+                        depth,
+                        Class::Water,
+                        hazard,
+                    ));
                 }
                 let Some(&z) = dry.get(&key) else {
                     // Observed through water evidence only, not water: its level, if any.

@@ -396,7 +396,14 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
             let y = (py - 8 * text_scale as i64 + row as i64 * 9 * text_scale as i64)
                 .clamp(0, mh.saturating_sub(8) as i64) as u32;
             // A dark box behind the text keeps it readable on any colour.
-            fill_rect(&mut img, x.saturating_sub(1), y.saturating_sub(1), tw as u32 + 2, 8 * text_scale + 2, [0, 0, 0]);
+            fill_rect(
+                &mut img,
+                x.saturating_sub(1),
+                y.saturating_sub(1),
+                tw as u32 + 2,
+                8 * text_scale + 2,
+                [0, 0, 0],
+            );
             draw_text(&mut img, x, y, text, text_scale, [255, 255, 255]);
         }
     }
@@ -413,7 +420,12 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         .iter()
         .any(|c| c.class == Class::Water && c.hazard == Hazard::DeepWater && !c.depth.is_nan());
     let mut items: Vec<([u8; 3], String)> = Vec::new();
-    for class in [Class::Ground, Class::Vegetation, Class::SnowIce, Class::Unknown] {
+    for class in [
+        Class::Ground,
+        Class::Vegetation,
+        Class::SnowIce,
+        Class::Unknown,
+    ] {
         if counts[class as usize] > 0 {
             items.push((class.colour(), format!("{} (drivable)", class.name())));
         }

@@ -4,8 +4,9 @@
 //! vertices at cell corners shared between neighbouring cells, so the top is one connected
 //! sheet. When every cell's depth is known the body is closed: the bottom lies at surface −
 //! depth, with the measured depth at each cell centre, the mean depth of the four cells
-//! around an interior corner, and depth zero at the shoreline, where the bottom meets the
-//! top in the same vertex. Every edge then belongs to exactly two triangles, all wound
+//! around an interior corner, the mean of the two cells at the midpoint of an edge between
+//! two water cells, and depth zero at the shoreline, where the bottom meets the top in the
+//! same vertex. Every edge then belongs to exactly two triangles, all wound
 //! counter-clockwise seen from outside: a watertight, consistently wound solid whose volume
 //! is the water's. A body with any unknown depth is the open top sheet only.
 
@@ -70,7 +71,7 @@ pub fn body_mesh(body: &WaterBody, res: f64, surface: &Surface) -> BodyMesh {
         closed,
         ..BodyMesh::default()
     };
-    let mut push = |m: &mut BodyMesh, x: f64, y: f64, z: f64, d: f64| {
+    let push = |m: &mut BodyMesh, x: f64, y: f64, z: f64, d: f64| {
         m.vertices.push([x, y, z]);
         m.vertex_depth.push(d);
         (m.vertices.len() - 1) as u32
@@ -78,13 +79,20 @@ pub fn body_mesh(body: &WaterBody, res: f64, surface: &Surface) -> BodyMesh {
     // Corner (i, j) is at (i·res, j·res); cell (kx, ky) spans corners kx..kx+1, ky..ky+1.
     let mut top_corner: HashMap<(i64, i64), u32> = HashMap::new();
     let mut bottom_corner: HashMap<(i64, i64), u32> = HashMap::new();
+    let mut bottom_mid: HashMap<(i64, i64), u32> = HashMap::new();
     for &k in &body.cells {
-        let corners = [(k.x, k.y), (k.x + 1, k.y), (k.x + 1, k.y + 1), (k.x, k.y + 1)];
+        let corners = [
+            (k.x, k.y),
+            (k.x + 1, k.y),
+            (k.x + 1, k.y + 1),
+            (k.x, k.y + 1),
+        ];
         let mut t = [0u32; 4];
         let mut b = [0u32; 4];
         for (n, &(i, j)) in corners.iter().enumerate() {
             let (x, y) = (i as f64 * res, j as f64 * res);
-            let around = [(i - 1, j - 1), (i, j - 1), (i - 1, j), (i, j)].map(|(a, c)| CellKey::new(a, c));
+            let around =
+                [(i - 1, j - 1), (i, j - 1), (i - 1, j), (i, j)].map(|(a, c)| CellKey::new(a, c));
             let interior = around.iter().all(|c| set.contains(c));
             t[n] = match top_corner.get(&(i, j)) {
                 Some(&v) => v,
@@ -118,8 +126,33 @@ pub fn body_mesh(body: &WaterBody, res: f64, surface: &Surface) -> BodyMesh {
         if closed {
             let d = depth[&k];
             let cb = push(&mut m, cx, cy, zc - d, d);
+            // The bottom polygon: corners, and the midpoint of every edge shared with
+            // another cell of the body. Without the midpoint, an edge between two shoreline
+            // corners inside a one-cell-wide strip would be shared by four triangles.
+            let mut ring: Vec<u32> = Vec::with_capacity(8);
             for n in 0..4 {
-                m.bottom.push([cb, b[(n + 1) % 4], b[n]]);
+                ring.push(b[n]);
+                let (p, q) = (corners[n], corners[(n + 1) % 4]);
+                // The neighbour across edge p–q (counter-clockwise: below, right, above, left).
+                let across = [(0, -1), (1, 0), (0, 1), (-1, 0)][n];
+                let nb = CellKey::new(k.x + across.0, k.y + across.1);
+                if set.contains(&nb) {
+                    let key = (p.0 + q.0, p.1 + q.1); // twice the midpoint: unique per edge
+                    let v = match bottom_mid.get(&key) {
+                        Some(&v) => v,
+                        None => {
+                            let (x, y) = (key.0 as f64 * res / 2.0, key.1 as f64 * res / 2.0);
+                            let dm = (d + depth[&nb]) / 2.0;
+                            let v = push(&mut m, x, y, surface.at(x, y) - dm, dm);
+                            bottom_mid.insert(key, v);
+                            v
+                        }
+                    };
+                    ring.push(v);
+                }
+            }
+            for n in 0..ring.len() {
+                m.bottom.push([cb, ring[(n + 1) % ring.len()], ring[n]]);
             }
         }
     }

@@ -8,11 +8,13 @@
 //! ## 1. Bodies: connected components with hysteresis
 //!
 //! Each cell's fused water probability `p = Evidence::water_probability(&Fusion)` is read.
-//! Cells with `p ≥ p_high` seed a body; a body grows through 8-connected neighbours with
-//! `p ≥ p_low`. One strong cell is enough to start a body, but weakly supported cells only
-//! join one that is already there, so isolated weak evidence (one dark patch, one stray
-//! no-return) never becomes water while the faint fringe of a real pond does. Bodies
-//! smaller than `min_body_area_m2` are dropped. A body is a set of cells, so dry islands
+//! Cells with `p ≥ p_high` (0.8) seed a body; a body grows through 8-connected neighbours
+//! with `p ≥ p_low` (0.5). With the default fusion one cue at its cap gives
+//! p = 100/119 ≈ 0.84 (prior 5 %, cap ln 100), so one well-supported cue can seed a body;
+//! weakly supported cells (one reflection ray: p ≈ 0.68) only join a body that is already
+//! there, so isolated weak evidence (one dark patch, one stray reflection) never becomes
+//! water while the faint fringe of a real pond does. Bodies smaller than
+//! `min_body_area_m2` (default 0: hysteresis is the noise guard) are dropped. A body is a set of cells, so dry islands
 //! inside it (holes) and bays stay exactly as observed.
 //!
 //! **Ids** are stable as more of a body is seen: [`find_bodies`] takes the previous
@@ -112,9 +114,9 @@ pub struct WaterConfig {
 impl Default for WaterConfig {
     fn default() -> Self {
         WaterConfig {
-            p_high: 0.9,
-            p_low: 0.6,
-            min_body_area_m2: 0.05,
+            p_high: 0.8,
+            p_low: 0.5,
+            min_body_area_m2: 0.0,
             shore_radius_m: 1.5,
             shore_quantile: 0.25,
             occluder_height_m: 0.10,
@@ -135,7 +137,12 @@ fn check(what: &str, ok: bool, v: impl std::fmt::Display, must: &str) -> Result<
 impl WaterConfig {
     pub fn validate(&self) -> Result<()> {
         let prob = |p: f64| p > 0.0 && p < 1.0;
-        check("water.p_high", prob(self.p_high), self.p_high, "must lie strictly between 0 and 1")?;
+        check(
+            "water.p_high",
+            prob(self.p_high),
+            self.p_high,
+            "must lie strictly between 0 and 1",
+        )?;
         check(
             "water.p_low",
             prob(self.p_low) && self.p_low <= self.p_high,
@@ -244,7 +251,11 @@ impl HazardConfig {
     pub fn from_json_file(path: &std::path::Path) -> Result<Self> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         let cfg: HazardConfig = serde_json::from_str(&text).map_err(|e| {
-            Error::format(path, format!("line {} column {}", e.line(), e.column()), e.to_string())
+            Error::format(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
         })?;
         cfg.validate()?;
         Ok(cfg)

@@ -54,8 +54,9 @@ impl SurfaceModel {
     }
 }
 
+/// A triangulation vertex: position and elevation.
 #[derive(Debug, Clone, Copy)]
-struct V {
+pub struct V {
     p: Point2<f64>,
     z: f64,
 }
@@ -118,15 +119,12 @@ impl Surface {
         } else {
             Vec::new()
         };
-        let cdt = ConstrainedDelaunayTriangulation::<V>::try_bulk_load_cdt(verts, edges, |_| {})
-            .ok()?;
+        let cdt =
+            ConstrainedDelaunayTriangulation::<V>::try_bulk_load_cdt(verts, edges, |_| {}).ok()?;
         if cdt.num_inner_faces() == 0 {
             return None;
         }
-        Some(Surface::Tin {
-            cdt,
-            samples: ok,
-        })
+        Some(Surface::Tin { cdt, samples: ok })
     }
 
     /// Surface elevation at `(x, y)`: the plane, or barycentric interpolation in the
@@ -136,7 +134,7 @@ impl Surface {
             Surface::Level(z) => *z,
             Surface::Tin { cdt, samples } => {
                 let p = Point2::new(x, y);
-                match cdt.locate(p) {
+                let z = match cdt.locate(p) {
                     PositionInTriangulation::OnFace(f) => {
                         let f = cdt.face(f);
                         let w = f.barycentric_interpolation(p);
@@ -156,7 +154,14 @@ impl Surface {
                         };
                         a.z + t * (b.z - a.z)
                     }
-                    _ => nearest(samples, x, y),
+                    _ => f64::NAN,
+                };
+                // Outside the hull, or a point exactly on a hull edge for which the
+                // interpolation weights degenerate: the nearest sample.
+                if z.is_finite() {
+                    z
+                } else {
+                    nearest(samples, x, y)
                 }
             }
         }
@@ -270,7 +275,11 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
     let Some(half) = Surface::tin(&even, &[]) else {
         return Some(level);
     };
-    let held = rms(samples.iter().skip(1).step_by(2).map(|s| half.at(s.x, s.y) - s.z));
+    let held = rms(samples
+        .iter()
+        .skip(1)
+        .step_by(2)
+        .map(|s| half.at(s.x, s.y) - s.z));
     // The full triangulation must exist too (it does when half of it does, unless samples
     // are non-finite, which `median` and `tin` both exclude).
     if Surface::tin(samples, constraints).is_none() || held >= level_residual_m {

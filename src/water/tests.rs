@@ -126,7 +126,10 @@ fn a_raised_bush_on_the_near_shore_does_not_lift_the_water() {
     });
     let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
     let b = &map.bodies[0];
-    assert!(b.shore_samples_kept < b.shore_samples, "bush samples dropped");
+    assert!(
+        b.shore_samples_kept < b.shore_samples,
+        "bush samples dropped"
+    );
     let SurfaceModel::Level { z } = b.surface else {
         panic!("{:?}", b.surface.name())
     };
@@ -145,7 +148,8 @@ fn a_raised_bush_on_the_near_shore_does_not_lift_the_water() {
     let m2 = HazardMap::from_tiles(&t, &loose).unwrap();
     let (rms2, _) = surface_rms(&m2, &truth);
     assert!(
-        m2.bodies[0].shore_samples_kept == m2.bodies[0].shore_samples && m2.bodies[0].level_residual_m > 0.1,
+        m2.bodies[0].shore_samples_kept == m2.bodies[0].shore_samples
+            && m2.bodies[0].level_residual_m > 0.1,
         "{} {rms2}",
         m2.bodies[0].level_residual_m
     );
@@ -175,7 +179,11 @@ fn a_stream_on_a_slope_is_delaunay_within_3_cm() {
     let b = &map.bodies[0];
     assert_eq!(b.surface.name(), "delaunay");
     let d = b.delaunay_residual_m.unwrap();
-    assert!(d < b.level_residual_m && d < 0.03, "{d} {}", b.level_residual_m);
+    assert!(
+        d < b.level_residual_m && d < 0.03,
+        "{d} {}",
+        b.level_residual_m
+    );
     let (rms, n) = surface_rms(&map, &truth);
     assert!(rms <= 0.03, "{rms}");
     // Depth unknown everywhere: NaN, hazard deep, no volume.
@@ -200,9 +208,8 @@ fn hysteresis_seeds_and_grows() {
             t.add(CellKey::new(kx, ky), &dry(0.0));
         }
     }
-    // One no-return with one return: ln(0.9/0.05) + ln(0.1/0.95) → p ≈ 0.086... too weak;
-    // use reflections: 2 reflections → p = 0.05/0.95·1600 / (1 + ·) ≈ 0.988 (seed);
-    // 1 reflection → ≈ 0.678 (grows, cannot seed).
+    // 2 reflections: the cue reaches its cap, p = 100/119 ≈ 0.84 (seeds);
+    // 1 reflection: odds 0.05/0.95 · 40, p ≈ 0.678 (grows, cannot seed).
     let refl = |n: u16| CellStats {
         ev: Evidence {
             reflect: n,
@@ -229,13 +236,23 @@ fn hysteresis_seeds_and_grows() {
     assert_eq!(map.bodies.len(), 1);
     assert_eq!(
         map.bodies[0].cells,
-        vec![CellKey::new(-10, 0), CellKey::new(-9, 0), CellKey::new(-8, 1)]
+        vec![
+            CellKey::new(-10, 0),
+            CellKey::new(-9, 0),
+            CellKey::new(-8, 1)
+        ]
     );
     let n_water = map.cells.iter().filter(|c| c.class == Class::Water).count();
     assert_eq!(n_water, 3);
-    // The default minimum area (0.05 m², 5 cells) drops this 3-cell body.
-    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
-    assert!(map.bodies.is_empty());
+    // A minimum area of 0.05 m² (5 cells) drops this 3-cell body.
+    let big = HazardConfig {
+        water: WaterConfig {
+            min_body_area_m2: 0.05,
+            ..WaterConfig::default()
+        },
+        ..HazardConfig::default()
+    };
+    assert!(HazardMap::from_tiles(&t, &big).unwrap().bodies.is_empty());
 }
 
 #[test]
@@ -251,7 +268,11 @@ fn holes_and_islands_are_kept() {
     });
     let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
     assert_eq!(map.bodies.len(), 1);
-    let island = map.cells.iter().find(|c| c.key == CellKey::new(0, 0)).unwrap();
+    let island = map
+        .cells
+        .iter()
+        .find(|c| c.key == CellKey::new(0, 0))
+        .unwrap();
     assert_eq!(island.class, Class::Ground);
     // The mesh is closed with the island as a hole through it.
     let b = &map.bodies[0];
@@ -290,8 +311,16 @@ fn ids_are_stable_as_bodies_grow_and_merge() {
     let cfg = HazardConfig::default();
     let m1 = HazardMap::from_tiles(&t1, &cfg).unwrap();
     assert_eq!(m1.bodies.len(), 2);
-    let west = m1.bodies.iter().find(|b| b.cells.contains(&CellKey::new(-30, 0))).unwrap();
-    let east = m1.bodies.iter().find(|b| b.cells.contains(&CellKey::new(30, 0))).unwrap();
+    let west = m1
+        .bodies
+        .iter()
+        .find(|b| b.cells.contains(&CellKey::new(-30, 0)))
+        .unwrap();
+    let east = m1
+        .bodies
+        .iter()
+        .find(|b| b.cells.contains(&CellKey::new(30, 0)))
+        .unwrap();
     assert!(west.area_m2 > east.area_m2);
     let (w2, e2, n2) = (blob(-3.0, 3.1), blob(3.0, 3.1), blob(0.0, 0.0));
     let new = |x: f64, y: f64| x.hypot(y - 6.5) < 1.0;
@@ -305,9 +334,16 @@ fn ids_are_stable_as_bodies_grow_and_merge() {
     });
     let m2 = HazardMap::from_tiles_after(&t2, &cfg, &m1.bodies).unwrap();
     assert_eq!(m2.bodies.len(), 2, "merged pond and the new one");
-    let merged = m2.bodies.iter().find(|b| b.cells.contains(&CellKey::new(30, 0))).unwrap();
+    let merged = m2
+        .bodies
+        .iter()
+        .find(|b| b.cells.contains(&CellKey::new(30, 0)))
+        .unwrap();
     assert!(merged.cells.contains(&CellKey::new(-30, 0)));
-    assert_eq!(merged.id, west.id, "the merged body keeps its largest ancestor's id");
+    assert_eq!(
+        merged.id, west.id,
+        "the merged body keeps its largest ancestor's id"
+    );
     let fresh = m2.bodies.iter().find(|b| b.id != west.id).unwrap();
     assert_eq!(fresh.id, 3, "new ids count up from the largest seen");
     // Without history the ids are 1, 2 in key order.
@@ -462,7 +498,11 @@ fn depth_decides_the_water_hazard_and_volume_needs_every_depth() {
     let m2 = HazardMap::from_tiles(&t2, &cfg).unwrap();
     assert_eq!(m2.bodies[0].volume_m3, None);
     assert_eq!(m2.bodies[0].depth.unknown_cells, 1);
-    let c = m2.cells.iter().find(|c| c.key == CellKey::new(5, 0)).unwrap();
+    let c = m2
+        .cells
+        .iter()
+        .find(|c| c.key == CellKey::new(5, 0))
+        .unwrap();
     assert!(c.depth.is_nan() && c.hazard == Hazard::DeepWater);
 }
 
@@ -485,9 +525,13 @@ fn steps_and_slopes_are_obstacles() {
             .unwrap()
     };
     assert_eq!(at(0.55, 0.55).class, Class::Obstacle);
-    assert_eq!(at(0.75, 0.75).hazard, Hazard::Free, "the top of the box is flat");
-    assert_eq!(at(-1.55, 0.0).hazard, Hazard::Obstacle);
-    assert_eq!(at(-1.55, 0.0).class, Class::Ground);
+    assert_eq!(
+        at(0.75, 0.75).hazard,
+        Hazard::Free,
+        "the top of the box is flat"
+    );
+    assert_eq!(at(-1.55, 0.05).hazard, Hazard::Obstacle);
+    assert_eq!(at(-1.55, 0.05).class, Class::Ground);
     assert_eq!(at(0.15, -0.55).hazard, Hazard::Free);
 }
 
@@ -541,12 +585,16 @@ fn with_water_wraps_from_tiles() {
     let (t, _) = scene(30, pond(2.0, Some(0.4)));
     let a = HazardMap::with_water(&t, &Fusion::default(), 0.3);
     let b = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
-    assert_eq!(a, b);
+    // (Debug text: water cells without points have a NaN elevation_std, and NaN != NaN.)
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
     assert!(a.cells.iter().any(|c| c.hazard == Hazard::DeepWater));
 }
 
 fn arb_blob() -> impl Strategy<Value = Vec<(i64, i64, Option<u16>)>> {
-    prop::collection::vec((0i64..12, 0i64..12, prop::option::weighted(0.9, 0u16..800)), 1..80)
+    prop::collection::vec(
+        (0i64..12, 0i64..12, prop::option::weighted(0.9, 0u16..800)),
+        1..80,
+    )
 }
 
 proptest! {
