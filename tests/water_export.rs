@@ -44,7 +44,10 @@ fn mixed(x: f64, y: f64) -> (f64, Option<(f64, Option<f64>)>) {
     if x < 0.0 {
         let r1 = (x + 6.0).hypot(y - 4.0);
         if r1 < 2.5 {
-            return (-0.3, Some((0.0, Some(0.25 * (1.0 - (r1 / 2.5).powi(2)) + 0.02))));
+            return (
+                -0.3,
+                Some((0.0, Some(0.25 * (1.0 - (r1 / 2.5).powi(2)) + 0.02))),
+            );
         }
         if (-3.6..-2.6).contains(&x) && (3.5..4.5).contains(&y) {
             return (1.0, None); // the bush
@@ -54,7 +57,7 @@ fn mixed(x: f64, y: f64) -> (f64, Option<(f64, Option<f64>)>) {
             return (-0.6, Some((0.0, Some(0.6))));
         }
         if r2 < 0.6 {
-            return (0.05, None); // the island
+            return (0.2 * (0.6 - r2), None); // the island, a low dome
         }
         if (-1.5..-0.9).contains(&x) && (8.0..8.6).contains(&y) {
             return (0.6, None); // a box: an obstacle
@@ -94,7 +97,13 @@ fn exports_of_a_scene_with_ponds_a_stream_and_a_box() {
         &serde_json::json!({ "water_bodies": map.water_report() }),
     )
     .unwrap();
-    for f in ["map.ply", "terrain.ply", "water.ply", "map.png", "report.json"] {
+    for f in [
+        "map.ply",
+        "terrain.ply",
+        "water.ply",
+        "map.png",
+        "report.json",
+    ] {
         assert!(dir.join(f).is_file(), "{f}");
     }
     let models: Vec<(&str, usize)> = map
@@ -102,10 +111,16 @@ fn exports_of_a_scene_with_ponds_a_stream_and_a_box() {
         .iter()
         .map(|b| (b.surface.name(), b.cells.len()))
         .collect();
-    eprintln!("{}", serde_json::to_string_pretty(&map.water_report()).unwrap());
+    eprintln!(
+        "{}",
+        serde_json::to_string_pretty(&map.water_report()).unwrap()
+    );
     assert_eq!(map.bodies.len(), 3, "{models:?}");
     assert_eq!(
-        map.bodies.iter().filter(|b| b.surface.name() == "delaunay").count(),
+        map.bodies
+            .iter()
+            .filter(|b| b.surface.name() == "delaunay")
+            .count(),
         1,
         "{models:?}"
     );
