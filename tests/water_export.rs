@@ -35,12 +35,14 @@ fn wet(level: f64, depth: Option<f64>) -> CellStats {
     }
 }
 
-type Scene = fn(f64, f64) -> (f64, Option<(f64, Option<f64>)>);
+/// Terrain at (x, y) and, where there is water, `Some((surface, depth))`.
+type Cell = (f64, Option<(f64, Option<f64>)>);
+type Scene = fn(f64, f64) -> Cell;
 
 /// Two ponds on flat ground at z = 0 for x < 0 (one bowl-shaped and shallow with a 1 m
 /// bush on its east shore, one 0.6 m deep around a dry island), a box, and for x ≥ 0 a
 /// stream 1.6 m wide running down a 2 % slope in a ditch, without bottom returns.
-fn mixed(x: f64, y: f64) -> (f64, Option<(f64, Option<f64>)>) {
+fn mixed(x: f64, y: f64) -> Cell {
     if x < 0.0 {
         let r1 = (x + 6.0).hypot(y - 4.0);
         if r1 < 2.5 {
