@@ -618,6 +618,17 @@ mod tests {
     }
 
     #[test]
+    fn water_ply_without_bodies_is_an_empty_valid_mesh() {
+        let map = HazardMap::new(0.1, vec![cell(0, 0, 0.0)]);
+        let dir = tempfile::tempdir().unwrap();
+        write_map_files(dir.path(), &map).unwrap();
+        let bytes = std::fs::read(dir.path().join("water.ply")).unwrap();
+        let text = String::from_utf8_lossy(&bytes);
+        assert!(text.contains("element vertex 0\n") && text.contains("element face 0\n"));
+        assert!(text.ends_with("end_header\n"));
+    }
+
+    #[test]
     fn png_of_an_empty_map_is_still_a_picture() {
         let img = render_map_png(&HazardMap {
             resolution: 0.1,
