@@ -3,7 +3,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use std::collections::HashMap;
+
+use crate::error::Result;
 use crate::grid::{CellKey, Fusion, TileMap};
+use crate::water::{find_bodies, HazardConfig, Vehicle, WaterBody};
 
 /// Cell class codes of the export contract.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -120,6 +124,46 @@ impl MapCell {
 pub struct HazardMap {
     pub resolution: f64,
     pub cells: Vec<MapCell>,
+    /// Water bodies (empty for a geometry-only map).
+    #[serde(default)]
+    pub bodies: Vec<WaterBody>,
+}
+
+/// Class and hazard of a dry cell at `key` with elevation `z` from its dry 8-neighbours:
+/// the upper side of a step higher than `max_step` is an obstacle (class and hazard), a
+/// slope steeper than `max_grad` (rise over run, from a least-squares fit over the 3 × 3
+/// neighbourhood) is a hazard on ground.
+fn terrain_hazard(
+    dry: &HashMap<CellKey, f64>,
+    key: CellKey,
+    z: f64,
+    res: f64,
+    max_step: f64,
+    max_grad: f64,
+) -> (Class, Hazard) {
+    let (mut lowest, mut gx, mut gy, mut wx, mut wy) = (z, 0.0, 0.0, 0.0, 0.0);
+    for dy in -1i64..=1 {
+        for dx in -1i64..=1 {
+            let Some(&zn) = dry.get(&CellKey::new(key.x + dx, key.y + dy)) else {
+                continue;
+            };
+            lowest = lowest.min(zn);
+            gx += (zn - z) * dx as f64;
+            wx += (dx * dx) as f64;
+            gy += (zn - z) * dy as f64;
+            wy += (dy * dy) as f64;
+        }
+    }
+    if z - lowest > max_step {
+        return (Class::Obstacle, Hazard::Obstacle);
+    }
+    let g = |s: f64, w: f64| if w > 0.0 { s / (w * res) } else { 0.0 };
+    let grad = g(gx, wx).hypot(g(gy, wy));
+    if grad > max_grad {
+        (Class::Ground, Hazard::Obstacle)
+    } else {
+        (Class::Ground, Hazard::Free)
+    }
 }
 
 impl HazardMap {
@@ -146,63 +190,119 @@ impl HazardMap {
         HazardMap {
             resolution: tiles.resolution(),
             cells,
+            bodies: Vec::new(),
         }
     }
 
-    /// The map with water from the cues' evidence (see [`crate::grid::Evidence`] for the
-    /// fusion rule): `water` is the fused probability of every cell; cells observed only
-    /// through water evidence (no returns: a no-return region, reflection crossings) are
-    /// included at their measured water level. Provisional until the water stage (issue 8):
-    /// a cell with `water ≥ 0.9` is class Water, `z` its water level when one was measured,
-    /// `depth` the mean refraction-corrected bottom-return depth (NaN when unknown), and
-    /// hazard ShallowWater when that depth is at most `fording_depth_m`, else DeepWater.
+    /// A map of cells without water bodies.
+    pub fn new(resolution: f64, cells: Vec<MapCell>) -> Self {
+        HazardMap {
+            resolution,
+            cells,
+            bodies: Vec::new(),
+        }
+    }
+
+    /// The `report.json` record of the water bodies (see [`WaterBody::report`]).
+    pub fn water_report(&self) -> serde_json::Value {
+        crate::water::bodies_report(&self.bodies)
+    }
+
+    /// The map with water from the cues' evidence, with the default water and vehicle
+    /// configuration and the given fusion rule and fording depth: a thin wrapper over
+    /// [`HazardMap::from_tiles`], kept for callers written before the water stage. Invalid
+    /// settings (a fusion probability outside 0..1, a negative fording depth) give the
+    /// geometry-only map.
     pub fn with_water(tiles: &TileMap, fusion: &Fusion, fording_depth_m: f64) -> Self {
+        let cfg = HazardConfig {
+            fusion: *fusion,
+            vehicle: Vehicle {
+                fording_depth_m,
+                ..Vehicle::default()
+            },
+            ..HazardConfig::default()
+        };
+        Self::from_tiles(tiles, &cfg).unwrap_or_else(|_| Self::from_elevation(tiles))
+    }
+
+    /// The hazard map of a tile map: water bodies (see [`crate::water`]), then one record
+    /// per observed cell with class, hazard, water probability, z (the fitted water surface
+    /// for water cells, else the terrain elevation, else the cues' water level) and depth
+    /// (0 dry, NaN where unknown). Body ids start at 1.
+    pub fn from_tiles(tiles: &TileMap, cfg: &HazardConfig) -> Result<Self> {
+        Self::from_tiles_after(tiles, cfg, &[])
+    }
+
+    /// As [`HazardMap::from_tiles`], with body ids carried over from the bodies of an
+    /// earlier snapshot (a body that grew or merged keeps its largest ancestor's id).
+    pub fn from_tiles_after(
+        tiles: &TileMap,
+        cfg: &HazardConfig,
+        previous: &[WaterBody],
+    ) -> Result<Self> {
+        let bodies = find_bodies(tiles, cfg, previous)?;
+        let res = tiles.resolution();
+        // Water cells: surface z and depth from their body.
+        let mut water: HashMap<CellKey, (f64, f32)> = HashMap::new();
+        for b in &bodies {
+            let s = b.surface.evaluator();
+            for (&k, &d) in b.cells.iter().zip(&b.cell_depth_m) {
+                let (x, y) = tiles.centre_of(k);
+                water.insert(k, (s.at(x, y), d));
+            }
+        }
+        // Dry terrain for the step and slope tests.
+        let dry: HashMap<CellKey, f64> = tiles
+            .observed()
+            .filter(|(k, _)| !water.contains_key(k))
+            .filter_map(|(k, c)| Some((k, tiles.elevation(&c)?)))
+            .collect();
+        let v = &cfg.vehicle;
+        let max_grad = v.max_slope_deg.to_radians().tan();
         let cells = tiles
             .observed()
             .filter_map(|(key, c)| {
-                let p = c.ev.water_probability(fusion);
-                let level = c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3);
-                let elevation = tiles.elevation(&c);
-                let water = p >= 0.9;
-                let z = if water {
-                    level.or(elevation)
-                } else {
-                    elevation.or(level)
-                }?;
-                let depth = if water {
-                    c.ev.depth_m().unwrap_or(f64::NAN)
-                } else {
-                    0.0
-                };
-                let (class, hazard) = if water {
-                    let shallow = depth <= fording_depth_m;
-                    (
+                let p = c.ev.water_probability(&cfg.fusion) as f32;
+                if let Some(&(z, depth)) = water.get(&key) {
+                    let hazard = if depth.is_finite() && depth as f64 <= v.fording_depth_m {
+                        Hazard::ShallowWater
+                    } else {
+                        Hazard::DeepWater
+                    };
+                    return Some(MapCell::of(
+                        tiles,
+                        key,
+                        &c,
+                        z,
+                        p,
+                        depth,
                         Class::Water,
-                        if shallow {
-                            Hazard::ShallowWater
-                        } else {
-                            Hazard::DeepWater
-                        },
-                    )
-                } else {
-                    (Class::Ground, Hazard::Free)
+                        hazard,
+                    ));
+                }
+                let Some(&z) = dry.get(&key) else {
+                    // Observed through water evidence only, not water: its level, if any.
+                    let z = c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3)?;
+                    return Some(MapCell::of(
+                        tiles,
+                        key,
+                        &c,
+                        z,
+                        p,
+                        0.0,
+                        Class::Unknown,
+                        Hazard::Free,
+                    ));
                 };
-                Some(MapCell::of(
-                    tiles,
-                    key,
-                    &c,
-                    z,
-                    p as f32,
-                    depth as f32,
-                    class,
-                    hazard,
-                ))
+                let (class, hazard) = terrain_hazard(&dry, key, z, res, v.max_step_m, max_grad);
+                Some(MapCell::of(tiles, key, &c, z, p, 0.0, class, hazard))
             })
             .collect();
-        HazardMap {
-            resolution: tiles.resolution(),
+        Ok(HazardMap {
+            resolution: res,
             cells,
-        }
+            bodies,
+        })
     }
 
     /// Inclusive key bounds of the cells.

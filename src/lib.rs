@@ -20,6 +20,7 @@ pub mod mapper;
 pub mod optics;
 pub mod project;
 pub mod sim;
+pub mod water;
 
 pub use error::{Error, Result};
 

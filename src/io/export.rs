@@ -1,4 +1,4 @@
-//! The export contract (DESIGN.md, "Map export"): `map.ply`, `terrain.ply`, `map.png`,
+//! The export contract (DESIGN.md, "Map export"): `map.ply`, `terrain.ply`, `water.ply`, `map.png`,
 //! `report.json`. Every file is written to a temporary name beside its destination and
 //! renamed into place only when complete, so a reader never sees a partial file.
 
@@ -11,7 +11,7 @@ use image::{Rgb, RgbImage};
 
 use crate::error::{Error, Result};
 use crate::grid::CellKey;
-use crate::hazard::{Class, HazardMap, MapCell};
+use crate::hazard::{Class, Hazard, HazardMap, MapCell};
 
 /// Writes `path` through `body` atomically: a temporary file in the same directory, renamed
 /// over `path` only after `body` succeeded and the data reached the disk.
@@ -187,6 +187,74 @@ pub fn write_terrain_ply(path: &Path, map: &HazardMap) -> Result<()> {
     )
 }
 
+/// Colour of a water-mesh vertex `d` metres below the surface: the top sheet light to dark
+/// blue with the depth below it (violet where unknown), the bottom sandy.
+fn water_vertex_colour(top: bool, known: bool) -> [u8; 3] {
+    match (top, known) {
+        (true, true) => [40, 120, 230],
+        (true, false) => [150, 60, 200],
+        (false, _) => [150, 120, 80],
+    }
+}
+
+/// `water.ply`: the triangle mesh of every body's fitted water surface (DESIGN.md
+/// contract), binary little-endian. Bodies whose depths are all known are closed solids
+/// (surface, bottom at surface − depth, meeting at the shoreline: see
+/// [`crate::water::mesh`]); others are their open top sheet. Vertex properties: `x y z`,
+/// `red green blue`, `int body` (the body id), `float depth` (below the surface at that
+/// vertex: 0 on the top sheet).
+pub fn write_water_ply(path: &Path, map: &HazardMap) -> Result<()> {
+    let mut verts: Vec<([f32; 3], [u8; 3], i32, f32)> = Vec::new();
+    let mut tris: Vec<[u32; 3]> = Vec::new();
+    for b in &map.bodies {
+        let m = crate::water::mesh::body_mesh(b, map.resolution, &b.surface.evaluator());
+        let base = verts.len() as u32;
+        let known = b.depth.unknown_cells == 0;
+        let bottom_vertex: std::collections::HashSet<u32> =
+            m.bottom.iter().flatten().copied().collect();
+        let top_vertex: std::collections::HashSet<u32> = m.top.iter().flatten().copied().collect();
+        for (i, (v, d)) in m.vertices.iter().zip(&m.vertex_depth).enumerate() {
+            let i = i as u32;
+            let top = top_vertex.contains(&i) || !bottom_vertex.contains(&i);
+            verts.push((
+                v.map(|c| c as f32),
+                water_vertex_colour(top, known),
+                b.id as i32,
+                *d as f32,
+            ));
+        }
+        tris.extend(m.top.iter().chain(&m.bottom).map(|t| t.map(|i| i + base)));
+    }
+    write_atomic(path, |w| {
+        write!(
+            w,
+            "ply\nformat binary_little_endian 1.0\ncomment tarn water surfaces: one mesh per body, \
+             closed where every depth is known\nelement vertex {}\n\
+             property float x\nproperty float y\nproperty float z\n\
+             property uchar red\nproperty uchar green\nproperty uchar blue\n\
+             property int body\nproperty float depth\n\
+             element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            verts.len(),
+            tris.len()
+        )?;
+        for (p, rgb, body, depth) in &verts {
+            for v in p {
+                w.write_all(&v.to_le_bytes())?;
+            }
+            w.write_all(rgb)?;
+            w.write_all(&body.to_le_bytes())?;
+            w.write_all(&depth.to_le_bytes())?;
+        }
+        for t in &tris {
+            w.write_all(&[3])?;
+            for &i in t {
+                w.write_all(&(i as i32).to_le_bytes())?;
+            }
+        }
+        Ok(())
+    })
+}
+
 /// Draws `text` with the 8×8 font at `(x, y)`, `scale` pixels per font pixel.
 fn draw_text(img: &mut RgbImage, x: u32, y: u32, text: &str, scale: u32, colour: [u8; 3]) {
     use font8x8::UnicodeFonts;
@@ -230,9 +298,29 @@ fn nice_length(max_m: f64) -> f64 {
         .unwrap_or(p)
 }
 
-/// Renders the map top-down: +x to the right, +y up. Classes in their colours, shaded by a
-/// hillshade of the elevation (light from the upper left); hazards outlined; a legend and a
-/// scale bar below the map.
+/// Colour of a cell in `map.png`: water by hazard (light blue shallow, dark blue deep,
+/// violet where the depth is unknown), geometric obstacles red, other classes in their
+/// colours; drivable ground keeps its class colour.
+fn map_colour(c: &MapCell) -> [u8; 3] {
+    match (c.class, c.hazard) {
+        (Class::Water, Hazard::ShallowWater) => SHALLOW,
+        (Class::Water, _) if c.depth.is_nan() => UNKNOWN_DEPTH,
+        (Class::Water, _) => DEEP,
+        (_, Hazard::Obstacle) => OBSTACLE,
+        (class, _) => class.colour(),
+    }
+}
+
+const SHALLOW: [u8; 3] = [110, 200, 250];
+const DEEP: [u8; 3] = [20, 50, 160];
+const UNKNOWN_DEPTH: [u8; 3] = [130, 70, 200];
+const OBSTACLE: [u8; 3] = [220, 40, 30];
+
+/// Renders the map top-down: +x to the right, +y up. Drivable cells in their class colours
+/// shaded by a hillshade of the elevation (light from the upper left); water coloured by
+/// hazard (shallow within the fording depth, deep, depth unknown); geometric obstacles
+/// red; each water body labelled with its id and depth at its centre; a legend of what is
+/// shown and a scale bar below the map.
 pub fn render_map_png(map: &HazardMap) -> RgbImage {
     const BG: [u8; 3] = [24, 24, 28];
     let Some((lo, hi)) = map.key_bounds() else {
@@ -243,8 +331,8 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
     let (wc, hc) = ((hi.x - lo.x + 1) as u32, (hi.y - lo.y + 1) as u32);
     let s = (900 / wc.max(hc)).clamp(1, 8);
     let (mw, mh) = (wc * s, hc * s);
-    let legend_h = 64;
-    let width = mw.max(560);
+    let legend_h = 96;
+    let width = mw.max(640);
     let mut img = RgbImage::from_pixel(width, mh + legend_h, Rgb(BG));
 
     let elev: HashMap<CellKey, f64> = map.cells.iter().map(|c| (c.key, c.z)).collect();
@@ -270,42 +358,104 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
                 0.0
             }
         };
-        let gx = slope([(-2, z(-2, 0)), (-1, z(-1, 0)), (1, z(1, 0)), (2, z(2, 0))]);
-        let gy = slope([(-2, z(0, -2)), (-1, z(0, -1)), (1, z(0, 1)), (2, z(0, 2))]);
-        let n = nalgebra::Vector3::new(-gx, -gy, 1.0).normalize();
-        // Flat ground has shade 1; slopes facing the light are brighter, others darker;
-        // higher ground is a little lighter.
-        let shade = (0.45 + 0.55 * n.dot(&l).max(0.0) / l.z) * (0.8 + 0.35 * (c.z - zlo) / zspan);
-        let base = c.class.colour();
-        let col = base.map(|v| (v as f64 * shade.clamp(0.0, 1.2)).min(255.0) as u8);
+        let base = map_colour(c);
+        let col = if c.class == Class::Water || c.hazard == Hazard::Obstacle {
+            // Flat colours: hazards must read at a glance.
+            base
+        } else {
+            let gx = slope([(-2, z(-2, 0)), (-1, z(-1, 0)), (1, z(1, 0)), (2, z(2, 0))]);
+            let gy = slope([(-2, z(0, -2)), (-1, z(0, -1)), (1, z(0, 1)), (2, z(0, 2))]);
+            let n = nalgebra::Vector3::new(-gx, -gy, 1.0).normalize();
+            // Flat ground has shade 1; slopes facing the light are brighter, others darker;
+            // higher ground is a little lighter.
+            let shade =
+                (0.45 + 0.55 * n.dot(&l).max(0.0) / l.z) * (0.8 + 0.35 * (c.z - zlo) / zspan);
+            base.map(|v| (v as f64 * shade.clamp(0.0, 1.2)).min(255.0) as u8)
+        };
         let px = (c.key.x - lo.x) as u32 * s;
         let py = (hi.y - c.key.y) as u32 * s;
         fill_rect(&mut img, px, py, s, s, col);
-        if c.hazard as u8 >= 2 && s >= 3 {
-            let mark = if c.hazard as u8 == 3 {
-                [255, 60, 40]
-            } else {
-                [255, 255, 255]
-            };
-            img.put_pixel(px + s / 2, py + s / 2, Rgb(mark));
+    }
+
+    // Body labels: "#id" and the depth, at the body's centroid.
+    let text_scale = if mw >= 400 { 2 } else { 1 };
+    for b in &map.bodies {
+        let n = b.cells.len().max(1) as f64;
+        let cx = b.cells.iter().map(|k| k.x as f64).sum::<f64>() / n;
+        let cy = b.cells.iter().map(|k| k.y as f64).sum::<f64>() / n;
+        let depth = match (b.depth.max_m, b.depth.unknown_cells) {
+            (Some(d), 0) => format!("max {d:.2} m"),
+            (Some(d), _) => format!("max {d:.2} m+?"),
+            (None, _) => "depth ?".to_string(),
+        };
+        let px = ((cx - lo.x as f64 + 0.5) * s as f64) as i64;
+        let py = ((hi.y as f64 - cy + 0.5) * s as f64) as i64;
+        for (row, text) in [format!("#{}", b.id), depth].iter().enumerate() {
+            let tw = (text.len() as u32 * 8 * text_scale) as i64;
+            let x = (px - tw / 2).clamp(0, (width as i64 - tw).max(0)) as u32;
+            let y = (py - 8 * text_scale as i64 + row as i64 * 9 * text_scale as i64)
+                .clamp(0, mh.saturating_sub(8) as i64) as u32;
+            // A dark box behind the text keeps it readable on any colour.
+            fill_rect(
+                &mut img,
+                x.saturating_sub(1),
+                y.saturating_sub(1),
+                tw as u32 + 2,
+                8 * text_scale + 2,
+                [0, 0, 0],
+            );
+            draw_text(&mut img, x, y, text, text_scale, [255, 255, 255]);
         }
     }
 
-    // Legend: class swatches, then the scale bar.
+    // Legend: what is drivable, the water by hazard, the other classes; then the scale bar.
     let counts = map.class_counts();
-    let ly = mh + 8;
-    let mut lx = 8;
-    for class in Class::ALL.into_iter().skip(1) {
-        if counts[class as usize] == 0 {
-            continue;
+    let has = |h: Hazard| map.cells.iter().any(|c| c.hazard == h);
+    let has_unknown = map
+        .cells
+        .iter()
+        .any(|c| c.class == Class::Water && c.hazard != Hazard::ShallowWater && c.depth.is_nan());
+    let has_deep = map
+        .cells
+        .iter()
+        .any(|c| c.class == Class::Water && c.hazard == Hazard::DeepWater && !c.depth.is_nan());
+    let mut items: Vec<([u8; 3], String)> = Vec::new();
+    for class in [
+        Class::Ground,
+        Class::Vegetation,
+        Class::SnowIce,
+        Class::Unknown,
+    ] {
+        if counts[class as usize] > 0 {
+            items.push((class.colour(), format!("{} (drivable)", class.name())));
         }
-        fill_rect(&mut img, lx, ly, 12, 12, class.colour());
-        draw_text(&mut img, lx + 16, ly + 2, class.name(), 1, [230, 230, 230]);
-        lx += 16 + 8 * class.name().len() as u32 + 14;
+    }
+    if has(Hazard::ShallowWater) {
+        items.push((SHALLOW, "shallow water (fordable)".into()));
+    }
+    if has_deep {
+        items.push((DEEP, "deep water".into()));
+    }
+    if has_unknown {
+        items.push((UNKNOWN_DEPTH, "water, depth unknown".into()));
+    }
+    if has(Hazard::Obstacle) {
+        items.push((OBSTACLE, "obstacle (step/slope)".into()));
+    }
+    let (mut lx, mut ly) = (8u32, mh + 8);
+    for (colour, name) in &items {
+        let w = 16 + 8 * name.len() as u32 + 14;
+        if lx + w > width {
+            lx = 8;
+            ly += 18;
+        }
+        fill_rect(&mut img, lx, ly, 12, 12, *colour);
+        draw_text(&mut img, lx + 16, ly + 2, name, 1, [230, 230, 230]);
+        lx += w;
     }
     let bar_m = nice_length(0.35 * wc as f64 * res);
     let bar_px = ((bar_m / res) as u32 * s).max(1);
-    let by = ly + 28;
+    let by = ly + 30;
     fill_rect(&mut img, 8, by, bar_px, 4, [240, 240, 240]);
     fill_rect(&mut img, 8, by - 4, 2, 12, [240, 240, 240]);
     fill_rect(
@@ -323,9 +473,10 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
     };
     draw_text(&mut img, 16 + bar_px, by - 2, &label, 1, [240, 240, 240]);
     let info = format!(
-        "{} cells at {:.2} m   +x right, +y up",
+        "{} cells at {:.2} m, {} water bodies   +x right, +y up",
         map.cells.len(),
-        res
+        res,
+        map.bodies.len()
     );
     draw_text(&mut img, 8, by + 14, &info, 1, [170, 170, 170]);
     img
@@ -340,11 +491,12 @@ pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {
     })
 }
 
-/// Writes `map.ply`, `terrain.ply` and `map.png` into `dir` (created if needed).
+/// Writes `map.ply`, `terrain.ply`, `water.ply` and `map.png` into `dir` (created if needed).
 pub fn write_map_files(dir: &Path, map: &HazardMap) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_map_ply(&dir.join("map.ply"), map)?;
     write_terrain_ply(&dir.join("terrain.ply"), map)?;
+    write_water_ply(&dir.join("water.ply"), map)?;
     write_map_png(&dir.join("map.png"), map)?;
     Ok(())
 }
@@ -360,7 +512,6 @@ pub fn elevation_range(cells: &[MapCell]) -> Option<(f64, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hazard::Hazard;
 
     fn cell(x: i64, y: i64, z: f64) -> MapCell {
         MapCell {
@@ -393,6 +544,7 @@ mod tests {
         let map = HazardMap {
             resolution: 0.1,
             cells,
+            bodies: vec![],
         };
         let tris = terrain_triangles(&map);
         assert_eq!(tris.len(), 4, "{tris:?}");
@@ -405,6 +557,7 @@ mod tests {
                 cell(0, 1, 0.0),
                 cell(2, 1, 0.0),
             ],
+            bodies: vec![],
         };
         assert!(terrain_triangles(&gap).is_empty());
         let full = HazardMap {
@@ -412,6 +565,7 @@ mod tests {
             cells: (0..3)
                 .flat_map(|y| (0..3).map(move |x| cell(x, y, 0.0)))
                 .collect(),
+            bodies: vec![],
         };
         let tris = terrain_triangles(&full);
         assert_eq!(tris.len(), 8);
@@ -444,6 +598,7 @@ mod tests {
         let map = HazardMap {
             resolution: 0.1,
             cells: vec![cell(3, -2, 1.5)],
+            bodies: vec![],
         };
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("map.ply");
@@ -463,10 +618,22 @@ mod tests {
     }
 
     #[test]
+    fn water_ply_without_bodies_is_an_empty_valid_mesh() {
+        let map = HazardMap::new(0.1, vec![cell(0, 0, 0.0)]);
+        let dir = tempfile::tempdir().unwrap();
+        write_map_files(dir.path(), &map).unwrap();
+        let bytes = std::fs::read(dir.path().join("water.ply")).unwrap();
+        let text = String::from_utf8_lossy(&bytes);
+        assert!(text.contains("element vertex 0\n") && text.contains("element face 0\n"));
+        assert!(text.ends_with("end_header\n"));
+    }
+
+    #[test]
     fn png_of_an_empty_map_is_still_a_picture() {
         let img = render_map_png(&HazardMap {
             resolution: 0.1,
             cells: vec![],
+            bodies: vec![],
         });
         assert!(img.width() > 0);
     }

@@ -203,7 +203,7 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
             below: 0,
         });
     }
-    Ok(HazardMap { resolution, cells })
+    Ok(HazardMap::new(resolution, cells))
 }
 
 #[cfg(test)]
@@ -232,6 +232,7 @@ mod tests {
                 cell(4, -7, Class::Water, Hazard::DeepWater, f32::NAN),
                 cell(5, 5, Class::Obstacle, Hazard::Obstacle, 0.0),
             ],
+            bodies: Vec::new(),
         }
     }
 

@@ -108,10 +108,7 @@ pub fn truth_map(w: &World) -> HazardMap {
             });
         }
     }
-    HazardMap {
-        resolution: res,
-        cells,
-    }
+    HazardMap::new(res, cells)
 }
 
 /// Statistics of each water body over the truth raster.

@@ -1,0 +1,602 @@
+//! Water bodies: which cells are water, where the water surface is, how deep it is, and
+//! what that means for a vehicle.
+//!
+//! The cues leave per-cell evidence in the map ([`crate::grid::Evidence`]); this stage turns
+//! it into bodies of water with a surface, a depth, an area and a volume, and the hazard map
+//! ([`crate::hazard::HazardMap::from_tiles`]) into one class and hazard per cell.
+//!
+//! ## 1. Bodies: connected components with hysteresis
+//!
+//! Each cell's fused water probability `p = Evidence::water_probability(&Fusion)` is read.
+//! Cells with `p ≥ p_high` (0.8) seed a body; a body grows through 8-connected neighbours
+//! with `p ≥ p_low` (0.5). With the default fusion one cue at its cap gives
+//! p = 100/119 ≈ 0.84 (prior 5 %, cap ln 100), so one well-supported cue can seed a body;
+//! weakly supported cells (one reflection ray: p ≈ 0.68) only join a body that is already
+//! there, so isolated weak evidence (one dark patch, one stray reflection) never becomes
+//! water while the faint fringe of a real pond does. Bodies smaller than
+//! `min_body_area_m2` (default 0: hysteresis is the noise guard) are dropped. A body is a set of cells, so dry islands
+//! inside it (holes) and bays stay exactly as observed.
+//!
+//! **Ids** are stable as more of a body is seen: [`find_bodies`] takes the previous
+//! snapshot's bodies; a new body that overlaps earlier ones keeps the id of the largest of
+//! them (by area), so a body that grows, or two that merge, keep the id of their largest
+//! ancestor. If a body splits, the part with the largest overlap keeps the id and the others
+//! get new ones. New ids count up from the largest id seen so far.
+//!
+//! ## 2. Shore elevation, robust to occlusion
+//!
+//! The water surface of a pond is level with its shoreline. The shore samples of a body are
+//! the observed dry cells 4-adjacent to it: the cells right at the water's edge, whose
+//! terrain meets the water. Their elevations are not all trustworthy: a bush, a rock or
+//! tall grass on the near shore is seen *above* the ground, and the ground behind it is not
+//! seen at all (paper §2.2). Raised samples are never too low, only too high, so the filter
+//! is one-sided: a sample is dropped when it stands more than `occluder_height_m` (10 cm)
+//! above the `shore_quantile` (25 %) quantile of the samples within `shore_radius_m`
+//! (1.5 m) of it. A local low quantile rather than the body's global minimum, because a
+//! stream's shore legitimately descends along its course, and a local quantile rather than
+//! the local minimum, because one noisy low cell must not decide. A 1 m bush covering a
+//! third of the shore within 1.5 m leaves the quantile on the ground, and is dropped
+//! (tested: the level stays within 3 cm).
+//!
+//! Where the shore is poorly seen (fewer than `min_shore_samples` kept), the water-level
+//! samples the cues measured with their evidence (`Evidence::level_mm`: the level of the
+//! last ground a no-return beam or reflection ray was cast from) are used instead, one per
+//! water cell, at the cell centre. Without either, the body's own cell elevations.
+//!
+//! ## 3. Surface: level plane, or constrained Delaunay where the shore is not level
+//!
+//! The level plane is the median of the kept samples, and its residual is their RMS about
+//! it. If that residual is at most `level_residual_m`, the shore agrees and the body is
+//! level (a pond). Otherwise (a stream down a slope) the surface interpolates the shore: a
+//! constrained Delaunay triangulation (spade, bulk-loaded) of the samples, with a
+//! constraint edge between every two 8-adjacent shore samples so that triangles follow the
+//! shoreline instead of cutting across land; crossing diagonals are skipped. Water cells are
+//! given barycentric interpolation in their triangle; outside the triangulation, the
+//! nearest sample. The Delaunay model must earn its place: its hold-out residual (every
+//! other sample predicted from the triangulation of the others) must beat the level's, or
+//! the body stays level. Both residuals are reported per body. Degenerate samples
+//! (collinear, duplicates, fewer than three) cannot be triangulated and keep the level.
+//! (spade's natural-neighbour interpolation exists only for unconstrained triangulations;
+//! the constraints were worth more than the smoother interpolant.)
+//!
+//! ## 4. Depth, area, volume
+//!
+//! A water cell's depth is the mean of its refraction-corrected bottom returns
+//! (`Evidence::depth_m`); without any it is **unknown** (NaN in the map), never a guess.
+//! Area is the number of cells times the cell area. The volume is given only when every
+//! cell's depth is known (`volume_m3: None` otherwise, with the known and unknown-depth
+//! areas reported): it is the volume of the closed water mesh ([`mesh`]) between the
+//! surface and the bottom, where the bottom interpolates the measured depths at the cell
+//! centres and comes up to depth zero at the shoreline, as real water does.
+//!
+//! ## 5. Hazards
+//!
+//! Water with every bottom return's depth known and at most `fording_depth_m` is shallow
+//! (hazard 1); deeper, or unknown, is deep (hazard 2): unknown is not safe. Dry cells are
+//! geometric obstacles (hazard 3) when the step to an 8-neighbour exceeds `max_step_m` (the
+//! upper side of the step is class obstacle) or the slope of the local 3 × 3 fit exceeds
+//! `max_slope_deg`.
+
+pub mod mesh;
+pub mod surface;
+
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::grid::{CellKey, Fusion, TileMap};
+
+pub use surface::{ShoreSample, Surface, SurfaceModel};
+
+/// Parameters of body extraction and surface fitting (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WaterConfig {
+    /// A cell with water probability at least this seeds a body.
+    pub p_high: f64,
+    /// A cell with water probability at least this joins a neighbouring body.
+    pub p_low: f64,
+    /// Bodies smaller than this are dropped (m²).
+    pub min_body_area_m2: f64,
+    /// Neighbourhood of the occluder test on shore samples (m).
+    pub shore_radius_m: f64,
+    /// Quantile of the neighbourhood taken as the local shore level (0..1).
+    pub shore_quantile: f64,
+    /// A shore sample this far above the local shore level is an occluder (m).
+    pub occluder_height_m: f64,
+    /// Fewer kept shore samples than this: use the cues' water-level samples.
+    pub min_shore_samples: usize,
+    /// Largest RMS of the shore about its median for a level surface (m).
+    pub level_residual_m: f64,
+}
+
+impl Default for WaterConfig {
+    fn default() -> Self {
+        WaterConfig {
+            p_high: 0.8,
+            p_low: 0.5,
+            min_body_area_m2: 0.0,
+            shore_radius_m: 1.5,
+            shore_quantile: 0.25,
+            occluder_height_m: 0.10,
+            min_shore_samples: 6,
+            level_residual_m: 0.02,
+        }
+    }
+}
+
+fn check(what: &str, ok: bool, v: impl std::fmt::Display, must: &str) -> Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::invalid(what, format!("{v} {must}")))
+    }
+}
+
+impl WaterConfig {
+    pub fn validate(&self) -> Result<()> {
+        let prob = |p: f64| p > 0.0 && p < 1.0;
+        check(
+            "water.p_high",
+            prob(self.p_high),
+            self.p_high,
+            "must lie strictly between 0 and 1",
+        )?;
+        check(
+            "water.p_low",
+            prob(self.p_low) && self.p_low <= self.p_high,
+            self.p_low,
+            "must lie strictly between 0 and 1 and not above p_high",
+        )?;
+        let nonneg = |v: f64| v.is_finite() && v >= 0.0;
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        check(
+            "water.min_body_area_m2",
+            nonneg(self.min_body_area_m2),
+            self.min_body_area_m2,
+            "must be a finite number ≥ 0",
+        )?;
+        check(
+            "water.shore_radius_m",
+            pos(self.shore_radius_m),
+            self.shore_radius_m,
+            "must be a finite number > 0",
+        )?;
+        check(
+            "water.shore_quantile",
+            (0.0..=1.0).contains(&self.shore_quantile),
+            self.shore_quantile,
+            "must lie in 0..1",
+        )?;
+        check(
+            "water.occluder_height_m",
+            pos(self.occluder_height_m),
+            self.occluder_height_m,
+            "must be a finite number > 0",
+        )?;
+        check(
+            "water.level_residual_m",
+            nonneg(self.level_residual_m),
+            self.level_residual_m,
+            "must be a finite number ≥ 0",
+        )
+    }
+}
+
+/// What the vehicle can drive through.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Vehicle {
+    /// Deepest water the vehicle may ford (m).
+    pub fording_depth_m: f64,
+    /// Highest step between neighbouring cells it can climb (m).
+    pub max_step_m: f64,
+    /// Steepest slope it can drive (degrees).
+    pub max_slope_deg: f64,
+}
+
+impl Default for Vehicle {
+    fn default() -> Self {
+        Vehicle {
+            fording_depth_m: 0.3,
+            max_step_m: 0.25,
+            max_slope_deg: 25.0,
+        }
+    }
+}
+
+impl Vehicle {
+    pub fn validate(&self) -> Result<()> {
+        let nonneg = |v: f64| v.is_finite() && v >= 0.0;
+        check(
+            "vehicle.fording_depth_m",
+            nonneg(self.fording_depth_m),
+            self.fording_depth_m,
+            "must be a finite number ≥ 0",
+        )?;
+        check(
+            "vehicle.max_step_m",
+            self.max_step_m.is_finite() && self.max_step_m > 0.0,
+            self.max_step_m,
+            "must be a finite number > 0",
+        )?;
+        check(
+            "vehicle.max_slope_deg",
+            self.max_slope_deg > 0.0 && self.max_slope_deg < 90.0,
+            self.max_slope_deg,
+            "must lie strictly between 0 and 90",
+        )
+    }
+}
+
+/// Everything the water and hazard stage needs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct HazardConfig {
+    pub fusion: Fusion,
+    pub water: WaterConfig,
+    pub vehicle: Vehicle,
+}
+
+impl HazardConfig {
+    /// Checks every part; the error names the bad field.
+    pub fn validate(&self) -> Result<()> {
+        self.fusion.validate()?;
+        self.water.validate()?;
+        self.vehicle.validate()
+    }
+
+    /// Reads a JSON config; unknown fields are errors naming the file.
+    pub fn from_json_file(path: &std::path::Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let cfg: HazardConfig = serde_json::from_str(&text).map_err(|e| {
+            Error::format(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
+/// Where a body's surface samples came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SurfaceSource {
+    /// Dry cells along the water's edge.
+    Shore,
+    /// The cues' water-level samples (the shore was poorly seen).
+    WaterLevels,
+    /// The body's own cell elevations (nothing better).
+    CellElevations,
+}
+
+/// Depth knowledge of a body.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DepthStats {
+    /// Cells with at least one bottom return, and without.
+    pub known_cells: usize,
+    pub unknown_cells: usize,
+    pub known_area_m2: f64,
+    pub unknown_area_m2: f64,
+    /// Mean and greatest of the known cell depths (m).
+    pub mean_m: Option<f64>,
+    pub max_m: Option<f64>,
+}
+
+/// One water body.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WaterBody {
+    pub id: u32,
+    /// Its cells, sorted.
+    pub cells: Vec<CellKey>,
+    pub area_m2: f64,
+    /// Volume of the closed water mesh; `None` when any cell's depth is unknown.
+    pub volume_m3: Option<f64>,
+    pub depth: DepthStats,
+    /// Dry shore cells found, and those kept after the occluder test.
+    pub shore_samples: usize,
+    pub shore_samples_kept: usize,
+    /// Samples the surface was fitted to, and where they came from.
+    pub surface_samples: usize,
+    pub surface_source: SurfaceSource,
+    pub surface: SurfaceModel,
+    /// RMS of the samples about the level plane (m).
+    pub level_residual_m: f64,
+    /// Hold-out RMS of the Delaunay surface, when it was tried (m).
+    pub delaunay_residual_m: Option<f64>,
+    /// Per-cell depth, parallel to `cells` (m; NaN unknown).
+    pub cell_depth_m: Vec<f32>,
+}
+
+impl WaterBody {
+    /// The `report.json` record of the body (everything but the per-cell lists).
+    pub fn report(&self) -> serde_json::Value {
+        let (surface_z, vertices) = match &self.surface {
+            SurfaceModel::Level { z } => (Some(*z), None),
+            SurfaceModel::Delaunay { samples, .. } => (None, Some(samples.len())),
+        };
+        serde_json::json!({
+            "id": self.id,
+            "cells": self.cells.len(),
+            "area_m2": self.area_m2,
+            "volume_m3": self.volume_m3,
+            "depth": self.depth,
+            "shore_samples": self.shore_samples,
+            "shore_samples_kept": self.shore_samples_kept,
+            "surface_samples": self.surface_samples,
+            "surface_source": self.surface_source,
+            "surface_model": self.surface.name(),
+            "surface_z": surface_z,
+            "delaunay_vertices": vertices,
+            "level_residual_m": self.level_residual_m,
+            "delaunay_residual_m": self.delaunay_residual_m,
+        })
+    }
+}
+
+/// The `report.json` record of all bodies.
+pub fn bodies_report(bodies: &[WaterBody]) -> serde_json::Value {
+    serde_json::Value::Array(bodies.iter().map(WaterBody::report).collect())
+}
+
+const N8: [(i64, i64); 8] = [
+    (-1, -1),
+    (0, -1),
+    (1, -1),
+    (-1, 0),
+    (1, 0),
+    (-1, 1),
+    (0, 1),
+    (1, 1),
+];
+const N4: [(i64, i64); 4] = [(0, -1), (-1, 0), (1, 0), (0, 1)];
+
+fn add(k: CellKey, (dx, dy): (i64, i64)) -> CellKey {
+    CellKey::new(k.x + dx, k.y + dy)
+}
+
+/// What the water stage reads of a cell.
+#[derive(Debug, Clone, Copy)]
+struct Info {
+    p: f64,
+    elevation: Option<f64>,
+    level: Option<f64>,
+    depth: Option<f64>,
+}
+
+/// Connected components with hysteresis over `p`, deterministic (sorted keys).
+fn components(info: &BTreeMap<CellKey, Info>, cfg: &WaterConfig) -> Vec<Vec<CellKey>> {
+    let mut seen: BTreeSet<CellKey> = BTreeSet::new();
+    let mut out = Vec::new();
+    for (&k, i) in info {
+        if i.p < cfg.p_high || seen.contains(&k) {
+            continue;
+        }
+        let mut body = vec![k];
+        seen.insert(k);
+        let mut q = VecDeque::from([k]);
+        while let Some(c) = q.pop_front() {
+            for d in N8 {
+                let n = add(c, d);
+                if !seen.contains(&n) && info.get(&n).is_some_and(|i| i.p >= cfg.p_low) {
+                    seen.insert(n);
+                    body.push(n);
+                    q.push_back(n);
+                }
+            }
+        }
+        body.sort_unstable();
+        out.push(body);
+    }
+    out
+}
+
+/// Finds the water bodies of a tile map. `previous` are the bodies of the last snapshot
+/// (empty for the first): ids follow the rule in the module documentation.
+pub fn find_bodies(
+    tiles: &TileMap,
+    cfg: &HazardConfig,
+    previous: &[WaterBody],
+) -> Result<Vec<WaterBody>> {
+    cfg.validate()?;
+    let res = tiles.resolution();
+    let info: BTreeMap<CellKey, Info> = tiles
+        .observed()
+        .map(|(k, c)| {
+            (
+                k,
+                Info {
+                    p: c.ev.water_probability(&cfg.fusion),
+                    elevation: tiles.elevation(&c),
+                    level: c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3),
+                    depth: c.ev.depth_m(),
+                },
+            )
+        })
+        .collect();
+    let cell_area = res * res;
+    let comps: Vec<Vec<CellKey>> = components(&info, &cfg.water)
+        .into_iter()
+        .filter(|b| b.len() as f64 * cell_area >= cfg.water.min_body_area_m2)
+        .collect();
+    let ids = assign_ids(&comps, previous);
+    let mut bodies = Vec::with_capacity(comps.len());
+    for (cells, id) in comps.into_iter().zip(ids) {
+        if let Some(b) = body_of(id, cells, &info, tiles, &cfg.water) {
+            bodies.push(b);
+        }
+    }
+    Ok(bodies)
+}
+
+/// Ids for new components given the previous bodies (module documentation, "Ids").
+fn assign_ids(comps: &[Vec<CellKey>], previous: &[WaterBody]) -> Vec<u32> {
+    let owner: HashMap<CellKey, usize> = previous
+        .iter()
+        .enumerate()
+        .flat_map(|(i, b)| b.cells.iter().map(move |&k| (k, i)))
+        .collect();
+    let mut next = previous.iter().map(|b| b.id).max().unwrap_or(0) + 1;
+    // (component, ancestor, overlap) of every component that overlaps a previous body.
+    let mut claims: Vec<(usize, usize, usize)> = Vec::new();
+    for (ci, cells) in comps.iter().enumerate() {
+        let mut overlap: BTreeMap<usize, usize> = BTreeMap::new();
+        for k in cells {
+            if let Some(&i) = owner.get(k) {
+                *overlap.entry(i).or_default() += 1;
+            }
+        }
+        // The largest ancestor; ties to the smaller id.
+        if let Some((&a, &n)) = overlap.iter().max_by(|(a, _), (b, _)| {
+            previous[**a]
+                .cells
+                .len()
+                .cmp(&previous[**b].cells.len())
+                .then(previous[**b].id.cmp(&previous[**a].id))
+        }) {
+            claims.push((ci, a, n));
+        }
+    }
+    let mut ids: Vec<Option<u32>> = vec![None; comps.len()];
+    // Per ancestor, the claim with the largest overlap wins (ties: first component).
+    let mut best: BTreeMap<usize, (usize, usize)> = BTreeMap::new();
+    for &(ci, a, n) in &claims {
+        let e = best.entry(a).or_insert((ci, n));
+        if n > e.1 {
+            *e = (ci, n);
+        }
+    }
+    for (a, (ci, _)) in best {
+        ids[ci] = Some(previous[a].id);
+    }
+    ids.into_iter()
+        .map(|id| {
+            id.unwrap_or_else(|| {
+                next += 1;
+                next - 1
+            })
+        })
+        .collect()
+}
+
+fn body_of(
+    id: u32,
+    cells: Vec<CellKey>,
+    info: &BTreeMap<CellKey, Info>,
+    tiles: &TileMap,
+    cfg: &WaterConfig,
+) -> Option<WaterBody> {
+    let res = tiles.resolution();
+    let set: BTreeSet<CellKey> = cells.iter().copied().collect();
+    // Shore: observed dry cells with an elevation, 4-adjacent to the body.
+    let mut shore_keys: BTreeSet<CellKey> = BTreeSet::new();
+    for &k in &cells {
+        for d in N4 {
+            let n = add(k, d);
+            if !set.contains(&n) && info.get(&n).is_some_and(|i| i.elevation.is_some()) {
+                shore_keys.insert(n);
+            }
+        }
+    }
+    let shore_keys: Vec<CellKey> = shore_keys.into_iter().collect();
+    let sample = |k: CellKey, z: f64| {
+        let (x, y) = tiles.centre_of(k);
+        ShoreSample { x, y, z }
+    };
+    let shore: Vec<ShoreSample> = shore_keys
+        .iter()
+        .map(|&k| sample(k, info[&k].elevation.unwrap_or(f64::NAN)))
+        .collect();
+    let kept = surface::reject_occluders(&shore, cfg);
+    let (samples, keys, source) = if kept.len() >= cfg.min_shore_samples.max(1) {
+        (
+            kept.iter().map(|&i| shore[i]).collect::<Vec<_>>(),
+            kept.iter().map(|&i| shore_keys[i]).collect::<Vec<_>>(),
+            SurfaceSource::Shore,
+        )
+    } else {
+        let levels: Vec<(CellKey, f64)> = cells
+            .iter()
+            .filter_map(|&k| info[&k].level.map(|z| (k, z)))
+            .collect();
+        if !levels.is_empty() {
+            (
+                levels.iter().map(|&(k, z)| sample(k, z)).collect(),
+                levels.iter().map(|&(k, _)| k).collect(),
+                SurfaceSource::WaterLevels,
+            )
+        } else if !kept.is_empty() {
+            (
+                kept.iter().map(|&i| shore[i]).collect(),
+                kept.iter().map(|&i| shore_keys[i]).collect(),
+                SurfaceSource::Shore,
+            )
+        } else {
+            let own: Vec<(CellKey, f64)> = cells
+                .iter()
+                .filter_map(|&k| info[&k].elevation.map(|z| (k, z)))
+                .collect();
+            (
+                own.iter().map(|&(k, z)| sample(k, z)).collect(),
+                own.iter().map(|&(k, _)| k).collect(),
+                SurfaceSource::CellElevations,
+            )
+        }
+    };
+    // Constraint edges between 8-adjacent samples (each pair once).
+    let index: HashMap<CellKey, usize> = keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+    let mut constraints = Vec::new();
+    for (i, &k) in keys.iter().enumerate() {
+        for d in [(1, 0), (0, 1), (1, 1), (1, -1)] {
+            if let Some(&j) = index.get(&add(k, d)) {
+                constraints.push([i, j]);
+            }
+        }
+    }
+    let fit = surface::fit(&samples, &constraints, cfg)?;
+    let cell_depth_m: Vec<f32> = cells
+        .iter()
+        .map(|k| info[k].depth.map_or(f32::NAN, |d| d as f32))
+        .collect();
+    let known: Vec<f64> = cell_depth_m
+        .iter()
+        .filter(|d| d.is_finite())
+        .map(|&d| d as f64)
+        .collect();
+    let cell_area = res * res;
+    let depth = DepthStats {
+        known_cells: known.len(),
+        unknown_cells: cells.len() - known.len(),
+        known_area_m2: known.len() as f64 * cell_area,
+        unknown_area_m2: (cells.len() - known.len()) as f64 * cell_area,
+        mean_m: (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64),
+        max_m: known.iter().copied().reduce(f64::max),
+    };
+    let mut body = WaterBody {
+        id,
+        area_m2: cells.len() as f64 * cell_area,
+        cells,
+        volume_m3: None,
+        depth,
+        shore_samples: shore.len(),
+        shore_samples_kept: kept.len(),
+        surface_samples: samples.len(),
+        surface_source: source,
+        surface: fit.model,
+        level_residual_m: fit.level_residual_m,
+        delaunay_residual_m: fit.delaunay_residual_m,
+        cell_depth_m,
+    };
+    if body.depth.unknown_cells == 0 {
+        let m = mesh::body_mesh(&body, res, &body.surface.evaluator());
+        body.volume_m3 = Some(m.volume());
+    }
+    Some(body)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,375 @@
+//! Shore samples → occluder filter → water surface model (level plane or constrained
+//! Delaunay interpolation). See the module documentation of [`super`] for the reasoning.
+
+use std::collections::HashMap;
+
+use serde::{Deserialize, Serialize};
+use spade::{ConstrainedDelaunayTriangulation, Point2, PositionInTriangulation, Triangulation};
+
+use super::WaterConfig;
+
+/// One shore (or water-level) sample: a position in the map frame and an elevation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ShoreSample {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+
+/// The fitted water surface of a body.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "snake_case")]
+pub enum SurfaceModel {
+    /// A horizontal plane at `z`.
+    Level { z: f64 },
+    /// Barycentric interpolation on the constrained Delaunay triangulation of `samples`;
+    /// `constraints` are index pairs into `samples` (neighbouring shore cells).
+    Delaunay {
+        samples: Vec<ShoreSample>,
+        constraints: Vec<[usize; 2]>,
+    },
+}
+
+impl SurfaceModel {
+    pub fn name(&self) -> &'static str {
+        match self {
+            SurfaceModel::Level { .. } => "level",
+            SurfaceModel::Delaunay { .. } => "delaunay",
+        }
+    }
+
+    /// An evaluator of the surface (builds the triangulation once).
+    pub fn evaluator(&self) -> Surface {
+        match self {
+            SurfaceModel::Level { z } => Surface::Level(*z),
+            SurfaceModel::Delaunay {
+                samples,
+                constraints,
+            } => Surface::tin(samples, constraints).unwrap_or_else(|| {
+                // Not triangulable (fewer than 3 distinct non-collinear samples): the
+                // median, which is what `fit` would have chosen.
+                Surface::Level(median(samples.iter().map(|s| s.z).collect()).unwrap_or(0.0))
+            }),
+        }
+    }
+}
+
+/// A triangulation vertex: position and elevation.
+#[derive(Debug, Clone, Copy)]
+pub struct V {
+    p: Point2<f64>,
+    z: f64,
+}
+
+impl spade::HasPosition for V {
+    type Scalar = f64;
+    fn position(&self) -> Point2<f64> {
+        self.p
+    }
+}
+
+/// A surface ready to evaluate.
+pub enum Surface {
+    Level(f64),
+    Tin {
+        cdt: ConstrainedDelaunayTriangulation<V>,
+        /// Samples for the nearest-sample fallback outside the triangulation.
+        samples: Vec<ShoreSample>,
+    },
+}
+
+impl Surface {
+    /// The triangulation of `samples` with the given constraint edges; `None` when the
+    /// samples do not span a triangle (all collinear, fewer than three distinct points, or
+    /// non-finite). Crossing constraints are skipped, not a panic.
+    fn tin(samples: &[ShoreSample], constraints: &[[usize; 2]]) -> Option<Surface> {
+        let ok: Vec<ShoreSample> = samples
+            .iter()
+            .copied()
+            .filter(|s| s.x.is_finite() && s.y.is_finite() && s.z.is_finite())
+            .collect();
+        if ok.len() != samples.len() || ok.len() < 3 {
+            return None;
+        }
+        let verts: Vec<V> = samples
+            .iter()
+            .map(|s| V {
+                p: Point2::new(s.x, s.y),
+                z: s.z,
+            })
+            .collect();
+        let edges: Vec<[usize; 2]> = constraints
+            .iter()
+            .copied()
+            .filter(|&[a, b]| a < samples.len() && b < samples.len() && a != b)
+            .collect();
+        // Duplicate positions are merged by spade, which renumbers vertices: constraints
+        // then no longer refer to the right ones, so with duplicates load without them.
+        let distinct = {
+            let mut p: Vec<(u64, u64)> = samples
+                .iter()
+                .map(|s| (s.x.to_bits(), s.y.to_bits()))
+                .collect();
+            p.sort_unstable();
+            p.dedup();
+            p.len()
+        };
+        let edges = if distinct == samples.len() {
+            edges
+        } else {
+            Vec::new()
+        };
+        let cdt =
+            ConstrainedDelaunayTriangulation::<V>::try_bulk_load_cdt(verts, edges, |_| {}).ok()?;
+        if cdt.num_inner_faces() == 0 {
+            return None;
+        }
+        Some(Surface::Tin { cdt, samples: ok })
+    }
+
+    /// Surface elevation at `(x, y)`: the plane, or barycentric interpolation in the
+    /// triangle containing the point; outside the triangulation's hull, the nearest sample.
+    pub fn at(&self, x: f64, y: f64) -> f64 {
+        match self {
+            Surface::Level(z) => *z,
+            Surface::Tin { cdt, samples } => {
+                let p = Point2::new(x, y);
+                let z = match cdt.locate(p) {
+                    PositionInTriangulation::OnFace(f) => {
+                        let f = cdt.face(f);
+                        let w = f.barycentric_interpolation(p);
+                        let v = f.vertices();
+                        w[0] * v[0].data().z + w[1] * v[1].data().z + w[2] * v[2].data().z
+                    }
+                    PositionInTriangulation::OnVertex(v) => cdt.vertex(v).data().z,
+                    PositionInTriangulation::OnEdge(e) => {
+                        let e = cdt.directed_edge(e);
+                        let [a, b] = e.vertices().map(|v| *v.data());
+                        let (dx, dy) = (b.p.x - a.p.x, b.p.y - a.p.y);
+                        let l2 = dx * dx + dy * dy;
+                        let t = if l2 > 0.0 {
+                            (((x - a.p.x) * dx + (y - a.p.y) * dy) / l2).clamp(0.0, 1.0)
+                        } else {
+                            0.0
+                        };
+                        a.z + t * (b.z - a.z)
+                    }
+                    _ => f64::NAN,
+                };
+                // Outside the hull, or a point exactly on a hull edge for which the
+                // interpolation weights degenerate: the nearest sample.
+                if z.is_finite() {
+                    z
+                } else {
+                    nearest(samples, x, y)
+                }
+            }
+        }
+    }
+}
+
+fn nearest(samples: &[ShoreSample], x: f64, y: f64) -> f64 {
+    samples
+        .iter()
+        .min_by(|a, b| {
+            let da = (a.x - x).powi(2) + (a.y - y).powi(2);
+            let db = (b.x - x).powi(2) + (b.y - y).powi(2);
+            da.total_cmp(&db)
+        })
+        .map_or(f64::NAN, |s| s.z)
+}
+
+/// The `q` quantile (0..1, nearest rank) of finite values; `None` when there are none.
+pub fn quantile(mut v: Vec<f64>, q: f64) -> Option<f64> {
+    v.retain(|z| z.is_finite());
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_unstable_by(f64::total_cmp);
+    let i = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    Some(v[i])
+}
+
+pub fn median(v: Vec<f64>) -> Option<f64> {
+    quantile(v, 0.5)
+}
+
+/// Drops occluded shore samples: a sample more than `cfg.occluder_height_m` above the
+/// `cfg.shore_quantile` quantile of the samples within `cfg.shore_radius_m` of it (itself
+/// included) stands on something raised (a bush, a rock, a bank top seen past the edge).
+/// Returns the indices of the samples kept, in input order.
+pub fn reject_occluders(samples: &[ShoreSample], cfg: &WaterConfig) -> Vec<usize> {
+    let r = cfg.shore_radius_m;
+    let r2 = r * r;
+    let bucket = |s: &ShoreSample| ((s.x / r).floor() as i64, (s.y / r).floor() as i64);
+    let mut buckets: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+    for (i, s) in samples.iter().enumerate() {
+        buckets.entry(bucket(s)).or_default().push(i);
+    }
+    let mut keep = Vec::with_capacity(samples.len());
+    let mut near = Vec::new();
+    for (i, s) in samples.iter().enumerate() {
+        near.clear();
+        let (bx, by) = bucket(s);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                if let Some(b) = buckets.get(&(bx + dx, by + dy)) {
+                    for &j in b {
+                        let o = &samples[j];
+                        if (o.x - s.x).powi(2) + (o.y - s.y).powi(2) <= r2 {
+                            near.push(o.z);
+                        }
+                    }
+                }
+            }
+        }
+        let reference = quantile(near.clone(), cfg.shore_quantile).unwrap_or(s.z);
+        if s.z - reference <= cfg.occluder_height_m {
+            keep.push(i);
+        }
+    }
+    keep
+}
+
+/// The outcome of choosing a surface model for one body.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fit {
+    pub model: SurfaceModel,
+    /// RMS of the kept samples about the median level.
+    pub level_residual_m: f64,
+    /// Hold-out RMS of the Delaunay surface (every other sample predicted from the
+    /// triangulation of the rest); `None` when it was not needed or not possible.
+    pub delaunay_residual_m: Option<f64>,
+}
+
+fn rms(it: impl Iterator<Item = f64>) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for v in it {
+        s += v * v;
+        n += 1;
+    }
+    if n == 0 {
+        0.0
+    } else {
+        (s / n as f64).sqrt()
+    }
+}
+
+/// Chooses the surface of a body from its (occluder-filtered) samples and the constraint
+/// edges between them: the level plane at the median when its RMS residual is within
+/// `cfg.level_residual_m`; otherwise the constrained Delaunay surface when its hold-out
+/// residual beats the level's, else still the level. `None` without finite samples.
+pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfig) -> Option<Fit> {
+    let z = median(samples.iter().map(|s| s.z).collect())?;
+    let level_residual_m = rms(samples.iter().map(|s| s.z - z));
+    let level = Fit {
+        model: SurfaceModel::Level { z },
+        level_residual_m,
+        delaunay_residual_m: None,
+    };
+    if level_residual_m <= cfg.level_residual_m || samples.len() < 6 {
+        return Some(level);
+    }
+    // Hold-out: triangulate the even samples, predict the odd ones.
+    let even: Vec<ShoreSample> = samples.iter().step_by(2).copied().collect();
+    let Some(half) = Surface::tin(&even, &[]) else {
+        return Some(level);
+    };
+    let held = rms(samples
+        .iter()
+        .skip(1)
+        .step_by(2)
+        .map(|s| half.at(s.x, s.y) - s.z));
+    // The full triangulation must exist too (it does when half of it does, unless samples
+    // are non-finite, which `median` and `tin` both exclude).
+    if Surface::tin(samples, constraints).is_none() || held >= level_residual_m {
+        return Some(Fit {
+            delaunay_residual_m: Some(held),
+            ..level
+        });
+    }
+    Some(Fit {
+        model: SurfaceModel::Delaunay {
+            samples: samples.to_vec(),
+            constraints: constraints.to_vec(),
+        },
+        level_residual_m,
+        delaunay_residual_m: Some(held),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn s(x: f64, y: f64, z: f64) -> ShoreSample {
+        ShoreSample { x, y, z }
+    }
+
+    #[test]
+    fn degenerate_samples_do_not_panic_and_fall_back() {
+        let cfg = WaterConfig::default();
+        // Collinear, sloped: no triangle. The fit stays level at the median.
+        let line: Vec<_> = (0..20).map(|i| s(i as f64, 0.0, 0.1 * i as f64)).collect();
+        let f = fit(&line, &[], &cfg).unwrap();
+        assert_eq!(f.model, SurfaceModel::Level { z: 1.0 });
+        // Duplicates and nearly coincident points with constraints that refer to them.
+        let mut dup: Vec<_> = (0..10)
+            .flat_map(|i| [s(i as f64, 0.0, 0.0), s(i as f64, 5.0, 1.0)])
+            .collect();
+        dup.push(s(3.0, 0.0, 0.0));
+        dup.push(s(3.0 + 1e-12, 1e-12, 0.0));
+        let cons: Vec<[usize; 2]> = (0..dup.len() - 1).map(|i| [i, i + 1]).collect();
+        let f = fit(&dup, &cons, &cfg).unwrap();
+        let e = f.model.evaluator();
+        let z = e.at(4.5, 2.5);
+        assert!(z.is_finite() && (-0.01..=1.01).contains(&z), "{z}");
+        // Nothing finite: no fit.
+        assert!(fit(&[s(f64::NAN, 0.0, f64::NAN)], &[], &cfg).is_none());
+        assert!(fit(&[], &[], &cfg).is_none());
+        // One sample.
+        assert_eq!(
+            fit(&[s(0.0, 0.0, 2.0)], &[], &cfg).unwrap().model,
+            SurfaceModel::Level { z: 2.0 }
+        );
+    }
+
+    #[test]
+    fn outside_the_hull_is_the_nearest_sample() {
+        let samples = vec![s(0.0, 0.0, 0.0), s(1.0, 0.0, 1.0), s(0.0, 1.0, 2.0)];
+        let e = SurfaceModel::Delaunay {
+            samples,
+            constraints: vec![[0, 1], [1, 2], [2, 0]],
+        }
+        .evaluator();
+        assert!((e.at(0.25, 0.25) - 0.75).abs() < 1e-12);
+        assert_eq!(e.at(5.0, -1.0), 1.0);
+        assert_eq!(e.at(0.5, 0.0), 0.5);
+    }
+
+    proptest! {
+        /// Barycentric interpolation reproduces any plane exactly inside the hull, whatever
+        /// the sample layout (duplicates included).
+        #[test]
+        fn a_plane_is_reproduced(
+            pts in prop::collection::vec((-10.0f64..10.0, -10.0f64..10.0), 3..40),
+            a in -1.0f64..1.0, b in -0.1f64..0.1, c in -0.1f64..0.1,
+            qx in -1.0f64..1.0, qy in -1.0f64..1.0,
+        ) {
+            let mut samples: Vec<_> = pts.iter().map(|&(x, y)| s(x, y, a + b * x + c * y)).collect();
+            samples.push(samples[0]);
+            let cons: Vec<[usize; 2]> = (1..samples.len()).map(|i| [i - 1, i]).collect();
+            let e = SurfaceModel::Delaunay { samples: samples.clone(), constraints: cons }.evaluator();
+            // A point that is a convex combination of three samples lies inside the hull.
+            let (p, q, r) = (samples[0], samples[1], samples[2]);
+            let (u, v) = (qx.abs() * 0.5, qy.abs() * 0.5);
+            let (x, y) = (p.x + u * (q.x - p.x) + v * (r.x - p.x), p.y + u * (q.y - p.y) + v * (r.y - p.y));
+            let z = e.at(x, y);
+            prop_assert!(z.is_finite());
+            if let Surface::Tin { .. } = e {
+                prop_assert!((z - (a + b * x + c * y)).abs() < 1e-6, "{} vs {}", z, a + b * x + c * y);
+            }
+        }
+    }
+}

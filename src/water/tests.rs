@@ -1,0 +1,638 @@
+use std::collections::HashMap;
+
+use proptest::prelude::*;
+
+use super::*;
+use crate::grid::{CellStats, Evidence};
+use crate::hazard::{Class, Hazard, HazardMap};
+
+const RES: f64 = 0.1;
+
+/// A dry cell with elevation `z` (m), 1 cm points.
+fn dry(z: f64) -> CellStats {
+    let mut c = CellStats::default();
+    for _ in 0..4 {
+        c.add((z * 1000.0).round() as i32, 65536);
+    }
+    c
+}
+
+/// A water cell seen only through no-returns (p ≈ 0.9996), with a level sample and,
+/// optionally, bottom returns of `depth`.
+fn wet(level: f64, depth: Option<f64>) -> CellStats {
+    let mut ev = Evidence {
+        noret: 6,
+        ..Evidence::default()
+    };
+    ev.add_level((level * 1000.0).round() as i32);
+    if let Some(d) = depth {
+        ev.add_depth(d);
+        ev.add_depth(d);
+    }
+    CellStats {
+        ev,
+        ..CellStats::default()
+    }
+}
+
+/// Terrain at (x, y) and, where there is water, `Some((surface, depth))`.
+type Cell = (f64, Option<(f64, Option<f64>)>);
+
+/// A scene on a square of cells: `f(x, y)` gives the terrain and, where there is water,
+/// `Some((surface, depth))`.
+fn scene(half: i64, f: impl Fn(f64, f64) -> Cell) -> (TileMap, HashMap<CellKey, f64>) {
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    let mut truth = HashMap::new();
+    for ky in -half..half {
+        for kx in -half..half {
+            let k = CellKey::new(kx, ky);
+            let (x, y) = t.centre_of(k);
+            let (ground, w) = f(x, y);
+            match w {
+                Some((s, d)) => {
+                    t.add(k, &wet(s, d));
+                    truth.insert(k, s);
+                }
+                None => t.add(k, &dry(ground)),
+            }
+        }
+    }
+    (t, truth)
+}
+
+/// A round pond of radius `r` at level 0, banks rising at 30 %, depth `d` everywhere.
+fn pond(r: f64, d: Option<f64>) -> impl Fn(f64, f64) -> Cell {
+    move |x: f64, y: f64| {
+        let rho = x.hypot(y);
+        if rho < r {
+            (-0.2, Some((0.0, d)))
+        } else {
+            (0.3 * (rho - r), None)
+        }
+    }
+}
+
+fn surface_rms(map: &HazardMap, truth: &HashMap<CellKey, f64>) -> (f64, usize) {
+    let mut s = 0.0;
+    let mut n = 0;
+    for c in map.cells.iter().filter(|c| c.class == Class::Water) {
+        if let Some(t) = truth.get(&c.key) {
+            s += (c.z - t).powi(2);
+            n += 1;
+        }
+    }
+    ((s / n.max(1) as f64).sqrt(), n)
+}
+
+#[test]
+fn a_level_pond_is_level() {
+    let (t, truth) = scene(50, pond(3.0, Some(0.25)));
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    assert_eq!(b.id, 1);
+    assert_eq!(b.surface.name(), "level");
+    assert_eq!(b.surface_source, SurfaceSource::Shore);
+    let SurfaceModel::Level { z } = b.surface else {
+        unreachable!()
+    };
+    // Shore cell centres lie 0–1 cell beyond the edge on a 30 % bank: ≤ 3 cm above.
+    assert!((0.0..0.03).contains(&z), "level {z}");
+    assert!(b.level_residual_m < 0.02, "{}", b.level_residual_m);
+    assert_eq!(b.cells.len(), truth.len());
+    assert!((b.area_m2 - truth.len() as f64 * RES * RES).abs() < 1e-9);
+    let (rms, n) = surface_rms(&map, &truth);
+    assert_eq!(n, truth.len());
+    assert!(rms < 0.03, "{rms}");
+    eprintln!(
+        "level pond r=3 m: level {z:.4} m, residual {:.4} m, surface RMS {rms:.4} m over {n} cells, \
+         {} shore samples",
+        b.level_residual_m, b.shore_samples
+    );
+}
+
+#[test]
+fn a_raised_bush_on_the_near_shore_does_not_lift_the_water() {
+    // A 1 m bush (1 m × 1 m) standing on the shore at +x.
+    let bush = |x: f64, y: f64| (2.9..3.9).contains(&x) && (-0.5..0.5).contains(&y);
+    let base = pond(3.0, Some(0.25));
+    let (t, truth) = scene(50, move |x, y| {
+        let (g, w) = base(x, y);
+        if w.is_none() && bush(x, y) {
+            (g + 1.0, None)
+        } else {
+            (g, w)
+        }
+    });
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    let b = &map.bodies[0];
+    assert!(
+        b.shore_samples_kept < b.shore_samples,
+        "bush samples dropped"
+    );
+    let SurfaceModel::Level { z } = b.surface else {
+        panic!("{:?}", b.surface.name())
+    };
+    assert!(z.abs() < 0.03, "level {z}");
+    let (rms, _) = surface_rms(&map, &truth);
+    assert!(rms < 0.03);
+    // Without the occluder test (threshold above the bush) the bush samples stay, the shore
+    // no longer agrees (residual > 0.1 m) and the pond is no longer a level plane.
+    let loose = HazardConfig {
+        water: WaterConfig {
+            occluder_height_m: 5.0,
+            ..WaterConfig::default()
+        },
+        ..HazardConfig::default()
+    };
+    let m2 = HazardMap::from_tiles(&t, &loose).unwrap();
+    let (rms2, _) = surface_rms(&m2, &truth);
+    assert!(
+        m2.bodies[0].shore_samples_kept == m2.bodies[0].shore_samples
+            && m2.bodies[0].level_residual_m > 0.1,
+        "{} {rms2}",
+        m2.bodies[0].level_residual_m
+    );
+    eprintln!(
+        "bush: kept {}/{} shore samples, level {z:.4} m, RMS {rms:.4} m; unfiltered residual {:.3} m, RMS {rms2:.4} m",
+        b.shore_samples_kept, b.shore_samples, m2.bodies[0].level_residual_m
+    );
+}
+
+/// A stream 2 m wide running 20 m down a 2 % slope in a ditch with 30 % banks.
+fn stream(x: f64, y: f64) -> Cell {
+    let s = 0.02 * x;
+    if (-10.0..10.0).contains(&x) && y.abs() < 1.0 {
+        (s - 0.3, Some((s, None)))
+    } else {
+        let dy = (y.abs() - 1.0).max(0.0);
+        let dx = (x.abs() - 10.0).max(0.0);
+        (s + 0.3 * dx.hypot(dy), None)
+    }
+}
+
+#[test]
+fn a_stream_on_a_slope_is_delaunay_within_3_cm() {
+    let (t, truth) = scene(120, stream);
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    assert_eq!(b.surface.name(), "delaunay");
+    let d = b.delaunay_residual_m.unwrap();
+    assert!(
+        d < b.level_residual_m && d < 0.03,
+        "{d} {}",
+        b.level_residual_m
+    );
+    let (rms, n) = surface_rms(&map, &truth);
+    assert!(rms <= 0.03, "{rms}");
+    // Depth unknown everywhere: NaN, hazard deep, no volume.
+    assert!(map
+        .cells
+        .iter()
+        .filter(|c| c.class == Class::Water)
+        .all(|c| c.depth.is_nan() && c.hazard == Hazard::DeepWater));
+    assert_eq!(b.volume_m3, None);
+    assert_eq!(b.depth.known_cells, 0);
+    eprintln!(
+        "stream 2 % slope: level residual {:.4} m, Delaunay hold-out {d:.4} m, surface RMS {rms:.4} m over {n} cells",
+        b.level_residual_m
+    );
+}
+
+#[test]
+fn hysteresis_seeds_and_grows() {
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    for ky in -5..5 {
+        for kx in -20..20 {
+            t.add(CellKey::new(kx, ky), &dry(0.0));
+        }
+    }
+    // 2 reflections: the cue reaches its cap, p = 100/119 ≈ 0.84 (seeds);
+    // 1 reflection: odds 0.05/0.95 · 40, p ≈ 0.678 (grows, cannot seed).
+    let refl = |n: u16| CellStats {
+        ev: Evidence {
+            reflect: n,
+            ..Evidence::default()
+        },
+        ..CellStats::default()
+    };
+    // A seed with a weak neighbour chain, and a weak chain alone.
+    t.add(CellKey::new(-10, 0), &refl(2));
+    t.add(CellKey::new(-9, 0), &refl(1));
+    t.add(CellKey::new(-8, 1), &refl(1));
+    t.add(CellKey::new(5, 0), &refl(1));
+    t.add(CellKey::new(6, 0), &refl(1));
+    let cfg = HazardConfig {
+        water: WaterConfig {
+            min_body_area_m2: 0.0,
+            ..WaterConfig::default()
+        },
+        ..HazardConfig::default()
+    };
+    let p1 = refl(1).ev.water_probability(&cfg.fusion);
+    assert!(p1 > cfg.water.p_low && p1 < cfg.water.p_high, "{p1}");
+    let map = HazardMap::from_tiles(&t, &cfg).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    assert_eq!(
+        map.bodies[0].cells,
+        vec![
+            CellKey::new(-10, 0),
+            CellKey::new(-9, 0),
+            CellKey::new(-8, 1)
+        ]
+    );
+    let n_water = map.cells.iter().filter(|c| c.class == Class::Water).count();
+    assert_eq!(n_water, 3);
+    // A minimum area of 0.05 m² (5 cells) drops this 3-cell body.
+    let big = HazardConfig {
+        water: WaterConfig {
+            min_body_area_m2: 0.05,
+            ..WaterConfig::default()
+        },
+        ..HazardConfig::default()
+    };
+    assert!(HazardMap::from_tiles(&t, &big).unwrap().bodies.is_empty());
+}
+
+#[test]
+fn holes_and_islands_are_kept() {
+    // An annulus of water around a dry island.
+    let (t, _) = scene(40, |x, y| {
+        let r = x.hypot(y);
+        if (1.0..3.0).contains(&r) {
+            (-0.2, Some((0.0, Some(0.2))))
+        } else {
+            (0.3 * (r - 3.0).abs().min((r - 1.0).abs()), None)
+        }
+    });
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let island = map
+        .cells
+        .iter()
+        .find(|c| c.key == CellKey::new(0, 0))
+        .unwrap();
+    assert_eq!(island.class, Class::Ground);
+    // The mesh is closed with the island as a hole through it.
+    let b = &map.bodies[0];
+    let m = mesh::body_mesh(b, RES, &b.surface.evaluator());
+    check_closed(&m);
+    assert!((m.top_plan_area() - b.area_m2).abs() < 1e-9);
+}
+
+/// Every undirected edge in exactly two triangles, every directed edge in exactly one.
+fn check_closed(m: &mesh::BodyMesh) {
+    let mut directed: HashMap<(u32, u32), usize> = HashMap::new();
+    for t in m.top.iter().chain(&m.bottom) {
+        for i in 0..3 {
+            *directed.entry((t[i], t[(i + 1) % 3])).or_default() += 1;
+        }
+    }
+    for (&(a, b), &n) in &directed {
+        assert_eq!(n, 1, "directed edge {a}->{b} used {n} times");
+        assert_eq!(directed.get(&(b, a)), Some(&1), "edge {a}-{b} is a border");
+    }
+}
+
+#[test]
+fn ids_are_stable_as_bodies_grow_and_merge() {
+    // Snapshot 1: two ponds, the western one larger. Snapshot 2: both grown until they
+    // merge, plus a new pond far away.
+    let blob = |cx: f64, r: f64| move |x: f64, y: f64| (x - cx).hypot(y) < r;
+    let (w1, e1) = (blob(-3.0, 2.0), blob(3.0, 1.5));
+    let (t1, _) = scene(80, |x, y| {
+        if w1(x, y) || e1(x, y) {
+            (-0.2, Some((0.0, None)))
+        } else {
+            (0.1, None)
+        }
+    });
+    let cfg = HazardConfig::default();
+    let m1 = HazardMap::from_tiles(&t1, &cfg).unwrap();
+    assert_eq!(m1.bodies.len(), 2);
+    let west = m1
+        .bodies
+        .iter()
+        .find(|b| b.cells.contains(&CellKey::new(-30, 0)))
+        .unwrap();
+    let east = m1
+        .bodies
+        .iter()
+        .find(|b| b.cells.contains(&CellKey::new(30, 0)))
+        .unwrap();
+    assert!(west.area_m2 > east.area_m2);
+    let (w2, e2, n2) = (blob(-3.0, 3.1), blob(3.0, 3.1), blob(0.0, 0.0));
+    let new = |x: f64, y: f64| x.hypot(y - 6.5) < 1.0;
+    let _ = n2;
+    let (t2, _) = scene(80, |x, y| {
+        if w2(x, y) || e2(x, y) || new(x, y) {
+            (-0.2, Some((0.0, None)))
+        } else {
+            (0.1, None)
+        }
+    });
+    let m2 = HazardMap::from_tiles_after(&t2, &cfg, &m1.bodies).unwrap();
+    assert_eq!(m2.bodies.len(), 2, "merged pond and the new one");
+    let merged = m2
+        .bodies
+        .iter()
+        .find(|b| b.cells.contains(&CellKey::new(30, 0)))
+        .unwrap();
+    assert!(merged.cells.contains(&CellKey::new(-30, 0)));
+    assert_eq!(
+        merged.id, west.id,
+        "the merged body keeps its largest ancestor's id"
+    );
+    let fresh = m2.bodies.iter().find(|b| b.id != west.id).unwrap();
+    assert_eq!(fresh.id, 3, "new ids count up from the largest seen");
+    // Without history the ids are 1, 2 in key order.
+    let m2b = HazardMap::from_tiles(&t2, &cfg).unwrap();
+    let mut ids: Vec<u32> = m2b.bodies.iter().map(|b| b.id).collect();
+    ids.sort_unstable();
+    assert_eq!(ids, vec![1, 2]);
+}
+
+#[test]
+fn a_split_body_keeps_its_id_on_the_larger_part() {
+    let prev = |cells: Vec<CellKey>, id| WaterBody {
+        id,
+        area_m2: 0.0,
+        volume_m3: None,
+        depth: DepthStats {
+            known_cells: 0,
+            unknown_cells: 0,
+            known_area_m2: 0.0,
+            unknown_area_m2: 0.0,
+            mean_m: None,
+            max_m: None,
+        },
+        shore_samples: 0,
+        shore_samples_kept: 0,
+        surface_samples: 0,
+        surface_source: SurfaceSource::Shore,
+        surface: SurfaceModel::Level { z: 0.0 },
+        level_residual_m: 0.0,
+        delaunay_residual_m: None,
+        cell_depth_m: vec![],
+        cells,
+    };
+    let row = |a: i64, b: i64| (a..b).map(|x| CellKey::new(x, 0)).collect::<Vec<_>>();
+    let old = vec![prev(row(0, 10), 7), prev(row(20, 22), 9)];
+    let ids = assign_ids(&[row(0, 3), row(4, 10), row(30, 31)], &old);
+    assert_eq!(ids, vec![10, 7, 11]);
+}
+
+#[test]
+fn one_cell_bodies_empty_maps_and_evidence_only_cells() {
+    let cfg = HazardConfig {
+        water: WaterConfig {
+            min_body_area_m2: 0.0,
+            ..WaterConfig::default()
+        },
+        ..HazardConfig::default()
+    };
+    // Empty map.
+    let t = TileMap::new(RES, 0.0).unwrap();
+    let m = HazardMap::from_tiles(&t, &cfg).unwrap();
+    assert!(m.cells.is_empty() && m.bodies.is_empty());
+    // One water cell with a depth among dry ground.
+    let (t, _) = scene(3, |x, y| {
+        if x.abs() < 0.1 && y.abs() < 0.1 && x > 0.0 && y > 0.0 {
+            (0.0, Some((0.0, Some(0.1))))
+        } else {
+            (0.0, None)
+        }
+    });
+    let m = HazardMap::from_tiles(&t, &cfg).unwrap();
+    assert_eq!(m.bodies.len(), 1);
+    let b = &m.bodies[0];
+    assert_eq!(b.cells.len(), 1);
+    // A pyramid under one cell: depth 0.1 at the centre, 0 at the corners: V = a·d/3.
+    let v = b.volume_m3.unwrap();
+    assert!((v - RES * RES * 0.1 / 3.0).abs() < 1e-9, "{v}");
+    check_closed(&mesh::body_mesh(b, RES, &b.surface.evaluator()));
+    let c = m.cells.iter().find(|c| c.class == Class::Water).unwrap();
+    assert_eq!(c.hazard, Hazard::ShallowWater);
+    // A lone water cell with no elevation anywhere and no level: no surface, no body, and
+    // the cell has nothing to place it at.
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    t.add(
+        CellKey::new(0, 0),
+        &CellStats {
+            ev: Evidence {
+                reflect: 5,
+                ..Evidence::default()
+            },
+            ..CellStats::default()
+        },
+    );
+    let m = HazardMap::from_tiles(&t, &cfg).unwrap();
+    assert!(m.bodies.is_empty() && m.cells.is_empty());
+    // NaN elevations never reach a tile map (quantized mm), but NaN fusion settings are
+    // rejected before anything runs.
+    let bad = HazardConfig {
+        fusion: Fusion {
+            prior: f64::NAN,
+            ..Fusion::default()
+        },
+        ..HazardConfig::default()
+    };
+    let e = HazardMap::from_tiles(&t, &bad).unwrap_err().to_string();
+    assert!(e.contains("prior"), "{e}");
+}
+
+#[test]
+fn poorly_seen_shores_use_the_cues_levels() {
+    // A pond whose surroundings were never observed: only its water cells, levels 0.12.
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    for ky in -10..10 {
+        for kx in -10..10 {
+            t.add(CellKey::new(kx, ky), &wet(0.12, None));
+        }
+    }
+    let m = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    let b = &m.bodies[0];
+    assert_eq!(b.surface_source, SurfaceSource::WaterLevels);
+    assert_eq!(b.surface, SurfaceModel::Level { z: 0.12 });
+    assert!(m.cells.iter().all(|c| (c.z - 0.12).abs() < 1e-9));
+}
+
+#[test]
+fn depth_decides_the_water_hazard_and_volume_needs_every_depth() {
+    let deep = |x: f64, _y: f64| if x < 0.0 { Some(0.5) } else { Some(0.1) };
+    let (t, truth) = scene(40, |x, y| {
+        let r = x.hypot(y);
+        if r < 2.0 {
+            (-0.5, Some((0.0, deep(x, y))))
+        } else {
+            (0.3 * (r - 2.0), None)
+        }
+    });
+    let cfg = HazardConfig::default();
+    let m = HazardMap::from_tiles(&t, &cfg).unwrap();
+    for c in m.cells.iter().filter(|c| c.class == Class::Water) {
+        let want = if c.x < 0.0 {
+            Hazard::DeepWater
+        } else {
+            Hazard::ShallowWater
+        };
+        assert_eq!(c.hazard, want);
+    }
+    let b = &m.bodies[0];
+    let v = b.volume_m3.unwrap();
+    // Columns would give Σ d·a; the bottom tapers to 0 at the shore, so a little less.
+    let columns: f64 = b.cell_depth_m.iter().map(|&d| d as f64 * RES * RES).sum();
+    assert!(v < columns && v > 0.85 * columns, "{v} vs {columns}");
+    assert_eq!(b.depth.known_cells, truth.len());
+    assert!((b.depth.max_m.unwrap() - 0.5).abs() < 1e-6);
+    // Remove one depth: volume unknown, the cell deep (unknown is not safe).
+    let mut t2 = TileMap::new(RES, 0.0).unwrap();
+    for (k, c) in t.observed() {
+        if k == CellKey::new(5, 0) {
+            t2.add(k, &wet(0.0, None));
+        } else {
+            t2.add(k, &c);
+        }
+    }
+    let m2 = HazardMap::from_tiles(&t2, &cfg).unwrap();
+    assert_eq!(m2.bodies[0].volume_m3, None);
+    assert_eq!(m2.bodies[0].depth.unknown_cells, 1);
+    let c = m2
+        .cells
+        .iter()
+        .find(|c| c.key == CellKey::new(5, 0))
+        .unwrap();
+    assert!(c.depth.is_nan() && c.hazard == Hazard::DeepWater);
+}
+
+#[test]
+fn steps_and_slopes_are_obstacles() {
+    let (t, _) = scene(20, |x, y| {
+        if (0.5..1.0).contains(&x) && (0.5..1.0).contains(&y) {
+            (0.5, None) // a 0.5 m box
+        } else if x < -1.0 {
+            (-(x + 1.0) * 1.0, None) // 45° slope
+        } else {
+            (0.0, None)
+        }
+    });
+    let m = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    let at = |x: f64, y: f64| {
+        m.cells
+            .iter()
+            .find(|c| (c.x - x).abs() < 0.05 && (c.y - y).abs() < 0.05)
+            .unwrap()
+    };
+    assert_eq!(at(0.55, 0.55).class, Class::Obstacle);
+    assert_eq!(
+        at(0.75, 0.75).hazard,
+        Hazard::Free,
+        "the top of the box is flat"
+    );
+    assert_eq!(at(-1.55, 0.05).hazard, Hazard::Obstacle);
+    assert_eq!(at(-1.55, 0.05).class, Class::Ground);
+    assert_eq!(at(0.15, -0.55).hazard, Hazard::Free);
+}
+
+#[test]
+fn config_is_checked_and_named() {
+    let cfg: HazardConfig =
+        serde_json::from_str(r#"{"vehicle": {"fording_depth_m": 0.5}}"#).unwrap();
+    assert_eq!(cfg.vehicle.fording_depth_m, 0.5);
+    assert_eq!(cfg.water, WaterConfig::default());
+    let e = serde_json::from_str::<HazardConfig>(r#"{"water": {"p_hihg": 0.5}}"#).unwrap_err();
+    assert!(e.to_string().contains("p_hihg"), "{e}");
+    for (cfg, name) in [
+        (
+            HazardConfig {
+                water: WaterConfig {
+                    p_low: 0.95,
+                    ..WaterConfig::default()
+                },
+                ..HazardConfig::default()
+            },
+            "water.p_low",
+        ),
+        (
+            HazardConfig {
+                vehicle: Vehicle {
+                    max_slope_deg: 90.0,
+                    ..Vehicle::default()
+                },
+                ..HazardConfig::default()
+            },
+            "vehicle.max_slope_deg",
+        ),
+        (
+            HazardConfig {
+                vehicle: Vehicle {
+                    fording_depth_m: -1.0,
+                    ..Vehicle::default()
+                },
+                ..HazardConfig::default()
+            },
+            "vehicle.fording_depth_m",
+        ),
+    ] {
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains(name), "{e}");
+    }
+}
+
+#[test]
+fn with_water_wraps_from_tiles() {
+    let (t, _) = scene(30, pond(2.0, Some(0.4)));
+    let a = HazardMap::with_water(&t, &Fusion::default(), 0.3);
+    let b = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    // (Debug text: water cells without points have a NaN elevation_std, and NaN != NaN.)
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    assert!(a.cells.iter().any(|c| c.hazard == Hazard::DeepWater));
+}
+
+fn arb_blob() -> impl Strategy<Value = Vec<(i64, i64, Option<u16>)>> {
+    prop::collection::vec(
+        (0i64..12, 0i64..12, prop::option::weighted(0.9, 0u16..800)),
+        1..80,
+    )
+}
+
+proptest! {
+    /// Any set of water cells with known depths gives a closed, consistently wound mesh
+    /// whose volume is positive and whose top covers exactly the body's area.
+    #[test]
+    fn water_meshes_are_closed(cells in arb_blob()) {
+        let mut t = TileMap::new(RES, 0.0).unwrap();
+        let mut depths: BTreeMap<CellKey, Option<u16>> = BTreeMap::new();
+        for (x, y, d) in cells {
+            depths.insert(CellKey::new(x, y), d);
+        }
+        for ky in -2..14 {
+            for kx in -2..14 {
+                let k = CellKey::new(kx, ky);
+                match depths.get(&k) {
+                    Some(d) => t.add(k, &wet(0.05 * kx as f64, d.map(|mm| mm as f64 * 1e-3))),
+                    None => t.add(k, &dry(0.1 + 0.01 * ky as f64)),
+                }
+            }
+        }
+        let cfg = HazardConfig { water: WaterConfig { min_body_area_m2: 0.0, ..WaterConfig::default() }, ..HazardConfig::default() };
+        let m = HazardMap::from_tiles(&t, &cfg).unwrap();
+        let n: usize = m.bodies.iter().map(|b| b.cells.len()).sum();
+        prop_assert_eq!(n, depths.len());
+        for b in &m.bodies {
+            let mesh = mesh::body_mesh(b, RES, &b.surface.evaluator());
+            prop_assert!((mesh.top_plan_area() - b.area_m2).abs() < 1e-9);
+            prop_assert!(mesh.vertices.iter().all(|v| v.iter().all(|c| c.is_finite())));
+            if mesh.closed {
+                check_closed(&mesh);
+                let v = b.volume_m3.unwrap();
+                prop_assert!(v >= 0.0 && (v - mesh.volume()).abs() < 1e-12);
+                let cols: f64 = b.cell_depth_m.iter().map(|&d| d as f64 * RES * RES).sum();
+                prop_assert!(v <= cols + 1e-12);
+            } else {
+                prop_assert!(b.volume_m3.is_none());
+            }
+        }
+    }
+}
