@@ -412,12 +412,19 @@ pub struct WaterSummary {
     pub hazard_cells: [usize; 4],
     /// Cells with any water evidence (probability above the prior).
     pub cells_with_evidence: usize,
+    /// The water bodies ([`crate::water::WaterBody::report`]): area, volume, depth, the
+    /// surface model and the residuals that chose it.
+    #[serde(default)]
+    pub bodies: serde_json::Value,
 }
 
 impl WaterSummary {
     pub fn of(map: &HazardMap, fusion: &crate::grid::Fusion) -> Self {
         use crate::hazard::Class;
-        let mut s = WaterSummary::default();
+        let mut s = WaterSummary {
+            bodies: map.water_report(),
+            ..Default::default()
+        };
         let mut depths = Vec::new();
         for c in &map.cells {
             s.hazard_cells[c.hazard as usize] += 1;
@@ -570,7 +577,7 @@ pub fn build_log(
     );
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let (tiles, map) = mapper.finish_map();
+    let (tiles, map) = mapper.finish_map()?;
     export::write_map_files(out, &map)?;
     let t_export = t2.elapsed().as_secs_f64();
     let total = t0.elapsed().as_secs_f64();

@@ -46,24 +46,9 @@ use crate::cues::{
 use crate::error::{Error, Result};
 use crate::grid::{Fusion, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap};
 use crate::hazard::HazardMap;
+use crate::water::{HazardConfig, Vehicle, WaterConfig};
 use crate::io::frames::Frame;
 use crate::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
-
-/// The vehicle, as far as hazards need it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct VehicleConfig {
-    /// Deepest water the vehicle may ford (m).
-    pub fording_depth_m: f64,
-}
-
-impl Default for VehicleConfig {
-    fn default() -> Self {
-        VehicleConfig {
-            fording_depth_m: 0.3,
-        }
-    }
-}
 
 /// The lidar: how its scans are fused and which of its cues run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -150,7 +135,10 @@ impl Default for StereoConfig {
 pub struct MapperConfig {
     pub grid: GridConfig,
     pub fusion: Fusion,
-    pub vehicle: VehicleConfig,
+    /// Fording depth, step and slope limits (hazards).
+    pub vehicle: Vehicle,
+    /// How evidence becomes water bodies with a surface and a depth.
+    pub water: WaterConfig,
     /// The lidar; absent: lidar scans are not used at all.
     pub lidar: Option<LidarConfig>,
     /// The stereo camera; absent: stereo clouds are not used at all.
@@ -162,7 +150,8 @@ impl Default for MapperConfig {
         MapperConfig {
             grid: GridConfig::default(),
             fusion: Fusion::default(),
-            vehicle: VehicleConfig::default(),
+            vehicle: Vehicle::default(),
+            water: WaterConfig::default(),
             lidar: Some(LidarConfig::default()),
             stereo: Some(StereoConfig::default()),
         }
@@ -203,6 +192,15 @@ impl MapperConfig {
         Ok(cfg)
     }
 
+    /// The part of the config the water stage needs.
+    pub fn hazard_config(&self) -> HazardConfig {
+        HazardConfig {
+            fusion: self.fusion,
+            water: self.water.clone(),
+            vehicle: self.vehicle.clone(),
+        }
+    }
+
     /// The config as TOML text (what [`MapperConfig::load`] reads back).
     pub fn to_toml(&self) -> Result<String> {
         toml::to_string(self).map_err(|e| Error::invalid("mapper config", e.to_string()))
@@ -213,6 +211,9 @@ impl MapperConfig {
     pub fn validate(&self) -> Result<()> {
         let named = |section: &str, r: Result<()>| {
             r.map_err(|e| match e {
+                Error::Invalid { what, message } if section.is_empty() => {
+                    Error::invalid(format!("mapper config {what}"), message)
+                }
                 Error::Invalid { what, message } => {
                     Error::invalid(format!("mapper config {section}: {what}"), message)
                 }
@@ -221,13 +222,8 @@ impl MapperConfig {
         };
         named("grid", self.grid.validate())?;
         named("fusion", self.fusion.validate())?;
-        let v = self.vehicle.fording_depth_m;
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(Error::invalid(
-                "mapper config vehicle.fording_depth_m",
-                format!("{v} is not a finite depth ≥ 0 m"),
-            ));
-        }
+        named("", self.water.validate())?;
+        named("", self.vehicle.validate())?;
         if let Some(l) = &self.lidar {
             let pos = |name: &str, v: f64| {
                 if v.is_finite() && v > 0.0 {
@@ -496,10 +492,7 @@ impl Mapper {
             }
         }
         let global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
-        let empty = Arc::new(HazardMap {
-            resolution: cfg.grid.resolution,
-            cells: Vec::new(),
-        });
+        let empty = Arc::new(HazardMap::new(cfg.grid.resolution, Vec::new()));
         Ok(Mapper {
             cfg,
             cues: FrameCues::new(fc),
@@ -632,18 +625,20 @@ impl Mapper {
         Ok(rep)
     }
 
-    /// The hazard map of the current window.
+    /// The hazard map of the current window. Water bodies keep the ids of the previous
+    /// snapshot's bodies they grew from.
     fn window_map(&self) -> Result<HazardMap> {
         let mut t = TileMap::new(self.cfg.grid.resolution, self.cfg.grid.z_ref)?;
         if let Some(g) = &self.grid {
             t.absorb_window(g)?;
         }
-        Ok(self.hazard_map_of(&t))
+        let previous = self.snapshots.latest();
+        HazardMap::from_tiles_after(&t, &self.cfg.hazard_config(), &previous.bodies)
     }
 
-    /// The hazard map of a tile map under this mapper's fusion and vehicle.
-    pub fn hazard_map_of(&self, tiles: &TileMap) -> HazardMap {
-        HazardMap::with_water(tiles, &self.cfg.fusion, self.cfg.vehicle.fording_depth_m)
+    /// The hazard map of a tile map under this mapper's fusion, water and vehicle settings.
+    pub fn hazard_map_of(&self, tiles: &TileMap) -> Result<HazardMap> {
+        HazardMap::from_tiles(tiles, &self.cfg.hazard_config())
     }
 
     /// The hazard map of the window after the last update: an immutable snapshot, cheap to
@@ -667,11 +662,11 @@ impl Mapper {
     }
 
     /// [`Mapper::finish`] and the hazard map of all of it.
-    pub fn finish_map(self) -> (TileMap, HazardMap) {
-        let (fusion, ford) = (self.cfg.fusion, self.cfg.vehicle.fording_depth_m);
+    pub fn finish_map(self) -> Result<(TileMap, HazardMap)> {
+        let cfg = self.cfg.hazard_config();
         let tiles = self.finish();
-        let map = HazardMap::with_water(&tiles, &fusion, ford);
-        (tiles, map)
+        let map = HazardMap::from_tiles(&tiles, &cfg)?;
+        Ok((tiles, map))
     }
 }
 

@@ -96,7 +96,7 @@ fn offline_build_is_the_online_map() {
     for f in &s.frames {
         m.update(f).unwrap();
     }
-    let (tiles, online) = m.finish_map();
+    let (tiles, online) = m.finish_map().unwrap();
     let out = tempfile::tempdir().unwrap();
     let r = crate::build::build_log(
         &s.log,

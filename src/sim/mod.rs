@@ -165,10 +165,11 @@ pub fn write_scene_mesh(w: &World, path: &Path) -> Result<()> {
 /// Every cue on. `tarn simulate` writes it as `DIR/mapper.toml`.
 pub fn mapper_config(scene: &Scene) -> crate::mapper::MapperConfig {
     use crate::grid::RangeNoise;
-    use crate::mapper::{LidarConfig, MapperConfig, StereoConfig, VehicleConfig};
+    use crate::mapper::{LidarConfig, MapperConfig, StereoConfig};
     MapperConfig {
-        vehicle: VehicleConfig {
+        vehicle: crate::water::Vehicle {
             fording_depth_m: scene.fording_depth,
+            ..Default::default()
         },
         lidar: scene.rig.lidar.as_ref().map(|l| LidarConfig {
             wavelength_nm: l.wavelength_nm,

@@ -290,6 +290,22 @@ pub fn print_water(w: &WaterSummary) {
         "  hazards: free {}, shallow water {}, deep or unknown-depth water {}, obstacle {}",
         h[0], h[1], h[2], h[3]
     );
+    for b in w.bodies.as_array().into_iter().flatten() {
+        let num = |k: &str| b[k].as_f64();
+        let surface = match (b["surface_model"].as_str(), num("surface_z")) {
+            (Some(m), Some(z)) => format!("{m} at z {z:.3} m"),
+            (Some(m), None) => m.to_string(),
+            _ => "?".into(),
+        };
+        let volume = num("volume_m3").map_or("volume unknown".into(), |v| format!("{v:.2} m³"));
+        println!(
+            "  body {}: {:.1} m², {volume}, surface {surface} (residual level {} / Delaunay {})",
+            b["id"],
+            num("area_m2").unwrap_or(f64::NAN),
+            num("level_residual_m").map_or("–".into(), |r| format!("{r:.3} m")),
+            num("delaunay_residual_m").map_or("–".into(), |r| format!("{r:.3} m")),
+        );
+    }
 }
 
 pub fn print_latency(r: &LogBuildReport) {
