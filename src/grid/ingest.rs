@@ -23,7 +23,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::cell::{quantize_mm, quantize_weight, CellStats};
+use super::cell::{quantize_mm, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
 use super::{Layers, RollingGrid};
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
@@ -228,7 +228,7 @@ fn fast_threshold(gate: Option<(f32, f32)>, k: f64, min_mm: f64) -> i32 {
         return i32::MIN;
     };
     let thr = mean as f64 - gate_mm(var as f64, 0.0, k, min_mm);
-    if !(thr > i32::MIN as f64) {
+    if thr.is_nan() || thr <= i32::MIN as f64 {
         return i32::MIN;
     }
     if thr >= i32::MAX as f64 {
@@ -258,6 +258,19 @@ pub(crate) fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
 fn floor_i64(v: f64) -> i64 {
     let t = v as i64;
     t - ((t as f64) > v) as i64
+}
+
+/// [`super::quantize_weight`] bit for bit, with the clamp before the conversion so the cast
+/// is one signed f64 → i64 conversion (baseline x86-64 has no unsigned one): for
+/// `w ≥ W_MAX` both give `W_MAX`, below it both truncate the same `w + 0.5 < 2⁶³`.
+#[inline]
+pub(crate) fn weight_of(sigma_m: f64) -> u32 {
+    let r = SIGMA_REF_M / sigma_m;
+    let w = W_UNIT * r * r;
+    if w.is_nan() || w < 1.0 {
+        return 1;
+    }
+    (w.min(W_MAX as f64) + 0.5) as i64 as u32
 }
 
 /// Reusable scratch memory of a grid's ingest.
@@ -330,7 +343,7 @@ impl Ctx<'_> {
         Classified::Sample(Sample {
             idx: (by * self.n + bx) as u32,
             z_mm,
-            w: quantize_weight(sigma),
+            w: weight_of(sigma),
             sigma_mm: (sigma * 1000.0) as f32,
         })
     }

@@ -498,4 +498,13 @@ proptest! {
             );
         }
     }
+
+    #[test]
+    fn fast_weight_is_quantize_weight(e in -12.0f64..6.0, m in 1.0f64..10.0) {
+        let sigma = m * 10f64.powf(e);
+        prop_assert_eq!(super::ingest::weight_of(sigma), quantize_weight(sigma));
+        for s in [0.0, -sigma, f64::NAN, f64::INFINITY, 6.25e-4 * 0.999_999, 6.25e-4] {
+            prop_assert_eq!(super::ingest::weight_of(s), quantize_weight(s));
+        }
+    }
 }
