@@ -417,6 +417,58 @@ mod tests {
     }
 
     #[test]
+    fn bench_on_the_default_scene_reports_every_required_field() {
+        let opts = BenchOptions {
+            reps: 1,
+            ingest_points: 50_000,
+            ..BenchOptions::default()
+        };
+        let r = run(&opts).unwrap();
+        for s in [
+            "ingest_lidar",
+            "cue_lidar",
+            "classify_640x480",
+            "export_map (whole map)",
+        ] {
+            let v = r.stages_ms[s];
+            assert!(v.is_finite() && v > 0.0, "{s}: {v}");
+        }
+        assert!(r.frame_stages.iter().all(|s| r.stages_ms.contains_key(s)));
+        let sum: f64 = r.frame_stages.iter().map(|s| r.stages_ms[s]).sum();
+        assert_eq!(r.frame_ms, sum);
+        assert!(r.ingest_points_per_s > 0.0 && r.offline_x_realtime > 0.0);
+        assert!(r.log_duration_s > 0.0);
+        assert_eq!(r.bytes_per_cell, RollingGrid::bytes_per_cell());
+        let json = serde_json::to_value(&r).unwrap();
+        for k in [
+            "ingest_points_per_s",
+            "frame_ms",
+            "frame_ms_method",
+            "classify_ms_640x480",
+            "offline_x_realtime",
+            "peak_memory_bytes",
+            "bytes_per_cell",
+            "stages_ms",
+        ] {
+            assert!(json.get(k).is_some_and(|v| !v.is_null()), "{k} missing");
+        }
+    }
+
+    #[test]
+    fn synthetic_cloud_builds_match_their_analytic_surface() {
+        let c = synthetic_lidar_cloud(200_000, 3);
+        let mut g = RollingGrid::new(GridConfig::default(), 0.0, 0.0).unwrap();
+        g.ingest(&c, &RangeNoise::LIDAR).unwrap();
+        // 2 cm uniform noise (σ 5.8 mm) averaged over a few points per cell, plus the
+        // surface's variation across a 0.1 m cell: well under a centimetre.
+        let rms = synthetic_rms(&g).unwrap();
+        assert!(rms < 0.01, "{rms}");
+        let b = cloud_build(100_000, 20.0).unwrap();
+        assert_eq!(b.points, 100_000);
+        assert!(b.cells_observed > 30_000 && b.cells_observed <= 40_401);
+    }
+
+    #[test]
     fn peak_memory_grows_with_a_touched_allocation() {
         let before = peak_memory_bytes().unwrap();
         let v = vec![1u8; 64 << 20];
