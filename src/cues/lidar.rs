@@ -419,12 +419,18 @@ impl LidarCueModel {
                 } else if dz <= cfg.above_gate_m {
                     level = p.z;
                     let d = v.x.hypot(v.y);
+                    let diag = self.in_interval(d);
+                    // A ground return outside the interval matters only to the
+                    // reflectivity cue: no event (and no allocation) without it.
+                    if !diag && self.reflectivity.is_none() {
+                        continue;
+                    }
                     let cos_inc = if range > 0.0 { -v.z / range } else { 0.0 };
                     out.push(Event::Ground {
                         slot: s,
                         x: p.x,
                         y: p.y,
-                        diag: self.in_interval(d),
+                        diag,
                         cos_inc,
                         range,
                     });

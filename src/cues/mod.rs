@@ -42,6 +42,35 @@ pub use lidar::{estimate_sensor_height, BeamModel, LidarCueConfig, LidarCueModel
 pub use reflectivity::{normalised_reflectivity, ReflectivityConfig};
 pub use stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig, StereoCues};
 
+/// A multiply-rotate hasher for cell keys (two integers): SipHash's resistance to chosen
+/// keys buys nothing for map cells and costs most of a lookup.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct KeyHasher(u64);
+
+impl std::hash::Hasher for KeyHasher {
+    #[inline]
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.write_u64(*b as u64);
+        }
+    }
+    #[inline]
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    #[inline]
+    fn write_i64(&mut self, v: i64) {
+        self.write_u64(v as u64);
+    }
+    #[inline]
+    fn finish(&self) -> u64 {
+        self.0 ^ (self.0 >> 29)
+    }
+}
+
+/// [`std::hash::BuildHasher`] of [`KeyHasher`].
+pub type BuildKeyHasher = std::hash::BuildHasherDefault<KeyHasher>;
+
 /// A sparse accumulator of per-cell evidence for one frame, keyed like the grid.
 #[derive(Debug, Clone)]
 pub struct EvidenceMap {
@@ -49,7 +78,7 @@ pub struct EvidenceMap {
     z_ref: f64,
     /// Hashed for speed; every read-out is sorted by key, so nothing depends on the
     /// hasher's order (and merging evidence is commutative).
-    cells: HashMap<CellKey, Evidence>,
+    cells: HashMap<CellKey, Evidence, BuildKeyHasher>,
 }
 
 impl EvidenceMap {
@@ -57,7 +86,7 @@ impl EvidenceMap {
         EvidenceMap {
             resolution,
             z_ref,
-            cells: HashMap::new(),
+            cells: HashMap::default(),
         }
     }
 

@@ -26,6 +26,7 @@
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::Point3;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::EvidenceMap;
@@ -218,122 +219,133 @@ pub fn stereo_reflections(
     };
     let (rows, cols) = (cloud.rows, cloud.cols);
     let o = cloud.sensor_origin_in_map();
-    let pts: Vec<Point3<f64>> = (0..cloud.len()).map(|i| cloud.point_in_map(i)).collect();
+    let pts: Vec<Point3<f64>> = (0..cloud.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|i| cloud.point_in_map(i))
+        .collect();
 
-    // 1. Candidate runs up each column.
-    let mut runs: Vec<Run> = Vec::new();
-    let mut rejected_geometry = 0;
-    for c in 0..cols {
-        let mut z_g: Option<f64> = None;
-        let mut h_g = 0.0;
-        let mut invalid_since_ground = 0usize;
-        let mut run: Vec<usize> = Vec::new();
-        let mut run_gap = false;
-        let mut run_shore = 0.0;
-        let mut run_shore_sigma = 0.0;
-        let mut sigma_g = 0.0;
-        let mut run_min_h = f64::INFINITY;
-        // A run is a reflection when it follows a gap and the terrain seen after it, up
-        // the column, is *nearer* than the run (range wraps backward: the virtual image
-        // lies beyond the far shore). With nothing after it, its own ranges must wrap.
-        let close = |run: &mut Vec<usize>,
-                     gap: bool,
-                     shore: (f64, f64),
-                     next_h: Option<f64>,
-                     runs: &mut Vec<Run>,
-                     rej: &mut usize| {
-            if run.is_empty() {
-                return;
-            }
-            let slots = std::mem::take(run);
-            let rng = |s: usize| (pts[s] - o).norm();
-            let hor = |s: usize| (pts[s].x - o.x).hypot(pts[s].y - o.y);
-            let wraps = match next_h {
-                Some(hn) => {
-                    let min_h = slots.iter().map(|&s| hor(s)).fold(f64::INFINITY, f64::min);
-                    hn < min_h - cfg.gap_min_m
-                }
-                None => {
-                    let steps = slots.len() - 1;
-                    let back = slots.windows(2).filter(|w| rng(w[1]) < rng(w[0])).count();
-                    steps > 0 && back as f64 >= cfg.wrap_fraction * steps as f64
-                }
-            };
-            if slots.len() >= cfg.min_run && gap && wraps {
-                runs.push(Run {
-                    slots,
-                    shore: shore.0,
-                    shore_sigma: shore.1,
-                });
-            } else {
-                *rej += 1;
-            }
-        };
-        for r in (0..rows).rev() {
-            let s = r * cols + c;
-            if !cloud.is_valid(s) {
+    // 1. Candidate runs up each column (columns are independent: in parallel, and
+    // gathered in column order so the result does not depend on the threads).
+    let per_column: Vec<(Vec<Run>, usize)> = (0..cols)
+        .into_par_iter()
+        .map(|c| {
+            let mut runs: Vec<Run> = Vec::new();
+            let mut rejected_geometry = 0;
+            let mut z_g: Option<f64> = None;
+            let mut h_g = 0.0;
+            let mut invalid_since_ground = 0usize;
+            let mut run: Vec<usize> = Vec::new();
+            let mut run_gap = false;
+            let mut run_shore = 0.0;
+            let mut run_shore_sigma = 0.0;
+            let mut sigma_g = 0.0;
+            let mut run_min_h = f64::INFINITY;
+            // A run is a reflection when it follows a gap and the terrain seen after it, up
+            // the column, is *nearer* than the run (range wraps backward: the virtual image
+            // lies beyond the far shore). With nothing after it, its own ranges must wrap.
+            let close = |run: &mut Vec<usize>,
+                         gap: bool,
+                         shore: (f64, f64),
+                         next_h: Option<f64>,
+                         runs: &mut Vec<Run>,
+                         rej: &mut usize| {
                 if run.is_empty() {
-                    invalid_since_ground += 1;
+                    return;
                 }
-                continue;
-            }
-            let p = pts[s];
-            let h = (p.x - o.x).hypot(p.y - o.y);
-            let Some(zg) = z_g else {
-                z_g = Some(p.z);
-                h_g = h;
-                continue;
+                let slots = std::mem::take(run);
+                let rng = |s: usize| (pts[s] - o).norm();
+                let hor = |s: usize| (pts[s].x - o.x).hypot(pts[s].y - o.y);
+                let wraps = match next_h {
+                    Some(hn) => {
+                        let min_h = slots.iter().map(|&s| hor(s)).fold(f64::INFINITY, f64::min);
+                        hn < min_h - cfg.gap_min_m
+                    }
+                    None => {
+                        let steps = slots.len() - 1;
+                        let back = slots.windows(2).filter(|w| rng(w[1]) < rng(w[0])).count();
+                        steps > 0 && back as f64 >= cfg.wrap_fraction * steps as f64
+                    }
+                };
+                if slots.len() >= cfg.min_run && gap && wraps {
+                    runs.push(Run {
+                        slots,
+                        shore: shore.0,
+                        shore_sigma: shore.1,
+                    });
+                } else {
+                    *rej += 1;
+                }
             };
-            // Stereo error lies along the ray: its vertical part is σ(r)·|sin(depression)|.
-            let range = (p - o).norm();
-            let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
-            let gate = cfg.gate_min_m.max(cfg.gate_sigma * vertical);
-            let below = p.z < zg - gate && p.z < o.z;
-            if let Some(&last) = run.last() {
-                // Inside a run, points below the level whose range keeps wrapping backward
-                // are the upper part of the same virtual image.
-                // Terrain much nearer than the run (the far shore) ends it.
-                let wrapping = range < (pts[last] - o).norm();
-                let nearer = h < run_min_h - cfg.gap_min_m;
-                if !nearer && (below || (p.z < zg && wrapping)) {
-                    run_min_h = run_min_h.min(h);
+            for r in (0..rows).rev() {
+                let s = r * cols + c;
+                if !cloud.is_valid(s) {
+                    if run.is_empty() {
+                        invalid_since_ground += 1;
+                    }
+                    continue;
+                }
+                let p = pts[s];
+                let h = (p.x - o.x).hypot(p.y - o.y);
+                let Some(zg) = z_g else {
+                    z_g = Some(p.z);
+                    h_g = h;
+                    continue;
+                };
+                // Stereo error lies along the ray: its vertical part is σ(r)·|sin(depression)|.
+                let range = (p - o).norm();
+                let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
+                let gate = cfg.gate_min_m.max(cfg.gate_sigma * vertical);
+                let below = p.z < zg - gate && p.z < o.z;
+                if let Some(&last) = run.last() {
+                    // Inside a run, points below the level whose range keeps wrapping backward
+                    // are the upper part of the same virtual image.
+                    // Terrain much nearer than the run (the far shore) ends it.
+                    let wrapping = range < (pts[last] - o).norm();
+                    let nearer = h < run_min_h - cfg.gap_min_m;
+                    if !nearer && (below || (p.z < zg && wrapping)) {
+                        run_min_h = run_min_h.min(h);
+                        run.push(s);
+                        continue;
+                    }
+                    close(
+                        &mut run,
+                        run_gap,
+                        (run_shore, run_shore_sigma),
+                        Some(h),
+                        &mut runs,
+                        &mut rejected_geometry,
+                    );
+                }
+                if below {
+                    // A new run (also right after one that nearer terrain ended).
+                    run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
+                    run_shore = zg;
+                    run_shore_sigma = sigma_g;
+                    run_min_h = h;
                     run.push(s);
                     continue;
                 }
-                close(
-                    &mut run,
-                    run_gap,
-                    (run_shore, run_shore_sigma),
-                    Some(h),
-                    &mut runs,
-                    &mut rejected_geometry,
-                );
+                if p.z - zg <= cfg.above_gate_m {
+                    z_g = Some(p.z);
+                    h_g = h;
+                    sigma_g = vertical;
+                    invalid_since_ground = 0;
+                }
             }
-            if below {
-                // A new run (also right after one that nearer terrain ended).
-                run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
-                run_shore = zg;
-                run_shore_sigma = sigma_g;
-                run_min_h = h;
-                run.push(s);
-                continue;
-            }
-            if p.z - zg <= cfg.above_gate_m {
-                z_g = Some(p.z);
-                h_g = h;
-                sigma_g = vertical;
-                invalid_since_ground = 0;
-            }
-        }
-        close(
-            &mut run,
-            run_gap,
-            (run_shore, run_shore_sigma),
-            None,
-            &mut runs,
-            &mut rejected_geometry,
-        );
-    }
+            close(
+                &mut run,
+                run_gap,
+                (run_shore, run_shore_sigma),
+                None,
+                &mut runs,
+                &mut rejected_geometry,
+            );
+            (runs, rejected_geometry)
+        })
+        .collect();
+    let rejected_geometry: usize = per_column.iter().map(|c| c.1).sum();
+    let runs: Vec<Run> = per_column.into_iter().flat_map(|c| c.0).collect();
 
     // 2. Water level by symmetry (one-parameter ICP against the non-reflected points).
     let mut in_run = vec![false; cloud.len()];
@@ -384,7 +396,8 @@ pub fn stereo_reflections(
             let r2 = cfg.pair_radius_m * cfg.pair_radius_m;
             for _ in 0..6 {
                 let mut dz: Vec<f64> = reflected
-                    .iter()
+                    .par_iter()
+                    .with_min_len(256)
                     .filter_map(|&s| {
                         let p = pts[s];
                         let q = [p.x, p.y, 2.0 * level - p.z];

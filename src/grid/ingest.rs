@@ -23,7 +23,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::cell::{quantize_mm, quantize_weight, CellStats};
+use super::cell::{quantize_mm, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
 use super::{Layers, RollingGrid};
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
@@ -119,42 +119,137 @@ impl IngestStats {
     }
 }
 
-/// One chunk's private accumulator: a dense copy of the window plus the list of cells it
+/// One chunk's private accumulator: a dense window of [`Acc`] plus the list of cells it
 /// touched, so that clearing and merging cost only what the chunk touched.
 #[derive(Debug, Clone, Default)]
 struct Partial {
-    cells: Vec<CellStats>,
+    cells: Vec<Acc>,
     touched: Vec<u32>,
-    /// Gate reference of each touched cell from the prior surface, computed once per cell
-    /// and batch: (mean mm, spread variance mm²), or NaN mean when the prior cannot gate.
-    gate: Vec<(f32, f32)>,
     stats: IngestStats,
 }
 
-impl Partial {
-    #[inline]
-    fn touch(&mut self, i: usize) -> &mut CellStats {
-        let c = &mut self.cells[i];
-        if c.is_empty() {
-            self.touched.push(i as u32);
+/// One chunk's accumulator for one cell: elevation only (ingest never writes evidence),
+/// with the cell's gate threshold cached, in exactly one 64-byte cache line.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(64))]
+struct Acc {
+    hits: u32,
+    below: u32,
+    zmin: i32,
+    zmax: i32,
+    sw: u64,
+    /// Points at or above this height (mm) are fused without evaluating the gate (it is
+    /// the gate with the point's own noise left out, which can only be nearer); `i32::MIN`
+    /// when the prior cannot gate. Set when the cell is first touched in a batch.
+    gate_fast: i32,
+    /// Index of the cell's group in the split pass (`u32::MAX` when not flagged).
+    group: u32,
+    swz: i128,
+    swzz: i128,
+}
+
+impl Default for Acc {
+    fn default() -> Self {
+        Acc {
+            hits: 0,
+            below: 0,
+            zmin: i32::MAX,
+            zmax: i32::MIN,
+            sw: 0,
+            gate_fast: i32::MIN,
+            group: u32::MAX,
+            swz: 0,
+            swzz: 0,
         }
-        c
+    }
+}
+
+impl Acc {
+    #[inline]
+    fn is_untouched(&self) -> bool {
+        self.hits == 0 && self.below == 0
     }
 
-    /// The prior's gate reference for cell `i` (cached for the batch).
     #[inline]
-    fn gate_ref(&mut self, i: usize, prior: &Layers, support: u32) -> (f32, f32) {
-        if self.cells[i].is_empty() {
-            self.gate[i] = if prior.hits[i] >= support {
-                let sw = prior.sw[i] as f64;
-                let mean = prior.swz[i] as f64 / sw;
-                let var = (prior.swzz[i] as f64 / sw - mean * mean).max(0.0);
-                (mean as f32, var as f32)
-            } else {
-                (f32::NAN, 0.0)
-            };
+    fn add(&mut self, z_mm: i32, w: u32) {
+        // |w·z| < 2^55 fits i64; the square needs one widening multiply.
+        let wz = w as i64 * z_mm as i64;
+        self.hits += 1;
+        self.sw += w as u64;
+        self.swz += wz as i128;
+        self.swzz += wz as i128 * z_mm as i128;
+        self.zmin = self.zmin.min(z_mm);
+        self.zmax = self.zmax.max(z_mm);
+    }
+
+    #[inline]
+    fn merge(&mut self, o: &Acc) {
+        self.hits += o.hits;
+        self.below += o.below;
+        self.sw += o.sw;
+        self.swz += o.swz;
+        self.swzz += o.swzz;
+        self.zmin = self.zmin.min(o.zmin);
+        self.zmax = self.zmax.max(o.zmax);
+    }
+
+    fn to_cell(self) -> CellStats {
+        CellStats {
+            hits: self.hits,
+            below: self.below,
+            sw: self.sw,
+            swz: self.swz,
+            swzz: self.swzz,
+            zmin: self.zmin,
+            zmax: self.zmax,
+            ev: Default::default(),
         }
-        self.gate[i]
+    }
+}
+
+/// The prior's gate reference for cell `i`: (mean mm, spread variance mm²), or `None` when
+/// the prior has too few points to gate.
+#[inline]
+fn prior_gate(prior: &Layers, i: usize, support: u32) -> Option<(f32, f32)> {
+    (prior.hits[i] >= support).then(|| {
+        let sw = prior.sw[i] as f64;
+        let mean = prior.swz[i] as f64 / sw;
+        let var = (prior.swzz[i] as f64 / sw - mean * mean).max(0.0);
+        (mean as f32, var as f32)
+    })
+}
+
+/// The height (mm) at and above which a point is fused whatever its own noise: the gate
+/// with the point's σ left out is the nearest it can be, so `z ≥ ceil(mean − gate(var, 0))`
+/// implies `z ≥ mean − gate(var, σ)` (every step is monotonic in floating point too).
+#[inline]
+fn fast_threshold(gate: Option<(f32, f32)>, k: f64, min_mm: f64) -> i32 {
+    let Some((mean, var)) = gate else {
+        return i32::MIN;
+    };
+    let thr = mean as f64 - gate_mm(var as f64, 0.0, k, min_mm);
+    if thr.is_nan() || thr <= i32::MIN as f64 {
+        return i32::MIN;
+    }
+    if thr >= i32::MAX as f64 {
+        return i32::MAX; // every point takes the exact test
+    }
+    (-floor_i64(-thr)) as i32
+}
+
+/// `floor(v / res)` computed with a multiply by `inv = 1 / res`. The product differs from
+/// the correctly rounded quotient by at most a few ulps (relative 2⁻⁵¹, under 10⁻⁶ for
+/// |q| < 10⁹), so when the product's fraction is at least 10⁻⁶ from an integer both have
+/// the same floor; otherwise (and for huge |q|) the division decides.
+#[inline]
+pub(crate) fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
+    let q = v * inv;
+    let f = floor_i64(q);
+    let frac = q - f as f64;
+    if frac > 1e-6 && frac < 1.0 - 1e-6 && q.abs() < 1e9 {
+        f
+    } else {
+        floor_i64(v / res)
     }
 }
 
@@ -163,6 +258,19 @@ impl Partial {
 fn floor_i64(v: f64) -> i64 {
     let t = v as i64;
     t - ((t as f64) > v) as i64
+}
+
+/// [`super::quantize_weight`] bit for bit, with the clamp before the conversion so the cast
+/// is one signed f64 → i64 conversion (baseline x86-64 has no unsigned one): for
+/// `w ≥ W_MAX` both give `W_MAX`, below it both truncate the same `w + 0.5 < 2⁶³`.
+#[inline]
+pub(crate) fn weight_of(sigma_m: f64) -> u32 {
+    let r = SIGMA_REF_M / sigma_m;
+    let w = W_UNIT * r * r;
+    if w.is_nan() || w < 1.0 {
+        return 1;
+    }
+    (w.min(W_MAX as f64) + 0.5) as i64 as u32
 }
 
 /// Reusable scratch memory of a grid's ingest.
@@ -193,6 +301,7 @@ struct Ctx<'a> {
     t: [f64; 3],
     so: [f32; 3],
     res: f64,
+    inv_res: f64,
     z_ref: f64,
     n: i64,
     origin: (i64, i64),
@@ -212,8 +321,8 @@ impl Ctx<'_> {
         let wx = r[0][0] * xd + r[0][1] * yd + r[0][2] * zd + self.t[0];
         let wy = r[1][0] * xd + r[1][1] * yd + r[1][2] * zd + self.t[1];
         let wz = r[2][0] * xd + r[2][1] * yd + r[2][2] * zd + self.t[2];
-        let dx = floor_i64(wx / self.res) - self.origin.0;
-        let dy = floor_i64(wy / self.res) - self.origin.1;
+        let dx = cell_coord(wx, self.inv_res, self.res) - self.origin.0;
+        let dy = cell_coord(wy, self.inv_res, self.res) - self.origin.1;
         if dx < 0 || dx >= self.n || dy < 0 || dy >= self.n {
             return Classified::Outside;
         }
@@ -234,7 +343,7 @@ impl Ctx<'_> {
         Classified::Sample(Sample {
             idx: (by * self.n + bx) as u32,
             z_mm,
-            w: quantize_weight(sigma),
+            w: weight_of(sigma),
             sigma_mm: (sigma * 1000.0) as f32,
         })
     }
@@ -248,16 +357,31 @@ fn gate_mm(var_mm2: f64, sigma_mm: f64, k: f64, min_mm: f64) -> f64 {
 
 /// Smallest chunk handed to a thread: below this, threading costs more than it saves.
 const MIN_CHUNK: usize = 32 * 1024;
-
 impl RollingGrid {
     /// Fuses one batch of points (see the module documentation for the gate).
     pub fn ingest(&mut self, cloud: &PointCloud, noise: &RangeNoise) -> Result<IngestStats> {
+        let chunks = cloud
+            .len()
+            .div_ceil(MIN_CHUNK)
+            .clamp(1, rayon::current_num_threads().max(1));
+        self.ingest_chunked(cloud, noise, chunks)
+    }
+
+    /// [`RollingGrid::ingest`] with the cloud cut into `chunks` contiguous chunks (one
+    /// private accumulator each). The result does not depend on `chunks`; tests check it.
+    pub(crate) fn ingest_chunked(
+        &mut self,
+        cloud: &PointCloud,
+        noise: &RangeNoise,
+        chunks: usize,
+    ) -> Result<IngestStats> {
         cloud.validate()?;
         noise.validate()?;
         let npts = cloud.len();
         if npts == 0 {
             return Ok(IngestStats::default());
         }
+        let chunks = chunks.clamp(1, npts);
         let n = self.n as i64;
         let m = cloud.frame_to_map.to_homogeneous();
         let ctx = Ctx {
@@ -274,6 +398,7 @@ impl RollingGrid {
                 cloud.sensor_origin.z as f32,
             ],
             res: self.cfg.resolution,
+            inv_res: 1.0 / self.cfg.resolution,
             z_ref: self.cfg.z_ref,
             n,
             origin: (self.origin.x, self.origin.y),
@@ -284,9 +409,6 @@ impl RollingGrid {
         let min_mm = self.cfg.gate_min_m * 1000.0;
         let support = self.cfg.min_support.max(1);
 
-        let chunks = npts
-            .div_ceil(MIN_CHUNK)
-            .clamp(1, rayon::current_num_threads().max(1));
         let ncells = self.n * self.n;
         let RollingGrid {
             layers, scratch, ..
@@ -296,8 +418,7 @@ impl RollingGrid {
         }
         for p in &mut scratch.partials[..chunks] {
             if p.cells.len() != ncells {
-                p.cells = vec![CellStats::default(); ncells];
-                p.gate = vec![(f32::NAN, 0.0); ncells];
+                p.cells = vec![Acc::default(); ncells];
                 p.touched.clear();
             }
         }
@@ -309,37 +430,41 @@ impl RollingGrid {
             .par_iter_mut()
             .enumerate()
             .for_each(|(ci, p)| {
-                let lo = ci * step;
+                let lo = (ci * step).min(npts);
                 let hi = ((ci + 1) * step).min(npts);
-                p.stats = IngestStats {
+                let mut st = IngestStats {
                     points: (hi - lo) as u64,
                     ..Default::default()
                 };
+                let cells = &mut p.cells[..];
+                let touched = &mut p.touched;
                 for i in lo..hi {
                     let s = match ctx.classify(i) {
                         Classified::Sample(s) => s,
                         Classified::NonFinite => {
-                            p.stats.nonfinite += 1;
+                            st.nonfinite += 1;
                             continue;
                         }
                         Classified::Outside => {
-                            p.stats.outside += 1;
+                            st.outside += 1;
                             continue;
                         }
                     };
                     let idx = s.idx as usize;
-                    let (mean, var) = p.gate_ref(idx, prior, support);
-                    if !mean.is_nan()
-                        && (s.z_mm as f64)
-                            < mean as f64 - gate_mm(var as f64, s.sigma_mm as f64, k, min_mm)
-                    {
-                        p.touch(idx).below += 1;
-                        p.stats.below += 1;
+                    let a = &mut cells[idx];
+                    if a.is_untouched() {
+                        touched.push(s.idx);
+                        a.gate_fast = fast_threshold(prior_gate(prior, idx, support), k, min_mm);
+                    }
+                    if s.z_mm < a.gate_fast && is_below(prior, idx, support, &s, k, min_mm) {
+                        a.below += 1;
+                        st.below += 1;
                         continue;
                     }
-                    p.touch(idx).add(s.z_mm, s.w);
-                    p.stats.fused += 1;
+                    a.add(s.z_mm, s.w);
+                    st.fused += 1;
                 }
+                p.stats = st;
             });
 
         // Reduce the partials into the first one (integer sums: order does not matter).
@@ -348,9 +473,14 @@ impl RollingGrid {
             .expect("chunks >= 1");
         for p in rest {
             for &i in &p.touched {
-                let c = p.cells[i as usize];
-                first.touch(i as usize).merge(&c);
-                p.cells[i as usize] = CellStats::default();
+                let iu = i as usize;
+                let c = p.cells[iu];
+                let f = &mut first.cells[iu];
+                if f.is_untouched() {
+                    first.touched.push(i);
+                }
+                f.merge(&c);
+                p.cells[iu] = Acc::default();
             }
             p.touched.clear();
             let st = p.stats;
@@ -366,22 +496,38 @@ impl RollingGrid {
                 && b.hits >= 2
                 && (b.zmax as f64 - b.zmin as f64) > min_mm;
             if needs_split {
+                first.cells[iu].group = flagged.len() as u32;
                 flagged.push(i);
             } else {
-                layers.merge_at(iu, &b);
-                first.cells[iu] = CellStats::default();
+                layers.merge_at(iu, &b.to_cell());
+                first.cells[iu] = Acc::default();
             }
         }
         let mut stats = first.stats;
         if !flagged.is_empty() {
-            flagged.sort_unstable();
-            let mut groups: Vec<Vec<Sample>> = vec![Vec::new(); flagged.len()];
-            for i in 0..npts {
-                if let Classified::Sample(s) = ctx.classify(i) {
-                    if let Ok(g) = flagged.binary_search(&s.idx) {
-                        groups[g].push(s);
+            // Pass 2 (only cells seen for the first time with a wide spread): gather their
+            // points, in parallel, then split each cell's points at height gaps.
+            let cells = &first.cells;
+            let found: Vec<Vec<(u32, Sample)>> = (0..chunks)
+                .into_par_iter()
+                .map(|ci| {
+                    let lo = (ci * step).min(npts);
+                    let hi = ((ci + 1) * step).min(npts);
+                    let mut v = Vec::new();
+                    for i in lo..hi {
+                        if let Classified::Sample(s) = ctx.classify(i) {
+                            let g = cells[s.idx as usize].group;
+                            if g != u32::MAX {
+                                v.push((g, s));
+                            }
+                        }
                     }
-                }
+                    v
+                })
+                .collect();
+            let mut groups: Vec<Vec<Sample>> = vec![Vec::new(); flagged.len()];
+            for (g, s) in found.into_iter().flatten() {
+                groups[g as usize].push(s);
             }
             for (g, &i) in groups.iter_mut().zip(&flagged) {
                 let iu = i as usize;
@@ -393,7 +539,7 @@ impl RollingGrid {
                 let mut c = kept;
                 c.below += below;
                 layers.merge_at(iu, &c);
-                first.cells[iu] = CellStats::default();
+                first.cells[iu] = Acc::default();
             }
         }
         first.touched.clear();
@@ -401,10 +547,22 @@ impl RollingGrid {
     }
 }
 
+/// The exact gate test against the prior surface (taken only below the fast threshold).
+#[cold]
+fn is_below(prior: &Layers, i: usize, support: u32, s: &Sample, k: f64, min_mm: f64) -> bool {
+    match prior_gate(prior, i, support) {
+        Some((mean, var)) => {
+            (s.z_mm as f64) < mean as f64 - gate_mm(var as f64, s.sigma_mm as f64, k, min_mm)
+        }
+        None => false,
+    }
+}
+
 /// Splits one cell's batch points at height gaps; returns the fused statistics of the
 /// surface cluster and everything above it, and the number of points below it.
 fn split_cell(pts: &mut [Sample], k: f64, min_mm: f64) -> (CellStats, u32) {
-    pts.sort_unstable_by_key(|s| (s.z_mm, s.w));
+    // A total order on what a sample holds, so ties cannot depend on arrival order.
+    pts.sort_unstable_by_key(|s| (s.z_mm, s.w, s.sigma_mm.to_bits()));
     // Cluster boundaries: a gap wider than the gate of the two points on either side.
     let mut starts = vec![0usize];
     for j in 1..pts.len() {

@@ -433,3 +433,78 @@ proptest! {
         prop_assert!(tb == tab);
     }
 }
+
+/// Points on a rough surface with a share of them far below it (reflections), so that
+/// both the prior gate and the first-batch split run.
+fn arb_layered(n: std::ops::Range<usize>) -> impl Strategy<Value = Vec<[f32; 3]>> {
+    prop::collection::vec((-6.0f32..6.0, -6.0f32..6.0, -0.05f32..0.05, 0u8..10), n).prop_map(|v| {
+        v.into_iter()
+            .map(|(x, y, dz, kind)| {
+                let z = 0.2 * (x * 0.5).sin() + dz - if kind == 0 { 0.9 } else { 0.0 };
+                [x, y, z]
+            })
+            .collect()
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    #[test]
+    fn chunking_and_point_order_do_not_change_the_grid(
+        first in arb_layered(1..2000),
+        second in arb_layered(1..2000),
+        chunks in 2usize..9,
+        rot in 0usize..2000,
+    ) {
+        let run = |a: &[[f32; 3]], b: &[[f32; 3]], chunks: usize| {
+            let mut g = grid(128);
+            let sa = g
+                .ingest_chunked(&PointCloud::unorganized(a.to_vec()), &RangeNoise::LIDAR, chunks)
+                .unwrap();
+            let sb = g
+                .ingest_chunked(&PointCloud::unorganized(b.to_vec()), &RangeNoise::LIDAR, chunks)
+                .unwrap();
+            (g, sa, sb)
+        };
+        let (g1, a1, b1) = run(&first, &second, 1);
+        // Another chunking, and each batch rotated and reversed.
+        let mut fa = first.clone();
+        fa.rotate_left(rot % first.len());
+        fa.reverse();
+        let mut sb = second.clone();
+        sb.rotate_left(rot % second.len());
+        let (g2, a2, b2) = run(&fa, &sb, chunks);
+        prop_assert_eq!((a1, b1), (a2, b2));
+        prop_assert!(g1 == g2, "grids differ with {} chunks", chunks);
+    }
+
+    #[test]
+    fn cell_coord_is_floor_of_the_quotient(
+        k in -2_000_000_000i64..2_000_000_000,
+        ulps in -3i64..4,
+        res in prop::sample::select(vec![0.005, 0.05, 0.1, 0.2, 0.25, 0.3, 1.0 / 3.0, 0.7, 2.0]),
+        frac in 0.0f64..1.0,
+    ) {
+        // Exactly on (a few ulps around) a cell boundary, and anywhere inside a cell.
+        let edge = k as f64 * res;
+        let v = edge * (1.0 + ulps as f64 * f64::EPSILON);
+        let inside = (k as f64 + frac) * res;
+        for v in [v, inside, -v, -inside] {
+            prop_assert_eq!(
+                super::ingest::cell_coord(v, 1.0 / res, res),
+                (v / res).floor() as i64,
+                "v {} res {}", v, res
+            );
+        }
+    }
+
+    #[test]
+    fn fast_weight_is_quantize_weight(e in -12.0f64..6.0, m in 1.0f64..10.0) {
+        let sigma = m * 10f64.powf(e);
+        prop_assert_eq!(super::ingest::weight_of(sigma), quantize_weight(sigma));
+        for s in [0.0, -sigma, f64::NAN, f64::INFINITY, 6.25e-4 * 0.999_999, 6.25e-4] {
+            prop_assert_eq!(super::ingest::weight_of(s), quantize_weight(s));
+        }
+    }
+}

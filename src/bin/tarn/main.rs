@@ -1,5 +1,6 @@
 //! The `tarn` command line: parses, calls the library, prints. One file per command.
 
+mod bench_cmd;
 mod build_cmd;
 mod classify_cmd;
 mod cloud_cmd;
@@ -53,6 +54,8 @@ enum Command {
     /// Water cues of one organized lidar scan: no-return evidence inside the optics'
     /// diagnostic interval, bottom and specular returns, reflectivity drop.
     Cues(cues_cmd::CuesArgs),
+    /// Per-stage time per frame (medians), whole-log throughput, peak memory, bytes per cell.
+    Bench(bench_cmd::BenchArgs),
     /// What a file holds. A ROS 2 log (.mcap): topics, types, counts, time span, frames that
     /// would be built. A point cloud (.ply, KITTI .bin): points, returns, channels, bounds.
     Info {
@@ -120,6 +123,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::TrainColor(a)) => classify_cmd::train(a),
         Some(Command::Classify(a)) => classify_cmd::classify(a),
         Some(Command::Cues(a)) => cues_cmd::run(&a),
+        Some(Command::Bench(a)) => bench_cmd::run_bench(&a),
         Some(Command::Info {
             input,
             json,

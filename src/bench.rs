@@ -1,0 +1,796 @@
+//! `tarn bench`: what each stage of the pipeline costs on a simulated (or given) log.
+//!
+//! Every stage is timed `reps` times and reported as its median: the machine is shared and
+//! noisy, and a median ignores the runs a neighbour's build slowed down. The stages of one
+//! frame run on a frame from the middle of the log, with a grid already holding the frames
+//! before it (the steady state of a mapper). Until the online `Mapper` exists, the full
+//! frame time is the sum of the per-frame stage medians (`frame_ms_method` says so).
+//!
+//! A stage is one entry of [`Stages`]: adding one (water surfaces, labels) is one line.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::build::{build_log, LogBuildConfig};
+use crate::classify::color::RuleClassifier;
+use crate::classify::lut::ColorLut;
+use crate::classify::{Label, LabelImage};
+use crate::cues::{
+    estimate_sensor_height, stereo_reflections, BeamModel, LidarCueConfig, LidarCueModel,
+    StereoCueConfig,
+};
+use crate::error::{Error, Result};
+use crate::geom::PointCloud;
+use crate::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
+use crate::hazard::HazardMap;
+use crate::io::frames::{Frame, FrameStream, LogConfig};
+use crate::io::ros::convert::Pixels;
+use crate::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
+use crate::project::{ElevationSurface, ProjectConfig, Projector, RayTarget};
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct BenchOptions {
+    /// Repetitions of every stage (medians are reported).
+    pub reps: usize,
+    /// A log to measure; `None` simulates `scene` into a temporary directory.
+    pub log: Option<PathBuf>,
+    /// The scene to simulate when no log is given.
+    pub scene: PathBuf,
+    /// Points of the synthetic lidar-like cloud that measures raw ingest throughput.
+    pub ingest_points: usize,
+    /// Bits per channel of the colour lookup table.
+    pub lut_bits: u8,
+    pub grid: GridConfig,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        BenchOptions {
+            reps: 7,
+            log: None,
+            scene: PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/maps/default.toml")),
+            ingest_points: 4_000_000,
+            lut_bits: 6,
+            grid: GridConfig::default(),
+        }
+    }
+}
+
+/// The result of [`run`]; `tarn bench --json` prints it.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    pub input: String,
+    pub reps: usize,
+    pub threads: usize,
+    /// Raw ingest throughput on a synthetic lidar-like cloud of `ingest_points` points.
+    pub ingest_points_per_s: f64,
+    pub ingest_points: usize,
+    /// The full frame, ms (see `frame_ms_method`).
+    pub frame_ms: f64,
+    pub frame_ms_method: String,
+    /// The stages summed into `frame_ms`.
+    pub frame_stages: Vec<String>,
+    /// Colour classification of a 640 × 480 image through the lookup table, one thread.
+    pub classify_ms_640x480: f64,
+    /// Log duration over the time `build::build_log` takes for the whole log (median).
+    pub offline_x_realtime: f64,
+    pub offline_build_s: f64,
+    pub log_duration_s: f64,
+    /// Peak resident memory of this process (VmHWM), bytes; `None` where /proc is absent.
+    pub peak_memory_bytes: Option<u64>,
+    /// Bytes of cell storage per cell of the rolling window.
+    pub bytes_per_cell: usize,
+    /// Median ms of every stage, per frame unless the name says otherwise.
+    pub stages_ms: BTreeMap<String, f64>,
+    /// Points in the measured frame's clouds.
+    pub frame_lidar_points: usize,
+    pub frame_stereo_points: usize,
+}
+
+/// Median of a non-empty sample (the mean of the middle two for an even count).
+pub fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// Peak resident set of this process (VmHWM from /proc/self/status), bytes.
+pub fn peak_memory_bytes() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// A stage: a name, whether it is part of one frame's work, and the work.
+type Stage<'a> = (&'static str, bool, Box<dyn FnMut() -> Result<()> + 'a>);
+
+/// The stages, timed round-robin `reps` times (so a burst of load hits them alike).
+struct Stages<'a>(Vec<Stage<'a>>);
+
+impl<'a> Stages<'a> {
+    fn add(&mut self, name: &'static str, per_frame: bool, f: impl FnMut() -> Result<()> + 'a) {
+        self.0.push((name, per_frame, Box::new(f)));
+    }
+
+    /// Median ms per stage, and the names of the per-frame ones.
+    fn time(mut self, reps: usize) -> Result<(BTreeMap<String, f64>, Vec<String>)> {
+        let mut times = vec![Vec::with_capacity(reps); self.0.len()];
+        for _ in 0..reps.max(1) {
+            for (s, t) in self.0.iter_mut().zip(&mut times) {
+                let t0 = Instant::now();
+                (s.2)()?;
+                t.push(t0.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+        let per_frame = self
+            .0
+            .iter()
+            .filter(|s| s.1)
+            .map(|s| s.0.to_string())
+            .collect();
+        let medians = self
+            .0
+            .iter()
+            .zip(&mut times)
+            .map(|(s, t)| (s.0.to_string(), median(t)))
+            .collect();
+        Ok((medians, per_frame))
+    }
+}
+
+/// A lidar-like ground cloud of `n` points (rings of a spinning sensor 1.8 m up, 2–19 m
+/// out, gentle relief and 2 cm noise), in the order a spinning lidar emits them.
+pub fn synthetic_lidar_cloud(n: usize, seed: u64) -> PointCloud {
+    let mut s = seed | 1;
+    let mut u = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let pts = (0..n)
+        .map(|i| {
+            let az = (i as f32 / n as f32) * 64.0 * std::f32::consts::TAU;
+            let r = 2.0 + 17.0 * u();
+            [
+                r * az.cos(),
+                r * az.sin(),
+                0.05 * (r * 0.3).sin() + 0.02 * (u() - 0.5) - 1.8,
+            ]
+        })
+        .collect();
+    PointCloud::unorganized(pts)
+}
+
+/// An RGB buffer of 640 × 480 resampled (nearest) from a frame's camera image.
+fn rgb_640x480(frame: &Frame) -> Option<Vec<u8>> {
+    let img = &frame.image.as_ref()?.image;
+    let Pixels::Rgb8(px) = &img.pixels else {
+        return None;
+    };
+    let (w, h) = (640usize, 480usize);
+    let mut out = Vec::with_capacity(w * h * 3);
+    for y in 0..h {
+        let sy = y * img.height / h;
+        for x in 0..w {
+            let sx = x * img.width / w;
+            out.extend_from_slice(&px[sy * img.width + sx]);
+        }
+    }
+    Some(out)
+}
+
+/// Reads a log's frames (all of them: the simulated logs are small).
+fn read_frames(log: &Path) -> Result<Vec<Frame>> {
+    let mut s = FrameStream::open(log, &LogConfig::default())?;
+    let mut frames = Vec::new();
+    for f in s.by_ref() {
+        frames.push(f?);
+    }
+    if frames.is_empty() {
+        return Err(Error::invalid(
+            format!("bench log {}", log.display()),
+            "no frame could be built from it",
+        ));
+    }
+    Ok(frames)
+}
+
+/// Measures every stage. See the module documentation.
+pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
+    let tmp = tempfile::tempdir().map_err(|e| Error::io("temporary directory", e))?;
+    let log = match &opts.log {
+        Some(l) => l.clone(),
+        None => {
+            let scene = crate::sim::Scene::load(&opts.scene)?;
+            crate::sim::simulate(&scene, tmp.path(), crate::sim::SimOptions::default())?;
+            tmp.path().join("log.mcap")
+        }
+    };
+    let reps = opts.reps.max(1);
+    let frames = read_frames(&log)?;
+    let mid = frames.len() / 2;
+    let frame = &frames[mid];
+
+    // The grid as a mapper holds it at the middle frame.
+    let res = opts.grid.resolution;
+    let z_ref = opts.grid.z_ref;
+    let centre = frame.base_to_map.translation.vector;
+    let mut grid = RollingGrid::new(opts.grid.clone(), centre.x, centre.y)?;
+    for f in &frames[..=mid] {
+        if let Some(c) = &f.lidar {
+            grid.ingest(c, &RangeNoise::LIDAR)?;
+        }
+        if let Some(c) = &f.stereo {
+            grid.ingest(c, &RangeNoise::STEREO)?;
+        }
+    }
+    let surface = ElevationSurface::from_grid(&grid)?;
+
+    let lidar = frame.lidar.as_ref();
+    let stereo = frame.stereo.as_ref();
+    let lidar_model = match lidar {
+        Some(c) => Some(LidarCueModel::new(
+            LidarModelConfig {
+                height_m: estimate_sensor_height(c).unwrap_or(1.8),
+                attenuation: Attenuation::PureWater {
+                    wavelength_nm: 905.0,
+                },
+                albedo: 0.3,
+                aperture_diameter_m: 0.0254,
+                n_water: 1.33,
+                sensitivity: Sensitivity::DryLimit(40.0),
+                solid_angle: SolidAngleForm::Exact,
+            },
+            BeamModel::default(),
+            LidarCueConfig::default(),
+            None,
+        )?),
+        None => None,
+    };
+    let lut = ColorLut::compile(&RuleClassifier::default(), opts.lut_bits)?;
+    let rgb = rgb_640x480(frame);
+    let mut labels = vec![Label::Other; 640 * 480];
+    let image = frame.image.as_ref();
+    let projector = match image.and_then(|i| i.camera.clone()) {
+        Some(cam) => Some(Projector::new(cam, ProjectConfig::default())?),
+        None => None,
+    };
+    let frame_labels = match (image, &projector) {
+        (Some(i), Some(_)) => match &i.image.pixels {
+            Pixels::Rgb8(px) => {
+                let raw: Vec<u8> = px.iter().flatten().copied().collect();
+                let mut data = vec![Label::Other; px.len()];
+                lut.classify_into(&raw, &mut data)?;
+                Some(LabelImage {
+                    width: i.image.width,
+                    height: i.image.height,
+                    data,
+                })
+            }
+            _ => None,
+        },
+        _ => None,
+    };
+    let mut tiles = TileMap::for_grid(&grid);
+    tiles.absorb_window(&grid)?;
+    let out_dir = tmp.path().join("export");
+    std::fs::create_dir_all(&out_dir).map_err(|e| Error::io(&out_dir, e))?;
+
+    let big = synthetic_lidar_cloud(opts.ingest_points, 0x9E37_79B9_7F4A_7C15);
+    let mut big_grid = RollingGrid::new(opts.grid.clone(), 0.0, 0.0)?;
+    big_grid.ingest(&big, &RangeNoise::LIDAR)?; // warm: scratch and surface
+
+    // Each stage is one line here.
+    // Two closures cannot both hold the grid mutably: each ingest works on its own copy.
+    let (mut gl, mut gs) = (grid.clone(), grid.clone());
+    let mut st = Stages(Vec::new());
+    if let Some(c) = lidar {
+        st.add("ingest_lidar", true, move || {
+            gl.ingest(c, &RangeNoise::LIDAR).map(|_| ())
+        });
+    }
+    if let Some(c) = stereo {
+        st.add("ingest_stereo", true, move || {
+            gs.ingest(c, &RangeNoise::STEREO).map(|_| ())
+        });
+    }
+    if let (Some(c), Some(m)) = (lidar, &lidar_model) {
+        st.add("cue_lidar", true, move || m.run(c, res, z_ref).map(|_| ()));
+    }
+    if let Some(c) = stereo {
+        let cfg = StereoCueConfig::default();
+        st.add("cue_stereo", true, move || {
+            stereo_reflections(c, res, z_ref, None, &cfg).map(|_| ())
+        });
+    }
+    if let Some(rgb) = &rgb {
+        st.add("classify_640x480", true, || {
+            lut.classify_into(rgb, &mut labels)
+        });
+    }
+    st.add("surface", true, || {
+        ElevationSurface::from_grid(&grid).map(|_| ())
+    });
+    if let (Some(p), Some(l), Some(i)) = (&projector, &frame_labels, image) {
+        if let Some(pose) = &i.frame_to_map {
+            let target = RayTarget::Terrain(&surface);
+            st.add("project", true, move || {
+                p.project(l, pose, None, Some(&target), res).map(|_| ())
+            });
+        }
+    }
+    st.add("export_map (whole map)", false, || {
+        let map = HazardMap::from_elevation(&tiles);
+        crate::io::export::write_map_files(&out_dir, &map)
+    });
+    st.add("ingest_4M_synthetic", false, || {
+        big_grid.ingest(&big, &RangeNoise::LIDAR).map(|_| ())
+    });
+    let (stages_ms, frame_stages) = st.time(reps)?;
+
+    // The whole log, offline.
+    let mut builds = Vec::new();
+    let mut duration = 0.0;
+    for r in 0..reps.min(3) {
+        let out = tmp.path().join(format!("build{r}"));
+        let t0 = Instant::now();
+        let rep = build_log(&log, &out, &LogBuildConfig::default(), &mut |_, _| {})?;
+        builds.push(t0.elapsed().as_secs_f64());
+        duration = rep.log_duration_s;
+    }
+    let build_s = median(&mut builds);
+
+    let frame_ms = frame_stages.iter().map(|s| stages_ms[s]).sum();
+    let classify = stages_ms
+        .get("classify_640x480")
+        .copied()
+        .unwrap_or(f64::NAN);
+    let ingest_ms = stages_ms["ingest_4M_synthetic"];
+    Ok(BenchReport {
+        input: log.display().to_string(),
+        reps,
+        threads: rayon::current_num_threads(),
+        ingest_points_per_s: opts.ingest_points as f64 / (ingest_ms * 1e-3),
+        ingest_points: opts.ingest_points,
+        frame_ms,
+        frame_ms_method: "sum of the per-frame stage medians (frame_stages); no Mapper yet".into(),
+        frame_stages,
+        classify_ms_640x480: classify,
+        offline_x_realtime: duration / build_s,
+        offline_build_s: build_s,
+        log_duration_s: duration,
+        peak_memory_bytes: peak_memory_bytes(),
+        bytes_per_cell: RollingGrid::bytes_per_cell(),
+        stages_ms,
+        frame_lidar_points: lidar.map_or(0, |c| c.len()),
+        frame_stereo_points: stereo.map_or(0, |c| c.len()),
+    })
+}
+
+impl BenchReport {
+    /// A Markdown table of the stages and the headline numbers.
+    pub fn markdown(&self) -> String {
+        let mut s = String::from("| stage | median ms |\n| --- | ---: |\n");
+        for (k, v) in &self.stages_ms {
+            s.push_str(&format!("| {k} | {v:.3} |\n"));
+        }
+        s.push_str(&format!(
+            "\nframe {:.2} ms ({}), ingest {:.1} M points/s, classify 640×480 {:.3} ms, \
+             offline {:.1}× real time, peak memory {} MiB, {} bytes per cell, {} threads, {} reps\n",
+            self.frame_ms,
+            self.frame_ms_method,
+            self.ingest_points_per_s / 1e6,
+            self.classify_ms_640x480,
+            self.offline_x_realtime,
+            self.peak_memory_bytes.map_or("?".into(), |b| (b >> 20).to_string()),
+            self.bytes_per_cell,
+            self.threads,
+            self.reps,
+        ));
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_of_odd_and_even_samples() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&mut []).is_nan());
+    }
+
+    #[test]
+    fn bench_on_the_default_scene_reports_every_required_field() {
+        let opts = BenchOptions {
+            reps: 1,
+            ingest_points: 50_000,
+            ..BenchOptions::default()
+        };
+        let r = run(&opts).unwrap();
+        for s in [
+            "ingest_lidar",
+            "cue_lidar",
+            "classify_640x480",
+            "export_map (whole map)",
+        ] {
+            let v = r.stages_ms[s];
+            assert!(v.is_finite() && v > 0.0, "{s}: {v}");
+        }
+        assert!(r.frame_stages.iter().all(|s| r.stages_ms.contains_key(s)));
+        let sum: f64 = r.frame_stages.iter().map(|s| r.stages_ms[s]).sum();
+        assert_eq!(r.frame_ms, sum);
+        assert!(r.ingest_points_per_s > 0.0 && r.offline_x_realtime > 0.0);
+        assert!(r.log_duration_s > 0.0);
+        assert_eq!(r.bytes_per_cell, RollingGrid::bytes_per_cell());
+        let json = serde_json::to_value(&r).unwrap();
+        for k in [
+            "ingest_points_per_s",
+            "frame_ms",
+            "frame_ms_method",
+            "classify_ms_640x480",
+            "offline_x_realtime",
+            "peak_memory_bytes",
+            "bytes_per_cell",
+            "stages_ms",
+        ] {
+            assert!(json.get(k).is_some_and(|v| !v.is_null()), "{k} missing");
+        }
+    }
+
+    #[test]
+    fn synthetic_cloud_builds_match_their_analytic_surface() {
+        let c = synthetic_lidar_cloud(200_000, 3);
+        let mut g = RollingGrid::new(GridConfig::default(), 0.0, 0.0).unwrap();
+        g.ingest(&c, &RangeNoise::LIDAR).unwrap();
+        // 2 cm uniform noise (σ 5.8 mm) averaged over a few points per cell, plus the
+        // surface's variation across a 0.1 m cell: well under a centimetre.
+        let rms = synthetic_rms(&g).unwrap();
+        assert!(rms < 0.01, "{rms}");
+        let b = cloud_build(100_000, 20.0).unwrap();
+        assert_eq!(b.points, 100_000);
+        assert!(b.cells_observed > 30_000 && b.cells_observed <= 40_401);
+    }
+
+    #[test]
+    fn peak_memory_grows_with_a_touched_allocation() {
+        let before = peak_memory_bytes().unwrap();
+        let v = vec![1u8; 64 << 20];
+        let after = peak_memory_bytes().unwrap();
+        assert!(v.iter().all(|&b| b == 1));
+        assert!(after >= before.max(64 << 20), "{before} -> {after}");
+    }
+}
+
+/// One setting of one knob: what it cost and what error it gave.
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepRow {
+    pub knob: String,
+    pub value: String,
+    /// What was timed.
+    pub timed: String,
+    /// Median time, ms (`None`: not measured, see `note`).
+    pub time_ms: Option<f64>,
+    /// What the error is measured against.
+    pub error_metric: String,
+    pub error: Option<f64>,
+    pub note: String,
+}
+
+fn row(
+    knob: &str,
+    value: impl ToString,
+    timed: &str,
+    time_ms: Option<f64>,
+    metric: &str,
+    error: Option<f64>,
+) -> SweepRow {
+    SweepRow {
+        knob: knob.into(),
+        value: value.to_string(),
+        timed: timed.into(),
+        time_ms,
+        error_metric: metric.into(),
+        error,
+        note: String::new(),
+    }
+}
+
+/// Median wall time (ms) of `reps` runs of `f`, and its last result.
+fn timed<T>(reps: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
+    let mut t = Vec::new();
+    let mut last = None;
+    for _ in 0..reps.max(1) {
+        let t0 = Instant::now();
+        last = Some(f()?);
+        t.push(t0.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok((median(&mut t), last.expect("reps >= 1")))
+}
+
+/// The analytic surface of [`synthetic_lidar_cloud`] (map frame).
+fn synthetic_surface(x: f64, y: f64) -> f64 {
+    let r = x.hypot(y);
+    0.05 * (r * 0.3).sin() - 1.8
+}
+
+/// RMS (m) of the grid's cell elevations against [`synthetic_surface`] at the cell centres,
+/// over the observed cells 3–18 m out (inside the synthetic scan's ring).
+fn synthetic_rms(g: &RollingGrid) -> Option<f64> {
+    let (o, n) = (g.origin(), g.size() as i64);
+    let (mut s2, mut cnt) = (0.0, 0usize);
+    for ky in o.y..o.y + n {
+        for kx in o.x..o.x + n {
+            let k = crate::grid::CellKey::new(kx, ky);
+            let (cx, cy) = g.centre_of(k);
+            let r = cx.hypot(cy);
+            if !(3.0..=18.0).contains(&r) {
+                continue;
+            }
+            if let Some(m) = g.cell(k).and_then(|c| c.mean_mm()) {
+                let z = g.config().z_ref + m * 1e-3;
+                s2 += (z - synthetic_surface(cx, cy)).powi(2);
+                cnt += 1;
+            }
+        }
+    }
+    (cnt > 0).then(|| (s2 / cnt as f64).sqrt())
+}
+
+/// Sweeps the knobs that trade speed for error (see README "Speed against error").
+pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
+    let reps = opts.reps.max(1);
+    let mut rows = Vec::new();
+    let tmp = tempfile::tempdir().map_err(|e| Error::io("temporary directory", e))?;
+
+    // Grid resolution on the simulated scene, scored by `tarn eval` against its truth.
+    let sim_dir = tmp.path().join("sim");
+    let scene = crate::sim::Scene::load(&opts.scene)?;
+    crate::sim::simulate(&scene, &sim_dir, crate::sim::SimOptions::default())?;
+    let log = sim_dir.join("log.mcap");
+    for res in [0.05, 0.1, 0.2, 0.4] {
+        let out = tmp.path().join(format!("res{res}"));
+        let cfg = LogBuildConfig {
+            grid: GridConfig {
+                resolution: res,
+                size_cells: ((40.0 / res).round() as usize).max(2),
+                ..opts.grid.clone()
+            },
+            ..LogBuildConfig::default()
+        };
+        let (ms, _) = timed(reps.min(3), || build_log(&log, &out, &cfg, &mut |_, _| {}))?;
+        let e = crate::eval::evaluate_dirs(&out, &sim_dir)?;
+        rows.push(row(
+            "grid resolution (m)",
+            res,
+            "build_log, whole default scene",
+            Some(ms),
+            "terrain RMS vs simulator truth (m)",
+            e.all.terrain_rms_m,
+        ));
+    }
+
+    // Point subsampling on a synthetic lidar-like cloud against its analytic surface.
+    let cloud = synthetic_lidar_cloud(opts.ingest_points, 7);
+    for keep_every in [1usize, 2, 4, 8, 16] {
+        let sub = PointCloud::unorganized(cloud.xyz.iter().step_by(keep_every).copied().collect());
+        let mut g = RollingGrid::new(opts.grid.clone(), 0.0, 0.0)?;
+        let (ms, _) = timed(reps, || {
+            g = RollingGrid::new(opts.grid.clone(), 0.0, 0.0)?;
+            g.ingest(&sub, &RangeNoise::LIDAR)
+        })?;
+        rows.push(row(
+            "point subsampling (keep 1 in k)",
+            keep_every,
+            &format!("ingest of {} points into a fresh grid", sub.len()),
+            Some(ms),
+            "cell RMS vs analytic surface, 3–18 m (m)",
+            synthetic_rms(&g),
+        ));
+    }
+
+    // Lookup-table size against the exact Table-1 rule it tabulates.
+    let rule = RuleClassifier::default();
+    let mut s = 0x2545_F491_4F6C_DD1Du64;
+    let rgb: Vec<u8> = (0..640 * 480 * 3)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 56) as u8
+        })
+        .collect();
+    let exact: Vec<Label> = rgb
+        .chunks_exact(3)
+        .map(|p| rule.classify_pixel([p[0], p[1], p[2]]))
+        .collect();
+    let mut out = vec![Label::Other; 640 * 480];
+    for bits in 3u8..=8 {
+        let lut = ColorLut::compile(&rule, bits)?;
+        let (ms, _) = timed(reps, || lut.classify_into(&rgb, &mut out))?;
+        let wrong = out.iter().zip(&exact).filter(|(a, b)| a != b).count();
+        rows.push(row(
+            "lookup-table bits per channel",
+            bits,
+            "classify 640×480 uniform-random RGB, one thread",
+            Some(ms),
+            "pixels labelled unlike the exact rule (fraction)",
+            Some(wrong as f64 / exact.len() as f64),
+        ));
+    }
+
+    for knob in [
+        "mixture components",
+        "interpolation (level / barycentric / natural neighbour)",
+        "projection ray-cast stride",
+    ] {
+        let mut r = row(knob, "–", "–", None, "–", None);
+        r.note = "pending: needs the water and labels modules (after the merge)".into();
+        rows.push(r);
+    }
+    Ok(rows)
+}
+
+/// The sweep as a Markdown table.
+pub fn sweep_markdown(rows: &[SweepRow]) -> String {
+    let f = |v: Option<f64>, d: usize| v.map_or("–".to_string(), |v| format!("{v:.d$}"));
+    let mut s = String::from(
+        "| knob | value | time (ms) | timed | error | error metric |\n| --- | ---: | ---: | --- | ---: | --- |\n",
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            r.knob,
+            r.value,
+            f(r.time_ms, 3),
+            if r.note.is_empty() { &r.timed } else { &r.note },
+            f(r.error, 5),
+            r.error_metric
+        ));
+    }
+    s
+}
+
+/// Error against time, one panel per measured knob (log-scaled time).
+pub fn sweep_plot(rows: &[SweepRow], path: &Path) -> Result<()> {
+    use plotters::prelude::*;
+    static FONT: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let font_ok = *FONT.get_or_init(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
+            .is_ok()
+    });
+    if !font_ok {
+        return Err(Error::invalid(
+            "sweep plot",
+            "the embedded DejaVu Sans font did not load",
+        ));
+    }
+    let knobs: Vec<&str> = {
+        let mut k: Vec<&str> = rows
+            .iter()
+            .filter(|r| r.time_ms.is_some() && r.error.is_some())
+            .map(|r| r.knob.as_str())
+            .collect();
+        k.dedup();
+        k
+    };
+    let err = |e: Box<dyn std::error::Error>| Error::invalid("sweep plot", e.to_string());
+    let (w, h) = (1500u32, 500u32);
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(Box::new(e)))?;
+        let panels = root.split_evenly((1, knobs.len().max(1)));
+        for (knob, area) in knobs.iter().zip(panels.iter()) {
+            let pts: Vec<(f64, f64, String)> = rows
+                .iter()
+                .filter(|r| r.knob == *knob)
+                .filter_map(|r| Some((r.time_ms?, r.error?, r.value.clone())))
+                .collect();
+            let (t0, t1) = pts
+                .iter()
+                .fold((f64::INFINITY, 0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+            let e1 = pts.iter().fold(0f64, |a, p| a.max(p.1));
+            let metric = rows
+                .iter()
+                .find(|r| r.knob == *knob)
+                .map(|r| r.error_metric.clone());
+            let mut chart = ChartBuilder::on(area)
+                .caption(*knob, ("sans-serif", 18))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
+                .build_cartesian_2d((t0 * 0.7..t1 * 1.4).log_scale(), 0.0..e1 * 1.15 + 1e-9)
+                .map_err(|e| err(Box::new(e)))?;
+            chart
+                .configure_mesh()
+                .x_desc("time (ms, log)")
+                .y_desc(metric.unwrap_or_default())
+                .label_style(("sans-serif", 12))
+                .draw()
+                .map_err(|e| err(Box::new(e)))?;
+            chart
+                .draw_series(LineSeries::new(pts.iter().map(|p| (p.0, p.1)), &BLUE))
+                .map_err(|e| err(Box::new(e)))?;
+            chart
+                .draw_series(pts.iter().map(|p| {
+                    EmptyElement::at((p.0, p.1))
+                        + Circle::new((0, 0), 4, BLUE.filled())
+                        + Text::new(p.2.clone(), (6, -14), ("sans-serif", 13))
+                }))
+                .map_err(|e| err(Box::new(e)))?;
+        }
+        root.present().map_err(|e| err(Box::new(e)))?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf)
+        .ok_or_else(|| Error::invalid("sweep plot", "buffer size"))?;
+    img.save(path)
+        .map_err(|e| Error::invalid(format!("sweep plot {}", path.display()), e.to_string()))
+}
+
+/// What building a large synthetic cloud into a map cost.
+#[derive(Debug, Clone, Serialize)]
+pub struct CloudBenchRow {
+    pub points: usize,
+    pub side_m: f64,
+    /// Making the cloud in memory (stands in for reading a file).
+    pub generate_s: f64,
+    pub build_s: f64,
+    pub points_per_s: f64,
+    pub blocks: usize,
+    pub cells_observed: usize,
+}
+
+/// Builds an `n`-point synthetic cloud over a `side_m` square (gentle analytic relief) with
+/// `build::build_cloud`.
+pub fn cloud_build(n: usize, side_m: f64) -> Result<CloudBenchRow> {
+    let t0 = Instant::now();
+    let pts: Vec<[f32; 3]> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            // A low-discrepancy (R2) sequence: spread evenly, reproducible, no RNG state.
+            let a = (i as f64 * 0.754_877_666_246_692_7).fract();
+            let b = (i as f64 * 0.569_840_290_998_053_3).fract();
+            let (x, y) = ((a - 0.5) * side_m, (b - 0.5) * side_m);
+            [
+                x as f32,
+                y as f32,
+                (0.3 * (0.2 * x).sin() * (0.15 * y).cos()) as f32,
+            ]
+        })
+        .collect();
+    let cloud = PointCloud::unorganized(pts);
+    let generate_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let b = crate::build::build_cloud(
+        &cloud,
+        &crate::build::BuildConfig::default(),
+        &mut |_, _| {},
+    )?;
+    let build_s = t1.elapsed().as_secs_f64();
+    Ok(CloudBenchRow {
+        points: n,
+        side_m,
+        generate_s,
+        build_s,
+        points_per_s: n as f64 / build_s,
+        blocks: b.blocks,
+        cells_observed: b.tiles.observed_count(),
+    })
+}
