@@ -311,12 +311,12 @@ mod tests {
             hits: 1,
             below: 0,
         };
-        let truth = HazardMap {
-            resolution: 1.0,
-            cells: (0..40)
+        let truth = HazardMap::new(
+            1.0,
+            (0..40)
                 .map(|k| cell(k, 0.0, if k == 12 { Class::Water } else { Class::Ground }))
                 .collect(),
-        };
+        );
         // Ground at 0; the map sinks cell 8 (a reflection fused as terrain) and calls 12 water.
         let mut map = truth.clone();
         map.cells[8].z = -0.5;
