@@ -348,6 +348,9 @@ pub struct LogBuildReport {
     pub errors: Vec<String>,
     /// Where reading stopped early (a truncated or damaged log), if it did.
     pub damage: Option<String>,
+    /// What the image labels contributed (`None`: not configured).
+    #[serde(default)]
+    pub labels: Option<crate::project::FrameLabelsReport>,
     pub cells_observed: usize,
     pub tiles: usize,
     pub elevation_range_m: Option<(f64, f64)>,
@@ -362,7 +365,14 @@ pub struct LogBuildConfig {
     /// Use this topic for frames; by default the lidar topic, or the stereo topic when the
     /// log has no lidar messages.
     pub frame_topic: Option<String>,
+    /// Image labels into the water evidence (`None`: images are not used). With labels the
+    /// map is exported with water ([`HazardMap::with_water`], default fusion rule,
+    /// [`LABELS_FORDING_DEPTH_M`]).
+    pub labels: Option<crate::project::FrameLabelConfig>,
 }
+
+/// Fording depth of the water map a labelled log build exports, metres (the scenes' default).
+pub const LABELS_FORDING_DEPTH_M: f64 = 0.3;
 
 /// Builds the elevation map of a ROS 2 log: each frame's lidar and stereo clouds are fused
 /// at their own poses into a rolling window centred on the vehicle; cells that leave it go
@@ -407,6 +417,10 @@ pub fn build_log(
     let mut errors = Vec::new();
     let mut frames_fused = 0u64;
     let mut t_fuse = 0.0;
+    let mut labels = match &cfg.labels {
+        Some(l) => Some((crate::project::FrameLabels::new(l.clone())?, Default::default())),
+        None => None,
+    };
     while let Some(item) = stream.next() {
         let (done, total) = stream.progress();
         progress(done, total);
@@ -439,6 +453,12 @@ pub fn build_log(
                 Err(e) => errors.push(at("stereo", e)),
             }
         }
+        if let Some((fl, rep)) = labels.as_mut() {
+            match fl.apply(&frame, g) {
+                Ok(r) => crate::project::FrameLabelsReport::merge(rep, &r),
+                Err(e) => errors.push(at("labels", e)),
+            }
+        }
         frames_fused += 1;
         t_fuse += t.elapsed().as_secs_f64();
     }
@@ -447,7 +467,14 @@ pub fn build_log(
     }
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let map = HazardMap::from_elevation(&tiles);
+    let map = match &labels {
+        Some(_) => HazardMap::with_water(
+            &tiles,
+            &crate::grid::Fusion::default(),
+            LABELS_FORDING_DEPTH_M,
+        ),
+        None => HazardMap::from_elevation(&tiles),
+    };
     export::write_map_files(out, &map)?;
     let t_export = t2.elapsed().as_secs_f64();
     let total = t0.elapsed().as_secs_f64();
@@ -466,6 +493,7 @@ pub fn build_log(
         frames: stream.stats().clone(),
         errors,
         damage: summary.damage.clone(),
+        labels: labels.map(|(_, r)| r),
         cells_observed: map.cells.len(),
         tiles: tiles.tile_count(),
         elevation_range_m: export::elevation_range(&map.cells),

@@ -9,7 +9,12 @@ use tarn::build::{
     build_file, build_log, check_output_dir, BuildConfig, BuildReport, LogBuildConfig,
     LogBuildReport,
 };
+use tarn::classify::color::RuleClassifier;
+use tarn::classify::gmm::ColorModel;
+use tarn::classify::lut::ColorLut;
+use tarn::classify::thermal::{MwirConfig, SwirConfig};
 use tarn::grid::{GridConfig, RangeNoise};
+use tarn::project::{FrameLabelConfig, MwirLabelConfig};
 use tarn::io::frames::LogConfig;
 
 #[derive(Args)]
@@ -37,9 +42,69 @@ pub struct BuildArgs {
     /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// (log) Image sensors whose labels go into the map's water evidence: any of colour,
+    /// swir, mwir (comma-separated). The map is then exported with water.
+    #[arg(long, value_delimiter = ',')]
+    pub labels: Vec<String>,
+    /// (log) Colour model (JSON from `tarn train-color`), compiled into a 6-bit lookup
+    /// table; without it the paper's Table 1 rule.
+    #[arg(long)]
+    pub colour_model: Option<PathBuf>,
+    /// (log) Local solar hour of the log (0..24), for the MWIR labels.
+    #[arg(long)]
+    pub hour: Option<f64>,
+    /// (log) Label every n-th pixel in x and y.
+    #[arg(long, default_value_t = 2)]
+    pub label_stride: usize,
+    /// (log) Pixels whose hit is farther than this do not vote, metres.
+    #[arg(long, default_value_t = 40.0)]
+    pub label_max_range: f64,
     /// Print the report as JSON instead of a summary.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The label configuration of `--labels`, `--colour-model`, `--hour`.
+fn label_config(a: &BuildArgs) -> anyhow::Result<Option<FrameLabelConfig>> {
+    if a.labels.is_empty() {
+        anyhow::ensure!(
+            a.colour_model.is_none() && a.hour.is_none(),
+            "--colour-model and --hour need --labels"
+        );
+        return Ok(None);
+    }
+    let mut cfg = FrameLabelConfig {
+        ray_stride: a.label_stride,
+        max_range: a.label_max_range,
+        ..FrameLabelConfig::default()
+    };
+    for l in &a.labels {
+        match l.trim() {
+            "colour" | "color" => {
+                cfg.colour = Some(match &a.colour_model {
+                    Some(p) => ColorLut::compile(&ColorModel::load(p)?, 6)?,
+                    None => ColorLut::compile(&RuleClassifier::default(), 8)?,
+                })
+            }
+            "swir" => cfg.swir = Some(SwirConfig::default()),
+            "mwir" => {
+                let hour = a
+                    .hour
+                    .context("--labels mwir needs --hour (local solar hour of the log)")?;
+                cfg.mwir = Some(MwirLabelConfig {
+                    classifier: MwirConfig::default(),
+                    hour,
+                })
+            }
+            other => anyhow::bail!("--labels: unknown sensor {other:?} (colour, swir, mwir)"),
+        }
+    }
+    anyhow::ensure!(
+        cfg.colour.is_some() || a.colour_model.is_none(),
+        "--colour-model needs --labels colour"
+    );
+    cfg.validate()?;
+    Ok(Some(cfg))
 }
 
 impl BuildArgs {
@@ -54,6 +119,11 @@ impl BuildArgs {
             window_cells: 400,
             frame_topic: None,
             config: None,
+            labels: Vec::new(),
+            colour_model: None,
+            hour: None,
+            label_stride: 2,
+            label_max_range: 40.0,
             json: false,
         }
     }
@@ -112,6 +182,7 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         },
         log,
         frame_topic: a.frame_topic.clone(),
+        labels: label_config(a)?,
     };
     let bar =
         progress_bar("{spinner} reading {bar:40} {binary_bytes}/{binary_total_bytes} ({eta})");
@@ -198,6 +269,16 @@ fn print_log_summary(r: &LogBuildReport) {
                 "  {name} points {}: fused {}, below surface {}, missing {}, outside the window {}",
                 p.points, p.fused, p.below, p.nonfinite, p.outside
             );
+        }
+    }
+    if let Some(l) = &r.labels {
+        for (name, s) in [("colour", &l.colour), ("swir", &l.swir), ("mwir", &l.mwir)] {
+            if let Some(s) = s {
+                println!(
+                    "  {name} labels: {} frames ({} skipped), cell votes water {} / not {}",
+                    s.frames, s.frames_skipped, s.cells_water, s.cells_dry
+                );
+            }
         }
     }
     println!(
