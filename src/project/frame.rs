@@ -367,47 +367,104 @@ impl FrameLabels {
         };
         let origin = Point3::from(cam_to_map.translation.vector);
         let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);
-        let rows: Vec<usize> = (0..h).step_by(s).collect();
-        // Per pixel: (raster index, water?, hit z), or how it failed.
-        let hits: Vec<(Vec<(u32, bool, f32)>, [u64; 3])> = rows
-            .par_chunks(8)
-            .map(|ys| {
-                let mut out = Vec::new();
+        let (cols, rows): (Vec<usize>, Vec<usize>) =
+            ((0..w).step_by(s).collect(), (0..h).step_by(s).collect());
+        // Per sampled pixel: its hit and whether it is water (`None`: no vote).
+        type Hit = Option<(Point3<f64>, bool)>;
+        let per_row: Vec<(Vec<Hit>, [u64; 3])> = rows
+            .par_iter()
+            .map(|&y| {
                 let mut n = [0u64; 3]; // via point, via ray, no hit
-                for &y in ys {
-                    for x in (0..w).step_by(s) {
+                let hits = cols
+                    .iter()
+                    .map(|&x| {
                         let i = y * w + x;
                         let water = match labels.data[i] {
                             Label::Water => true,
                             Label::Other | Label::SnowIce => false,
-                            Label::Sky | Label::Unknown => continue,
+                            Label::Sky | Label::Unknown => return None,
                         };
                         if let (Some(c), Some(k)) = (stereo, k) {
                             let e = (y / k) * c.cols + x / k;
                             if c.is_valid(e) {
                                 let p = c.point_in_map(e);
                                 if (p - origin).norm() <= max_range {
+                                    n[0] += 1;
+                                    return Some((p, water));
+                                }
+                            }
+                        }
+                        match map_rays[i].and_then(|d| surface.cast(&origin, &d, max_range)) {
+                            Some((p, _)) => {
+                                n[1] += 1;
+                                Some((p, water))
+                            }
+                            None => {
+                                n[2] += 1;
+                                None
+                            }
+                        }
+                    })
+                    .collect();
+                (hits, n)
+            })
+            .collect();
+        // Each sampled pixel stands for the quad spanned by its hit and those of its right,
+        // lower and diagonal neighbours: when all four agree and the quad is no larger than
+        // `QUAD_MAX_M` (larger ones straddle an occlusion edge), every cell under the quad
+        // gets the vote (a pixel row covers a metre of ground at 20 m, far more than a
+        // cell); otherwise only the pixel's own cell.
+        const QUAD_MAX_M: f64 = 3.0;
+        let half = 0.5 * surface.resolution();
+        let hits: Vec<Vec<(u32, bool, f32)>> = (0..rows.len())
+            .into_par_iter()
+            .map(|r| {
+                let mut out = Vec::new();
+                let row = &per_row[r].0;
+                let next = per_row.get(r + 1).map(|n| &n.0);
+                for c in 0..cols.len() {
+                    let Some((p00, wet)) = row[c] else { continue };
+                    let quad = next.and_then(|nx| {
+                        let q = [row.get(c + 1)?.as_ref()?, nx[c].as_ref()?, nx.get(c + 1)?.as_ref()?];
+                        q.iter().all(|(_, w2)| *w2 == wet).then_some([p00, q[0].0, q[1].0, q[2].0])
+                    });
+                    let quad = quad.filter(|q| {
+                        [(0, 1), (0, 2), (1, 3), (2, 3)]
+                            .iter()
+                            .all(|&(a, b)| (q[a] - q[b]).norm() <= QUAD_MAX_M)
+                    });
+                    match quad {
+                        None => {
+                            if let Some(j) = surface.index_of(p00.x, p00.y) {
+                                out.push((j as u32, wet, p00.z as f32));
+                            }
+                        }
+                        Some([a, b, cc, d]) => {
+                            // a = (x, y), b = (x + s, y), cc = (x, y + s), d = (x + s, y + s).
+                            let span = |u: Point3<f64>, v: Point3<f64>| (u - v).xy().norm();
+                            let nu = ((span(a, b).max(span(cc, d)) / half).ceil() as usize).max(1);
+                            let nv = ((span(a, cc).max(span(b, d)) / half).ceil() as usize).max(1);
+                            for iv in 0..nv {
+                                let tv = iv as f64 / nv as f64;
+                                let (l, rr) = (a + (cc - a) * tv, b + (d - b) * tv);
+                                for iu in 0..nu {
+                                    let p = l + (rr - l) * (iu as f64 / nu as f64);
                                     if let Some(j) = surface.index_of(p.x, p.y) {
-                                        out.push((j as u32, water, p.z as f32));
-                                        n[0] += 1;
-                                        continue;
+                                        out.push((j as u32, wet, p.z as f32));
                                     }
                                 }
                             }
                         }
-                        let hit = map_rays[i].and_then(|d| surface.cast(&origin, &d, max_range));
-                        match hit {
-                            Some((p, j)) => {
-                                out.push((j as u32, water, p.z as f32));
-                                n[1] += 1;
-                            }
-                            None => n[2] += 1,
-                        }
                     }
                 }
-                (out, n)
+                out
             })
             .collect();
+        for (_, n) in &per_row {
+            st.via_point += n[0];
+            st.via_ray += n[1];
+            st.no_hit += n[2];
+        }
         for l in &labels.data {
             match l {
                 Label::Water => st.pixels_water += 1,
@@ -415,10 +472,7 @@ impl FrameLabels {
                 _ => {}
             }
         }
-        for (out, n) in &hits {
-            st.via_point += n[0];
-            st.via_ray += n[1];
-            st.no_hit += n[2];
+        for out in &hits {
             for &(j, water, z) in out {
                 let t = &mut self.tally[j as usize];
                 if t.0 == 0 && t.1 == 0 {

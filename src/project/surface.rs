@@ -7,11 +7,13 @@
 //! comes with the first hit, as with [`super::ElevationSurface`].
 //!
 //! Unobserved cells are where water usually is: lidar returns nothing from a pond beyond the
-//! diagnostic interval and stereo rarely matches a sky reflection. A ray entering such a hole
-//! carries the elevation of the last observed cell it passed (the near shore) as the hole's
-//! level: water lies at or below its rim, so the ray stops inside the hole where it drops
-//! below that level, or goes on to the far shore if it does not. A ray that meets a hole
-//! before any observed cell has no level and passes on.
+//! diagnostic interval, stereo rarely matches a sky reflection, and the near bank of a
+//! depression that falls away faster than the ray is hidden from every sensor. A ray that
+//! crosses such a hole, from an observed near rim to the first observed cell beyond it (the
+//! far bank, which faces the sensor and is seen down to the waterline), stops where it drops
+//! to the lower of the two rims' elevations inside the hole: water lies at or below both. If
+//! it stays above that level it goes on and may hit the far bank. A ray that meets a hole
+//! before any observed cell, or never leaves it, stops nowhere in it.
 
 use nalgebra::{Point3, Vector3};
 
@@ -108,6 +110,8 @@ impl GridSurface {
         let dt = 0.5 * self.resolution / horiz;
         let steps = (max_range / dt).ceil() as usize;
         let mut level = f64::NAN;
+        // Where the ray entered the current hole (after an observed rim), if it is in one.
+        let mut entry: Option<f64> = None;
         let mut was_inside = false;
         for s in 1..=steps {
             let t = s as f64 * dt;
@@ -121,22 +125,24 @@ impl GridSurface {
             was_inside = true;
             let z = self.z[i] as f64;
             if z.is_nan() {
-                if p.z <= level {
-                    // Where the ray drops to the hole's level.
-                    let tl = (level - origin.z) / dir.z;
-                    let q = if dir.z < 0.0 && tl > t - dt && tl <= t {
-                        origin + dir * tl
-                    } else {
-                        p
-                    };
+                if level.is_finite() && entry.is_none() {
+                    entry = Some(t - dt);
+                }
+                continue;
+            }
+            if let Some(t0) = entry.take() {
+                // Out of a hole: water would lie at or below both rims.
+                let l = level.min(z);
+                let tl = (l - origin.z) / dir.z;
+                if dir.z < 0.0 && tl >= t0 && tl <= t {
+                    let q = origin + dir * tl;
                     return Some((q, self.index_of(q.x, q.y).unwrap_or(i)));
                 }
-            } else {
-                if p.z <= z {
-                    return Some((p, i));
-                }
-                level = z;
             }
+            if p.z <= z {
+                return Some((p, i));
+            }
+            level = z;
         }
         None
     }
@@ -201,11 +207,19 @@ mod tests {
         // Ground at 0, an unobserved pond for 4 ≤ x < 8; the far shore beyond.
         let (_, s) = grid_of(|x, _| (!(4.0..8.0).contains(&x)).then_some(0.0));
         let o = Point3::new(0.0, 0.0, 1.5);
-        // Aimed at x = 6: it enters the hole above 0 and drops to the rim level at x = 6.
+        // Aimed at x = 6: it crosses the hole and drops to the rims' level (0) at x = 6.
         let d = Vector3::new(6.0, 0.0, -1.5).normalize();
         let (p, i) = s.cast(&o, &d, 50.0).unwrap();
         assert!((p.x - 6.0).abs() < 1e-6 && p.z.abs() < 1e-9, "{p}");
         assert_eq!(Some(i), s.index_of(p.x, p.y));
+        // A far rim lower than the near one sets the level: far bank at −0.3 m, aimed at
+        // (7, −0.3): the hit is there, not where the ray passes z = 0 (x = 6).
+        let (_, s3) = grid_of(|x, _| {
+            (!(4.0..8.0).contains(&x)).then_some(if x >= 8.0 { -0.3 } else { 0.0 })
+        });
+        let d3 = Vector3::new(7.0, 0.0, -1.8).normalize();
+        let (p3, _) = s3.cast(&o, &d3, 50.0).unwrap();
+        assert!((p3.x - 7.0).abs() < 1e-6 && (p3.z + 0.3).abs() < 1e-6, "{p3}");
         // A ray that starts above a hole with no rim behind it passes on.
         let (_, s2) = grid_of(|x, _| (x >= 8.0).then_some(0.0));
         let (p2, _) = s2.cast(&o, &d, 50.0).unwrap();
