@@ -50,6 +50,11 @@ pub struct FrameLabelConfig {
     pub ray_stride: usize,
     /// Pixels whose hit lies farther than this along the ray (metres) do not vote.
     pub max_range: f64,
+    /// A stereo point places its pixel only up to this range (metres); farther pixels are
+    /// ray-marched over the fused map. Stereo range noise grows with the square of the range
+    /// (σ = z² σ_d / (f B): 2.9 m at 20 m for the simulated 320 px, 12 cm-baseline rig), so a
+    /// single far point is a worse place for a vote than the map, which averages many.
+    pub stereo_max_range: f64,
 }
 
 impl Default for FrameLabelConfig {
@@ -60,13 +65,17 @@ impl Default for FrameLabelConfig {
             mwir: None,
             ray_stride: 2,
             max_range: 40.0,
+            stereo_max_range: 10.0,
         }
     }
 }
 
 impl FrameLabelConfig {
     pub fn validate(&self) -> Result<()> {
-        if self.ray_stride == 0 || !(self.max_range.is_finite() && self.max_range > 0.0) {
+        if self.ray_stride == 0
+            || !(self.max_range.is_finite() && self.max_range > 0.0)
+            || self.stereo_max_range.is_nan()
+        {
             return Err(Error::invalid(
                 "label config",
                 format!(
@@ -367,6 +376,7 @@ impl FrameLabels {
         };
         let origin = Point3::from(cam_to_map.translation.vector);
         let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);
+        let stereo_range = self.cfg.stereo_max_range.min(max_range);
         let (cols, rows): (Vec<usize>, Vec<usize>) =
             ((0..w).step_by(s).collect(), (0..h).step_by(s).collect());
         // Per sampled pixel: its hit and whether it is water (`None`: no vote).
@@ -388,7 +398,7 @@ impl FrameLabels {
                             let e = (y / k) * c.cols + x / k;
                             if c.is_valid(e) {
                                 let p = c.point_in_map(e);
-                                if (p - origin).norm() <= max_range {
+                                if (p - origin).norm() <= stereo_range {
                                     n[0] += 1;
                                     return Some((p, water));
                                 }
