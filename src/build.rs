@@ -418,7 +418,10 @@ pub fn build_log(
     let mut frames_fused = 0u64;
     let mut t_fuse = 0.0;
     let mut labels = match &cfg.labels {
-        Some(l) => Some((crate::project::FrameLabels::new(l.clone())?, Default::default())),
+        Some(l) => Some((
+            crate::project::FrameLabels::new(l.clone())?,
+            Default::default(),
+        )),
         None => None,
     };
     while let Some(item) = stream.next() {

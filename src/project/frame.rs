@@ -304,8 +304,9 @@ impl FrameLabels {
                     } else {
                         None
                     };
-                    rep.dropped +=
-                        self.run(cue, img, cam, &pose, stereo, ground_z, &surface, grid, &mut st)?;
+                    rep.dropped += self.run(
+                        cue, img, cam, &pose, stereo, ground_z, &surface, grid, &mut st,
+                    )?;
                 }
             }
             match cue {
@@ -359,7 +360,12 @@ impl FrameLabels {
             }
             Cue::Swir => {
                 let g = ground_geometry(camera, &map_rays, cam_to_map.translation.z, ground_z);
-                classify_swir(&mono_of(img), &g, None, self.cfg.swir.as_ref().expect("cfg"))?
+                classify_swir(
+                    &mono_of(img),
+                    &g,
+                    None,
+                    self.cfg.swir.as_ref().expect("cfg"),
+                )?
             }
             Cue::Mwir => {
                 let m = self.cfg.mwir.as_ref().expect("configured");
@@ -435,8 +441,14 @@ impl FrameLabels {
                 for c in 0..cols.len() {
                     let Some((p00, wet)) = row[c] else { continue };
                     let quad = next.and_then(|nx| {
-                        let q = [row.get(c + 1)?.as_ref()?, nx[c].as_ref()?, nx.get(c + 1)?.as_ref()?];
-                        q.iter().all(|(_, w2)| *w2 == wet).then_some([p00, q[0].0, q[1].0, q[2].0])
+                        let q = [
+                            row.get(c + 1)?.as_ref()?,
+                            nx[c].as_ref()?,
+                            nx.get(c + 1)?.as_ref()?,
+                        ];
+                        q.iter()
+                            .all(|(_, w2)| *w2 == wet)
+                            .then_some([p00, q[0].0, q[1].0, q[2].0])
                     });
                     let quad = quad.filter(|q| {
                         [(0, 1), (0, 2), (1, 3), (2, 3)]
@@ -524,7 +536,10 @@ impl FrameLabels {
                 *fd = 1;
                 st.cells_dry += 1;
             }
-            let key = CellKey::new(o.x + (j as usize % nw) as i64, o.y + (j as usize / nw) as i64);
+            let key = CellKey::new(
+                o.x + (j as usize % nw) as i64,
+                o.y + (j as usize / nw) as i64,
+            );
             if !grid.add_evidence(key, &e) {
                 dropped += 1;
             }

@@ -166,7 +166,10 @@ mod tests {
         let mut pts = Vec::new();
         for j in 0..200 {
             for i in 0..200 {
-                let (x, y) = (-10.0 + (i as f64 + 0.5) * 0.1, -10.0 + (j as f64 + 0.5) * 0.1);
+                let (x, y) = (
+                    -10.0 + (i as f64 + 0.5) * 0.1,
+                    -10.0 + (j as f64 + 0.5) * 0.1,
+                );
                 if let Some(z) = f(x, y) {
                     pts.push([x as f32, y as f32, z as f32]);
                 }
@@ -188,7 +191,9 @@ mod tests {
         let t = 1.5 / -d.z;
         assert!((p - (o + d * t)).xy().norm() <= 0.05 + 1e-9, "{p}");
         // Upward or vertical rays hit nothing.
-        assert!(s.cast(&o, &Vector3::new(1.0, 0.0, 0.1).normalize(), 50.0).is_none());
+        assert!(s
+            .cast(&o, &Vector3::new(1.0, 0.0, 0.1).normalize(), 50.0)
+            .is_none());
         assert!(s.cast(&o, &Vector3::new(0.0, 0.0, -1.0), 50.0).is_none());
     }
 
@@ -214,12 +219,14 @@ mod tests {
         assert_eq!(Some(i), s.index_of(p.x, p.y));
         // A far rim lower than the near one sets the level: far bank at −0.3 m, aimed at
         // (7, −0.3): the hit is there, not where the ray passes z = 0 (x = 6).
-        let (_, s3) = grid_of(|x, _| {
-            (!(4.0..8.0).contains(&x)).then_some(if x >= 8.0 { -0.3 } else { 0.0 })
-        });
+        let (_, s3) =
+            grid_of(|x, _| (!(4.0..8.0).contains(&x)).then_some(if x >= 8.0 { -0.3 } else { 0.0 }));
         let d3 = Vector3::new(7.0, 0.0, -1.8).normalize();
         let (p3, _) = s3.cast(&o, &d3, 50.0).unwrap();
-        assert!((p3.x - 7.0).abs() < 1e-6 && (p3.z + 0.3).abs() < 1e-6, "{p3}");
+        assert!(
+            (p3.x - 7.0).abs() < 1e-6 && (p3.z + 0.3).abs() < 1e-6,
+            "{p3}"
+        );
         // A ray that starts above a hole with no rim behind it passes on.
         let (_, s2) = grid_of(|x, _| (x >= 8.0).then_some(0.0));
         let (p2, _) = s2.cast(&o, &d, 50.0).unwrap();

@@ -14,8 +14,8 @@ use tarn::classify::gmm::ColorModel;
 use tarn::classify::lut::ColorLut;
 use tarn::classify::thermal::{MwirConfig, SwirConfig};
 use tarn::grid::{GridConfig, RangeNoise};
-use tarn::project::{FrameLabelConfig, MwirLabelConfig};
 use tarn::io::frames::LogConfig;
+use tarn::project::{FrameLabelConfig, MwirLabelConfig};
 
 #[derive(Args)]
 pub struct BuildArgs {

@@ -24,7 +24,10 @@ fn ground_grid() -> RollingGrid {
     let mut pts = Vec::new();
     for j in 0..200 {
         for i in 0..200 {
-            let (x, y) = (-10.0 + (i as f64 + 0.5) * 0.1, -10.0 + (j as f64 + 0.5) * 0.1);
+            let (x, y) = (
+                -10.0 + (i as f64 + 0.5) * 0.1,
+                -10.0 + (j as f64 + 0.5) * 0.1,
+            );
             if !pond(x, y) {
                 pts.push([x as f32, y as f32, 0.0]);
             }
