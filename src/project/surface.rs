@@ -253,7 +253,7 @@ mod tests {
                 prop_assert!((p - q).xy().norm() < 0.2 + 0.1 / dep, "{p} {q}");
             } else {
                 // Both miss only at the window's edge (9 m of range from the centre).
-                prop_assert!(mine.is_none() && theirs.is_none() || (o + d * 9.0).xy().norm() > 8.0);
+                prop_assert!(mine.is_none() && theirs.is_none() || (o + d * 9.0).coords.xy().norm() > 8.0);
             }
         }
     }
