@@ -72,8 +72,8 @@ impl ColorLut {
         let (bg, br) = (self.bits as u32, 2 * self.bits as u32);
         let table = &self.table[..];
         let mask = table.len() - 1;
-        let (px, _) = rgb.as_chunks::<3>();
-        for (o, &[r, g, b]) in out.iter_mut().zip(px) {
+        for (o, px) in out.iter_mut().zip(rgb.chunks_exact(3)) {
+            let (r, g, b) = (px[0], px[1], px[2]);
             let i = (((r >> s) as usize) << br) | (((g >> s) as usize) << bg) | ((b >> s) as usize);
             *o = table[i & mask];
         }

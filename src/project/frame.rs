@@ -55,6 +55,9 @@ pub struct FrameLabelConfig {
     /// (σ = z² σ_d / (f B): 2.9 m at 20 m for the simulated 320 px, 12 cm-baseline rig), so a
     /// single far point is a worse place for a vote than the map, which averages many.
     pub stereo_max_range: f64,
+    /// Cells whose elevation σ exceeds this (metres) are holes to the ray march
+    /// ([`GridSurface::from_grid_gated`]); infinity keeps every observed cell.
+    pub surface_max_std: f64,
 }
 
 impl Default for FrameLabelConfig {
@@ -66,6 +69,7 @@ impl Default for FrameLabelConfig {
             ray_stride: 2,
             max_range: 40.0,
             stereo_max_range: 10.0,
+            surface_max_std: 0.1,
         }
     }
 }
@@ -75,12 +79,15 @@ impl FrameLabelConfig {
         if self.ray_stride == 0
             || !(self.max_range.is_finite() && self.max_range > 0.0)
             || self.stereo_max_range.is_nan()
+            || self.surface_max_std.is_nan()
+            || self.surface_max_std <= 0.0
         {
             return Err(Error::invalid(
                 "label config",
                 format!(
-                    "ray_stride {} must be ≥ 1 and max_range {} m finite and > 0",
-                    self.ray_stride, self.max_range
+                    "ray_stride {} must be ≥ 1, max_range {} m finite and > 0, \
+                     surface_max_std {} m > 0",
+                    self.ray_stride, self.max_range, self.surface_max_std
                 ),
             ));
         }
@@ -269,7 +276,7 @@ impl FrameLabels {
         if !any {
             return Ok(rep);
         }
-        let surface = GridSurface::from_grid(grid);
+        let surface = GridSurface::from_grid_gated(grid, self.cfg.surface_max_std);
         let nn = surface.size() * surface.size();
         if self.tally.len() != nn {
             self.tally = vec![(0, 0, 0.0); nn];

@@ -32,12 +32,21 @@ pub struct GridSurface {
 
 impl GridSurface {
     pub fn from_grid(grid: &RollingGrid) -> Self {
+        Self::from_grid_gated(grid, f64::INFINITY)
+    }
+
+    /// As [`Self::from_grid`], but a cell whose elevation standard deviation
+    /// ([`crate::grid::CellStats::elevation_std_m`]) exceeds `max_std_m` counts as
+    /// unobserved: a cell seen only by a few far stereo points (σ grows with range²) holds
+    /// an elevation that may belong to a cell metres nearer, and would stop rays short.
+    pub fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
         let n = grid.size();
         let o = grid.origin();
         let z_ref = grid.config().z_ref;
         let mut z = vec![f32::NAN; n * n];
         for (k, c) in grid.observed() {
-            if let Some(m) = c.mean_mm() {
+            let Some(m) = c.mean_mm() else { continue };
+            if c.elevation_std_m().is_some_and(|sd| sd <= max_std_m) {
                 z[(k.y - o.y) as usize * n + (k.x - o.x) as usize] = (z_ref + m * 1e-3) as f32;
             }
         }
@@ -103,7 +112,7 @@ impl GridSurface {
         max_range: f64,
     ) -> Option<(Point3<f64>, usize)> {
         let horiz = dir.xy().norm();
-        if !(horiz > 1e-9) || !origin.coords.iter().all(|v| v.is_finite()) {
+        if horiz.is_nan() || horiz <= 1e-9 || !origin.coords.iter().all(|v| v.is_finite()) {
             return None;
         }
         // Steps of half a cell horizontally.
@@ -144,7 +153,17 @@ impl GridSurface {
             }
             level = z;
         }
-        None
+        // Still in a hole entered from an observed rim, with no far rim in reach (a far
+        // shore beyond range or the window): the near rim's level is the best there is.
+        match entry {
+            Some(t0) if dir.z < 0.0 => {
+                let tl = (level - origin.z) / dir.z;
+                let q = origin + dir * tl;
+                let i = self.index_of(q.x, q.y)?;
+                (tl >= t0 && tl <= max_range && self.z[i].is_nan()).then_some((q, i))
+            }
+            _ => None,
+        }
     }
 }
 
@@ -227,10 +246,36 @@ mod tests {
             (p3.x - 7.0).abs() < 1e-6 && (p3.z + 0.3).abs() < 1e-6,
             "{p3}"
         );
+        // No far rim (the hole runs to the window's edge): the near rim's level.
+        let (_, s4) = grid_of(|x, _| (x < 4.0).then_some(0.0));
+        let (p4, _) = s4.cast(&o, &d, 50.0).unwrap();
+        assert!((p4.x - 6.0).abs() < 1e-6 && p4.z.abs() < 1e-9, "{p4}");
         // A ray that starts above a hole with no rim behind it passes on.
         let (_, s2) = grid_of(|x, _| (x >= 8.0).then_some(0.0));
         let (p2, _) = s2.cast(&o, &d, 50.0).unwrap();
         assert!(p2.x >= 8.0, "{p2}");
+    }
+
+    #[test]
+    fn gated_surface_drops_uncertain_cells() {
+        use crate::geom::PointCloud;
+        use crate::grid::{GridConfig, RangeNoise};
+        let cfg = GridConfig {
+            size_cells: 100,
+            resolution: 0.1,
+            ..GridConfig::default()
+        };
+        let mut g = RollingGrid::new(cfg, 0.0, 0.0).unwrap();
+        // One precise point at (1, 1), one noisy point at (2, 2).
+        let precise = PointCloud::unorganized(vec![[1.05, 1.05, 0.0]]);
+        let noisy = PointCloud::unorganized(vec![[2.05, 2.05, 0.3]]);
+        g.ingest(&precise, &RangeNoise::constant(0.02)).unwrap();
+        g.ingest(&noisy, &RangeNoise::constant(0.5)).unwrap();
+        let all = GridSurface::from_grid(&g);
+        assert!(all.elevation(1.05, 1.05).is_finite() && all.elevation(2.05, 2.05).is_finite());
+        let gated = GridSurface::from_grid_gated(&g, 0.1);
+        assert!(gated.elevation(1.05, 1.05).abs() < 1e-3);
+        assert!(gated.elevation(2.05, 2.05).is_nan());
     }
 
     proptest! {

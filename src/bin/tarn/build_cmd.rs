@@ -59,6 +59,10 @@ pub struct BuildArgs {
     /// (log) Pixels whose hit is farther than this do not vote, metres.
     #[arg(long, default_value_t = 40.0)]
     pub label_max_range: f64,
+    /// (log) Cells whose elevation σ exceeds this (metres) are holes to the label ray march
+    /// (far stereo-only cells); `inf` keeps every cell.
+    #[arg(long, default_value_t = 0.1)]
+    pub label_surface_max_std: f64,
     /// Print the report as JSON instead of a summary.
     #[arg(long)]
     pub json: bool,
@@ -76,6 +80,7 @@ fn label_config(a: &BuildArgs) -> anyhow::Result<Option<FrameLabelConfig>> {
     let mut cfg = FrameLabelConfig {
         ray_stride: a.label_stride,
         max_range: a.label_max_range,
+        surface_max_std: a.label_surface_max_std,
         ..FrameLabelConfig::default()
     };
     for l in &a.labels {
@@ -124,6 +129,7 @@ impl BuildArgs {
             hour: None,
             label_stride: 2,
             label_max_range: 40.0,
+            label_surface_max_std: 0.1,
             json: false,
         }
     }
