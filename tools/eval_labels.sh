@@ -28,9 +28,12 @@ for r in "${runs[@]}"; do
     extra=(--hour "$hour")
   fi
   map="$OUT/map/$scene-${labels//,/+}"
-  "$T" build "$sim/log.mcap" --labels "$labels" "${extra[@]}" --out "$map" --json > "$map.report.json"
+  # An 80 m window (800 cells at 0.1 m) holds every cell within --label-max-range (40 m)
+  # of the vehicle: with the default 40 m window, votes beyond 20 m fall outside it.
+  "$T" build "$sim/log.mcap" --labels "$labels" "${extra[@]}" --window-cells 800 \
+    --out "$map" --json > "$map.report.json"
   echo
-  echo "### $scene, \`tarn build --labels $labels ${extra[*]}\`"
+  echo "### $scene, \`tarn build --labels $labels ${extra[*]} --window-cells 800\`"
   echo
   "$T" eval "$map" --truth "$sim"
 done
