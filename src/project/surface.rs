@@ -127,7 +127,7 @@ impl GridSurface {
             let p = origin + dir * t;
             let Some(i) = self.index_of(p.x, p.y) else {
                 if was_inside {
-                    return None;
+                    break;
                 }
                 continue;
             };
