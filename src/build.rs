@@ -357,6 +357,9 @@ pub struct LogBuildReport {
     pub errors: Vec<String>,
     /// Where reading stopped early (a truncated or damaged log), if it did.
     pub damage: Option<String>,
+    /// What the image labels contributed (`None`: not configured).
+    #[serde(default)]
+    pub labels: Option<crate::project::FrameLabelsReport>,
     pub cells_observed: usize,
     pub tiles: usize,
     pub elevation_range_m: Option<(f64, f64)>,
@@ -539,6 +542,7 @@ pub fn build_log(
     let mut t_fuse = 0.0;
     let mut stage_totals = StageTimes::default();
     let mut per_frame = Vec::new();
+    let mut label_totals: Option<crate::project::FrameLabelsReport> = None;
     while let Some(item) = stream.next() {
         let (done, total) = stream.progress();
         progress(done, total);
@@ -559,6 +563,12 @@ pub fn build_log(
                     stereo.merge(s);
                 }
                 counts.add(&r.cues);
+                if let Some(l) = &r.labels {
+                    crate::project::FrameLabelsReport::merge(
+                        label_totals.get_or_insert_with(Default::default),
+                        l,
+                    );
+                }
                 stage_totals.add(&r.times_s);
                 per_frame.push(r.times_s);
                 frames_fused += 1;
@@ -600,6 +610,7 @@ pub fn build_log(
         frames: stream.stats().clone(),
         errors,
         damage: summary.damage.clone(),
+        labels: label_totals,
         cells_observed: map.cells.len(),
         tiles: tiles.tile_count(),
         elevation_range_m: export::elevation_range(&map.cells),

@@ -143,6 +143,11 @@ pub struct MapperConfig {
     pub lidar: Option<LidarConfig>,
     /// The stereo camera; absent: stereo clouds are not used at all.
     pub stereo: Option<StereoConfig>,
+    /// Image labels (colour, SWIR, MWIR) into the water evidence; absent: images are not
+    /// used at all. Set in code or from the command line (`tarn build --labels`); not read
+    /// from config files (a trained colour model is its own JSON file).
+    #[serde(skip)]
+    pub labels: Option<crate::project::FrameLabelConfig>,
 }
 
 impl Default for MapperConfig {
@@ -154,6 +159,7 @@ impl Default for MapperConfig {
             water: WaterConfig::default(),
             lidar: Some(LidarConfig::default()),
             stereo: Some(StereoConfig::default()),
+            labels: None,
         }
     }
 }
@@ -416,6 +422,8 @@ pub struct FrameReport {
     /// Cells of the published snapshot, and those called water.
     pub snapshot_cells: usize,
     pub snapshot_water_cells: usize,
+    /// What the image labels contributed (`None`: not configured).
+    pub labels: Option<crate::project::FrameLabelsReport>,
     pub times_s: StageTimes,
 }
 
@@ -465,6 +473,7 @@ impl MapSnapshots {
 pub struct Mapper {
     cfg: MapperConfig,
     cues: FrameCues,
+    labels: Option<crate::project::FrameLabels>,
     /// The lidar height the cue model was built for.
     lidar_height: Option<f64>,
     grid: Option<RollingGrid>,
@@ -493,9 +502,15 @@ impl Mapper {
         }
         let global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
         let empty = Arc::new(HazardMap::new(cfg.grid.resolution, Vec::new()));
+        let labels = cfg
+            .labels
+            .clone()
+            .map(crate::project::FrameLabels::new)
+            .transpose()?;
         Ok(Mapper {
             cfg,
             cues: FrameCues::new(fc),
+            labels,
             lidar_height,
             grid: None,
             global,
@@ -604,10 +619,11 @@ impl Mapper {
         }
         times.stereo = t.elapsed().as_secs_f64();
 
-        // 4. labels — IMAGE LABELS GO HERE: `FrameLabels::apply(frame, grid)` (colour, SWIR
-        // and MWIR classification projected onto the map as evidence) runs at this point,
-        // configured by a `labels` section of MapperConfig. Not built in this module.
+        // 4. labels: colour, SWIR and MWIR classification projected onto the map as votes.
         let t = Instant::now();
+        if let Some(fl) = self.labels.as_mut() {
+            rep.labels = Some(fl.apply(frame, grid)?);
+        }
         times.labels = t.elapsed().as_secs_f64();
 
         // 5. water: the window's hazard map, published.

@@ -58,7 +58,9 @@ impl ColorLut {
         (((r as usize) >> s) << (2 * bits)) | (((g as usize) >> s) << bits) | ((b as usize) >> s)
     }
 
-    /// Labels a packed RGB buffer into `out` on the calling thread (no parallelism).
+    /// Labels a packed RGB buffer into `out` on the calling thread (no parallelism). One
+    /// pass, no allocation: per pixel three shifts, two ors and one table load (the index is
+    /// masked to the table's power-of-two length, so the load needs no bounds branch).
     pub fn classify_into(&self, rgb: &[u8], out: &mut [Label]) -> Result<()> {
         if rgb.len() != 3 * out.len() {
             return Err(Error::invalid(
@@ -66,8 +68,14 @@ impl ColorLut {
                 format!("{} bytes of RGB for {} labels", rgb.len(), out.len()),
             ));
         }
-        for (o, p) in out.iter_mut().zip(rgb.chunks_exact(3)) {
-            *o = self.table[self.index(p[0], p[1], p[2])];
+        let s = 8 - self.bits as u32;
+        let (bg, br) = (self.bits as u32, 2 * self.bits as u32);
+        let table = &self.table[..];
+        let mask = table.len() - 1;
+        for (o, px) in out.iter_mut().zip(rgb.chunks_exact(3)) {
+            let (r, g, b) = (px[0], px[1], px[2]);
+            let i = (((r >> s) as usize) << br) | (((g >> s) as usize) << bg) | ((b >> s) as usize);
+            *o = table[i & mask];
         }
         Ok(())
     }

@@ -106,13 +106,58 @@ impl CameraModel {
         }
         match self.distortion {
             Distortion::None => Some([xd, yd]),
-            Distortion::PlumbBob(_) => {
-                let (mut a, mut b) = (xd, yd);
+            Distortion::PlumbBob([k1, k2, _, _, k3]) => {
+                // Strong barrel distortion folds the image: r·(1 + k1 r² + k2 r⁴ + k3 r⁶)
+                // rises to a maximum at `r_max` and falls beyond it, so a distorted point has
+                // a second preimage outside the lens's valid field. Start from the inverse of
+                // the radial part on its rising branch and keep only solutions on it.
+                let r_max = plumb_bob_fold_radius(k1, k2, k3);
+                let radial = |r: f64| {
+                    let s = r * r;
+                    r * (1.0 + s * (k1 + s * (k2 + s * k3)))
+                };
+                let rd = xd.hypot(yd);
+                let r0 = if rd < 1e-15 {
+                    0.0
+                } else {
+                    // Bisection on [0, r_max] (radial(r) is increasing there).
+                    let hi = if r_max.is_finite() {
+                        r_max
+                    } else {
+                        let mut h = rd.max(1.0);
+                        while radial(h) < rd && h < 1e6 {
+                            h *= 2.0;
+                        }
+                        h
+                    };
+                    if radial(hi) < rd {
+                        // Beyond the radial part's maximum: the tangential terms can still
+                        // reach it from inside the fold (p·3r² is ~1 % of r near the fold),
+                        // so start at the fold and let Newton and the final check decide.
+                        hi
+                    } else {
+                        let (mut lo, mut hi) = (0.0, hi);
+                        for _ in 0..80 {
+                            let m = 0.5 * (lo + hi);
+                            if radial(m) < rd {
+                                lo = m;
+                            } else {
+                                hi = m;
+                            }
+                        }
+                        0.5 * (lo + hi)
+                    }
+                };
+                let (mut a, mut b) = if rd < 1e-15 {
+                    (xd, yd)
+                } else {
+                    (xd * r0 / rd, yd * r0 / rd)
+                };
                 for _ in 0..50 {
                     let [fa, fb] = self.distort(a, b);
                     let (ea, eb) = (fa - xd, fb - yd);
                     if ea.abs() < 1e-14 && eb.abs() < 1e-14 {
-                        return Some([a, b]);
+                        break;
                     }
                     // Numerical Jacobian (the function is a smooth polynomial).
                     let h = 1e-7;
@@ -128,7 +173,7 @@ impl CameraModel {
                     b -= (-j21 * ea + j11 * eb) / det;
                 }
                 let [fa, fb] = self.distort(a, b);
-                ((fa - xd).hypot(fb - yd) < 1e-9).then_some([a, b])
+                ((fa - xd).hypot(fb - yd) < 1e-9 && a.hypot(b) <= r_max).then_some([a, b])
             }
             Distortion::Equidistant(k) => {
                 let rd = (xd * xd + yd * yd).sqrt();
@@ -176,6 +221,54 @@ impl CameraModel {
         let [a, b] = self.undistort((u - self.cx) / self.fx, (v - self.cy) / self.fy)?;
         Some(Vector3::new(a, b, 1.0).normalize())
     }
+}
+
+/// Smallest r > 0 where the plumb_bob radial map r·(1 + k1 r² + k2 r⁴ + k3 r⁶) stops rising
+/// (its derivative 1 + 3k1 r² + 5k2 r⁴ + 7k3 r⁶ reaches 0); infinite when it never does.
+pub fn plumb_bob_fold_radius(k1: f64, k2: f64, k3: f64) -> f64 {
+    // g(s) = 1 + 3k1 s + 5k2 s² + 7k3 s³ in s = r², g(0) = 1. Split [0, ∞) at the stationary
+    // points of g (roots of g' = 3k1 + 10k2 s + 21k3 s²) into monotone pieces and bisect the
+    // first piece whose end is ≤ 0.
+    let g = |s: f64| 1.0 + s * (3.0 * k1 + s * (5.0 * k2 + s * 7.0 * k3));
+    let (qa, qb, qc) = (21.0 * k3, 10.0 * k2, 3.0 * k1);
+    let mut cuts: Vec<f64> = Vec::new();
+    if qa.abs() > 1e-300 {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc >= 0.0 {
+            let sq = disc.sqrt();
+            cuts.extend([(-qb - sq) / (2.0 * qa), (-qb + sq) / (2.0 * qa)]);
+        }
+    } else if qb.abs() > 1e-300 {
+        cuts.push(-qc / qb);
+    }
+    cuts.retain(|c| c.is_finite() && *c > 0.0);
+    cuts.sort_by(f64::total_cmp);
+    // The last piece: far enough out that g has its leading sign.
+    let mut far = cuts.last().copied().unwrap_or(0.0).max(1.0);
+    for _ in 0..200 {
+        if g(far) <= 0.0 {
+            break;
+        }
+        far *= 2.0;
+    }
+    cuts.push(far);
+    let mut lo = 0.0;
+    for hi in cuts {
+        if g(hi) <= 0.0 {
+            let (mut a, mut b) = (lo, hi);
+            for _ in 0..100 {
+                let m = 0.5 * (a + b);
+                if g(m) > 0.0 {
+                    a = m;
+                } else {
+                    b = m;
+                }
+            }
+            return (0.5 * (a + b)).sqrt();
+        }
+        lo = hi;
+    }
+    f64::INFINITY
 }
 
 /// Equidistant model: distorted radius θ_d(θ) = θ(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸).
@@ -230,7 +323,60 @@ mod tests {
         assert!(CameraModel::new(1, 1, [1.0, 1.0, f64::NAN, 0.0], Distortion::None, "c").is_err());
     }
 
+    #[test]
+    fn fold_radius_of_known_lenses() {
+        // k1 only: 1 + 3 k1 r² = 0 → r = sqrt(−1 / 3k1).
+        assert!((plumb_bob_fold_radius(-0.3, 0.0, 0.0) - (1.0f64 / 0.9).sqrt()).abs() < 1e-12);
+        assert!(plumb_bob_fold_radius(0.1, 0.01, 0.0).is_infinite());
+        // k2 only, negative: 1 + 5 k2 r⁴ = 0.
+        assert!((plumb_bob_fold_radius(0.0, -0.2, 0.0) - 1.0).abs() < 1e-12);
+    }
+
     proptest! {
+        /// Project a point inside the lens's valid field (inside the fold radius of strong
+        /// barrel distortion), then undistort its pixel: the same ray, not the fold's other
+        /// branch.
+        #[test]
+        fn plumb_bob_project_then_undistort_strong_barrel(
+            fr in 0.0f64..0.97, ang in 0.0f64..std::f64::consts::TAU,
+            k1 in -0.6f64..-0.15, k2 in -0.05f64..0.15, k3 in -0.02f64..0.02,
+            p1 in -0.002f64..0.002, p2 in -0.002f64..0.002,
+        ) {
+            let c = cam(Distortion::PlumbBob([k1, k2, p1, p2, k3]));
+            let r_fold = plumb_bob_fold_radius(k1, k2, k3).min(3.0);
+            let r = fr * r_fold;
+            let p = Point3::new(r * ang.cos(), r * ang.sin(), 1.0);
+            // The valid field is where the distortion map keeps its orientation: with the
+            // tangential terms the 2-D map can fold before the radial fold radius where the
+            // radial slope nearly vanishes (k1 = −0.48, k2 = 0.13: slope 0.002 at r = 1.3).
+            let det = |t: f64| {
+                let (a, b, h) = (t * ang.cos(), t * ang.sin(), 1e-6);
+                let f = c.distort(a, b);
+                let (fa, fb) = (c.distort(a + h, b), c.distort(a, b + h));
+                ((fa[0] - f[0]) * (fb[1] - f[1]) - (fb[0] - f[0]) * (fa[1] - f[1])) / (h * h)
+            };
+            prop_assume!((0..=200).all(|i| det(r * i as f64 / 200.0) > 0.02));
+            let [u, v] = c.project(&p).unwrap();
+            let ray = c.pixel_ray(u, v);
+            prop_assert!(ray.is_some(), "no ray for r = {r} (fold {r_fold}) at ({u}, {v})");
+            let ray = ray.unwrap();
+            prop_assert!((ray - p.coords.normalize()).norm() < 1e-7, "{ray} vs {p}");
+        }
+
+        /// Every pixel of a strongly distorted 640 × 480 image either has a ray that projects
+        /// back to it on the valid branch, or none (beyond the fold).
+        #[test]
+        fn plumb_bob_pixels_round_trip_on_the_valid_branch(
+            u in 0.0f64..640.0, v in 0.0f64..480.0, k1 in -0.6f64..-0.15,
+        ) {
+            let c = cam(Distortion::PlumbBob([k1, 0.0, 0.0, 0.0, 0.0]));
+            if let Some(r) = c.pixel_ray(u, v) {
+                let [pu, pv] = c.project(&Point3::from(r * 5.0)).unwrap();
+                prop_assert!((pu - u).abs() < 1e-6 && (pv - v).abs() < 1e-6);
+                prop_assert!((r.x / r.z).hypot(r.y / r.z) <= plumb_bob_fold_radius(k1, 0.0, 0.0) + 1e-9);
+            }
+        }
+
         #[test]
         fn plumb_bob_round_trip(
             u in 0.0f64..640.0, v in 0.0f64..480.0,

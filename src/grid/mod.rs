@@ -16,7 +16,7 @@ mod ingest;
 mod tiles;
 
 pub use cell::{quantize_mm, quantize_weight, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
-pub use evidence::{CueLogOdds, Evidence, Fusion, EVIDENCE_BYTES_PER_CELL};
+pub use evidence::{CueLogOdds, Evidence, Fusion, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS};
 pub use ingest::{IngestStats, RangeNoise};
 pub use tiles::{TileMap, TILE_CELLS};
 
@@ -133,8 +133,8 @@ pub(crate) struct Layers {
     pub swzz: Vec<i128>,
     pub zmin: Vec<i32>,
     pub zmax: Vec<i32>,
-    /// Evidence: noret, diag_ret, reflect, dark, lit.
-    pub ev_counts: Vec<[u16; 5]>,
+    /// Evidence event counts in [`Evidence::counts`] order.
+    pub ev_counts: Vec<[u16; EVIDENCE_COUNTS]>,
     pub ev_level_n: Vec<u32>,
     pub ev_level_sum: Vec<i64>,
     /// Evidence: depth count, Σ depth mm.
@@ -153,7 +153,7 @@ impl Layers {
             swzz: vec![e.swzz; n],
             zmin: vec![e.zmin; n],
             zmax: vec![e.zmax; n],
-            ev_counts: vec![[0; 5]; n],
+            ev_counts: vec![[0; EVIDENCE_COUNTS]; n],
             ev_level_n: vec![0; n],
             ev_level_sum: vec![0; n],
             ev_depth: vec![[0; 2]; n],
@@ -166,25 +166,22 @@ impl Layers {
 
     #[inline]
     pub fn get_ev(&self, i: usize) -> Evidence {
-        let c = self.ev_counts[i];
         let d = self.ev_depth[i];
-        Evidence {
-            noret: c[0],
-            diag_ret: c[1],
-            reflect: c[2],
-            dark: c[3],
-            lit: c[4],
+        let mut e = Evidence {
             level_n: self.ev_level_n[i],
             level_sum_mm: self.ev_level_sum[i],
             depth_n: d[0],
             depth_sum_mm: d[1],
             depth_sq_mm2: self.ev_depth_sq[i],
-        }
+            ..Evidence::default()
+        };
+        e.set_counts(self.ev_counts[i]);
+        e
     }
 
     #[inline]
     pub fn set_ev(&mut self, i: usize, e: &Evidence) {
-        self.ev_counts[i] = [e.noret, e.diag_ret, e.reflect, e.dark, e.lit];
+        self.ev_counts[i] = e.counts();
         self.ev_level_n[i] = e.level_n;
         self.ev_level_sum[i] = e.level_sum_mm;
         self.ev_depth[i] = [e.depth_n, e.depth_sum_mm];
@@ -193,7 +190,7 @@ impl Layers {
 
     #[inline]
     fn ev_is_empty_at(&self, i: usize) -> bool {
-        self.ev_counts[i] == [0; 5]
+        self.ev_counts[i] == [0; EVIDENCE_COUNTS]
             && self.ev_level_n[i] == 0
             && self.ev_level_sum[i] == 0
             && self.ev_depth[i] == [0; 2]

@@ -16,6 +16,12 @@
 //! commutative, associative [`LabelVotes::merge`]: results do not depend on thread count or
 //! frame order. Fusing votes into the map's classes is left to the mapper.
 
+pub mod frame;
+pub mod surface;
+
+pub use frame::{FrameLabelConfig, FrameLabels, FrameLabelsReport, MwirLabelConfig};
+pub use surface::GridSurface;
+
 use std::collections::HashMap;
 
 use nalgebra::{Point3, Vector3};

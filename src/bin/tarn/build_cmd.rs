@@ -9,9 +9,14 @@ use tarn::build::{
     build_file, build_log, check_output_dir, BuildConfig, BuildReport, LogBuildConfig,
     LogBuildReport, WaterSummary,
 };
+use tarn::classify::color::RuleClassifier;
+use tarn::classify::gmm::ColorModel;
+use tarn::classify::lut::ColorLut;
+use tarn::classify::thermal::{MwirConfig, SwirConfig};
 use tarn::grid::{GridConfig, RangeNoise};
 use tarn::io::frames::LogConfig;
 use tarn::mapper::MapperConfig;
+use tarn::project::{FrameLabelConfig, MwirLabelConfig};
 
 #[derive(Args)]
 pub struct BuildArgs {
@@ -48,9 +53,74 @@ pub struct BuildArgs {
     /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
     #[arg(long)]
     pub log_config: Option<PathBuf>,
+    /// (log) Image sensors whose labels go into the map's water evidence: any of colour,
+    /// swir, mwir (comma-separated). The map is then exported with water.
+    #[arg(long, value_delimiter = ',')]
+    pub labels: Vec<String>,
+    /// (log) Colour model (JSON from `tarn train-color`), compiled into a 6-bit lookup
+    /// table; without it the paper's Table 1 rule.
+    #[arg(long)]
+    pub colour_model: Option<PathBuf>,
+    /// (log) Local solar hour of the log (0..24), for the MWIR labels.
+    #[arg(long)]
+    pub hour: Option<f64>,
+    /// (log) Label every n-th pixel in x and y.
+    #[arg(long, default_value_t = 2)]
+    pub label_stride: usize,
+    /// (log) Pixels whose hit is farther than this do not vote, metres.
+    #[arg(long, default_value_t = 40.0)]
+    pub label_max_range: f64,
+    /// (log) Cells whose elevation σ exceeds this (metres) are holes to the label ray march
+    /// (far stereo-only cells); `inf` keeps every cell.
+    #[arg(long, default_value_t = 0.1)]
+    pub label_surface_max_std: f64,
     /// Print the report as JSON instead of a summary.
     #[arg(long)]
     pub json: bool,
+}
+
+/// The label configuration of `--labels`, `--colour-model`, `--hour`.
+fn label_config(a: &BuildArgs) -> anyhow::Result<Option<FrameLabelConfig>> {
+    if a.labels.is_empty() {
+        anyhow::ensure!(
+            a.colour_model.is_none() && a.hour.is_none(),
+            "--colour-model and --hour need --labels"
+        );
+        return Ok(None);
+    }
+    let mut cfg = FrameLabelConfig {
+        ray_stride: a.label_stride,
+        max_range: a.label_max_range,
+        surface_max_std: a.label_surface_max_std,
+        ..FrameLabelConfig::default()
+    };
+    for l in &a.labels {
+        match l.trim() {
+            "colour" | "color" => {
+                cfg.colour = Some(match &a.colour_model {
+                    Some(p) => ColorLut::compile(&ColorModel::load(p)?, 6)?,
+                    None => ColorLut::compile(&RuleClassifier::default(), 8)?,
+                })
+            }
+            "swir" => cfg.swir = Some(SwirConfig::default()),
+            "mwir" => {
+                let hour = a
+                    .hour
+                    .context("--labels mwir needs --hour (local solar hour of the log)")?;
+                cfg.mwir = Some(MwirLabelConfig {
+                    classifier: MwirConfig::default(),
+                    hour,
+                })
+            }
+            other => anyhow::bail!("--labels: unknown sensor {other:?} (colour, swir, mwir)"),
+        }
+    }
+    anyhow::ensure!(
+        cfg.colour.is_some() || a.colour_model.is_none(),
+        "--colour-model needs --labels colour"
+    );
+    cfg.validate()?;
+    Ok(Some(cfg))
 }
 
 impl BuildArgs {
@@ -67,6 +137,12 @@ impl BuildArgs {
             config: None,
             cues: None,
             log_config: None,
+            labels: Vec::new(),
+            colour_model: None,
+            hour: None,
+            label_stride: 2,
+            label_max_range: 40.0,
+            label_surface_max_std: 0.1,
             json: false,
         }
     }
@@ -134,6 +210,7 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
     if let Some(c) = &a.cues {
         cfg.set_cues(c)?;
     }
+    cfg.labels = label_config(a)?;
     cfg.validate()?;
     Ok(cfg)
 }
@@ -229,6 +306,16 @@ fn print_log_summary(r: &LogBuildReport) {
                 "  {name} points {}: fused {}, below surface {}, missing {}, outside the window {}",
                 p.points, p.fused, p.below, p.nonfinite, p.outside
             );
+        }
+    }
+    if let Some(l) = &r.labels {
+        for (name, s) in [("colour", &l.colour), ("swir", &l.swir), ("mwir", &l.mwir)] {
+            if let Some(s) = s {
+                println!(
+                    "  {name} labels: {} frames ({} skipped), cell votes water {} / not {}",
+                    s.frames, s.frames_skipped, s.cells_water, s.cells_dry
+                );
+            }
         }
     }
     println!(

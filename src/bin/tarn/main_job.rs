@@ -34,6 +34,11 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
     );
     let mut args = BuildArgs::defaults(sim_dir.join("log.mcap"), out.to_path_buf());
     args.config = Some(sim_dir.join("mapper.toml"));
+    // The default scene's pond reflects the sky: only the colour camera sees it (stereo
+    // finds no match on it, and it lies beyond the lidar's no-return interval). An 80 m
+    // window keeps the far shore's votes.
+    args.labels = vec!["colour".into()];
+    args.window_cells = Some(800);
     println!(
         "tarn: building the map of {} into {}",
         args.input.display(),

@@ -1,0 +1,224 @@
+use super::*;
+use crate::classify::color::RuleClassifier;
+use crate::classify::horizon::{optical_pose, Horizon};
+use crate::geom::camera::Distortion;
+use crate::geom::pose_xyz_rpy;
+use crate::grid::{Fusion, GridConfig, RangeNoise};
+use crate::io::ros::convert::Image;
+
+const SKY: [u8; 3] = [250, 250, 252];
+const GRASS: [u8; 3] = [60, 120, 40];
+
+/// Ground at z = 0 observed on a 20 m window except a pond hole for 4 ≤ x < 6 (|y| < 2).
+fn pond(x: f64, y: f64) -> bool {
+    (4.0..6.0).contains(&x) && y.abs() < 2.0
+}
+
+fn ground_grid() -> RollingGrid {
+    let cfg = GridConfig {
+        size_cells: 200,
+        resolution: 0.1,
+        ..GridConfig::default()
+    };
+    let mut g = RollingGrid::new(cfg, 0.0, 0.0).unwrap();
+    let mut pts = Vec::new();
+    for j in 0..200 {
+        for i in 0..200 {
+            let (x, y) = (
+                -10.0 + (i as f64 + 0.5) * 0.1,
+                -10.0 + (j as f64 + 0.5) * 0.1,
+            );
+            if !pond(x, y) {
+                pts.push([x as f32, y as f32, 0.0]);
+            }
+        }
+    }
+    g.ingest(&PointCloud::unorganized(pts), &RangeNoise::constant(0.02))
+        .unwrap();
+    g
+}
+
+fn camera() -> (CameraModel, Pose) {
+    let cam = CameraModel::new(
+        96,
+        64,
+        [70.0, 70.0, 47.5, 31.5],
+        Distortion::PlumbBob([-0.1, 0.01, 0.0, 0.0, 0.0]),
+        "cam",
+    )
+    .unwrap();
+    (
+        cam,
+        optical_pose(&pose_xyz_rpy(0.0, 0.0, 1.5, 0.0, 15f64.to_radians(), 0.0)),
+    )
+}
+
+/// A frame whose colour image shows sky above the horizon, the sky reflected in the pond
+/// and grass elsewhere (by casting each pixel ray against z = 0).
+fn frame() -> Frame {
+    let (cam, pose) = camera();
+    let px: Vec<[u8; 3]> = (0..cam.width * cam.height)
+        .map(|i| {
+            let r = pose.rotation
+                * cam
+                    .pixel_ray((i % cam.width) as f64, (i / cam.width) as f64)
+                    .unwrap();
+            if r.z >= 0.0 {
+                return SKY;
+            }
+            let t = 1.5 / -r.z;
+            if pond(r.x * t, r.y * t) {
+                SKY
+            } else {
+                GRASS
+            }
+        })
+        .collect();
+    Frame {
+        stamp: 1.0,
+        base_to_map: pose_xyz_rpy(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        lidar: None,
+        stereo: None,
+        image: Some(SensorImage {
+            image: Image {
+                width: cam.width,
+                height: cam.height,
+                pixels: Pixels::Rgb8(px),
+                frame_id: "cam".into(),
+                stamp: 1.0,
+            },
+            camera: Some(cam),
+            frame_to_map: Some(pose),
+        }),
+        swir: None,
+        mwir: None,
+    }
+}
+
+fn colour_cfg(stride: usize) -> FrameLabelConfig {
+    FrameLabelConfig {
+        colour: Some(ColorLut::compile(&RuleClassifier::default(), 8).unwrap()),
+        ray_stride: stride,
+        max_range: 30.0,
+        ..FrameLabelConfig::default()
+    }
+}
+
+#[test]
+fn sky_reflections_vote_for_the_pond_cells() {
+    let mut g = ground_grid();
+    let mut fl = FrameLabels::new(colour_cfg(1)).unwrap();
+    let rep = fl.apply(&frame(), &mut g).unwrap();
+    let st = rep.colour.unwrap();
+    assert!(rep.swir.is_none() && rep.mwir.is_none());
+    assert_eq!((st.frames, st.via_point), (1, 0));
+    assert!(st.cells_water > 50 && st.cells_dry > 500, "{st:?}");
+    let (mut water_votes, mut wrong) = (0, 0);
+    for (k, c) in g.observed() {
+        let (x, y) = g.centre_of(k);
+        if c.ev.colour_water > 0 {
+            water_votes += 1;
+            // Only pond cells, give or take the cell a boundary pixel lands in.
+            if !(pond(x, y) || pond(x + 0.1, y) || pond(x - 0.1, y)) {
+                wrong += 1;
+            }
+            // The level sample is the hole's rim: z = 0.
+            assert!(c.ev.level_mm().unwrap().abs() < 30.0, "{:?}", c.ev);
+        }
+        assert!(c.ev.colour_water + c.ev.colour_dry <= 1);
+    }
+    assert!(water_votes > 50 && wrong == 0, "{water_votes} {wrong}");
+    // A second frame makes the pond cells water under the fusion rule.
+    fl.apply(&frame(), &mut g).unwrap();
+    let f = Fusion::default();
+    let pond_water = g
+        .observed()
+        .filter(|(_, c)| c.ev.colour_water == 2)
+        .filter(|(_, c)| c.ev.water_probability(&f) >= 0.9)
+        .count();
+    assert!(pond_water > 50, "{pond_water}");
+}
+
+#[test]
+fn results_do_not_depend_on_threads_or_cached_rays() {
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut g = ground_grid();
+            let mut fl = FrameLabels::new(colour_cfg(2)).unwrap();
+            fl.apply(&frame(), &mut g).unwrap();
+            fl.apply(&frame(), &mut g).unwrap();
+            g.observed().map(|(k, c)| (k, c.ev)).collect::<Vec<_>>()
+        })
+    };
+    assert_eq!(run(1), run(3));
+}
+
+#[test]
+fn unconfigured_or_missing_sensors_do_nothing() {
+    let mut g = ground_grid();
+    let before: Vec<_> = g.observed().collect();
+    let mut none = FrameLabels::new(FrameLabelConfig::default()).unwrap();
+    assert_eq!(
+        none.apply(&frame(), &mut g).unwrap(),
+        FrameLabelsReport::default()
+    );
+    // SWIR configured, but the frame has no SWIR image: skipped and counted.
+    let mut swir = FrameLabels::new(FrameLabelConfig {
+        swir: Some(SwirConfig::default()),
+        ..FrameLabelConfig::default()
+    })
+    .unwrap();
+    let rep = swir.apply(&frame(), &mut g).unwrap();
+    assert_eq!(rep.swir.unwrap().frames_skipped, 1);
+    assert_eq!(g.observed().collect::<Vec<_>>(), before);
+    assert!(FrameLabels::new(FrameLabelConfig {
+        ray_stride: 0,
+        ..FrameLabelConfig::default()
+    })
+    .is_err());
+    let bad_hour = FrameLabelConfig {
+        mwir: Some(MwirLabelConfig {
+            classifier: MwirConfig::default(),
+            hour: 25.0,
+        }),
+        ..FrameLabelConfig::default()
+    };
+    assert!(FrameLabels::new(bad_hour).is_err());
+}
+
+#[test]
+fn cached_horizon_equals_the_classifier_horizon() {
+    let (cam, pose) = camera();
+    let f = frame();
+    let Pixels::Rgb8(px) = &f.image.as_ref().unwrap().image.pixels else {
+        unreachable!()
+    };
+    let lut = ColorLut::compile(&RuleClassifier::default(), 8).unwrap();
+    let mut a = LabelImage::filled(cam.width, cam.height, Label::Other);
+    lut.classify_into(px.as_flattened(), &mut a.data).unwrap();
+    let mut b = a.clone();
+    Horizon::Camera {
+        camera: cam.clone(),
+        cam_to_map: pose,
+    }
+    .apply(&mut a, true)
+    .unwrap();
+    let rays: Vec<_> = RayCache::new(&cam)
+        .rays
+        .into_iter()
+        .map(|r| r.map(|r| pose.rotation * r))
+        .collect();
+    apply_horizon(&mut b, &rays);
+    assert_eq!(a, b);
+    assert!(a.data.contains(&Label::Sky) && a.data.contains(&Label::Water));
+    let g1 = GroundGeometry::level(&cam, &pose, 0.0).unwrap();
+    let g2 = ground_geometry(&cam, &rays, 1.5, 0.0);
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&g1.incidence), bits(&g2.incidence));
+    assert_eq!(bits(&g1.range), bits(&g2.range));
+    assert_eq!(bits(&g1.lookahead), bits(&g2.lookahead));
+}

@@ -1,0 +1,305 @@
+//! A cheap ray march over a snapshot of the grid's elevations, with water in the holes.
+//!
+//! [`GridSurface`] copies the window's mean elevations into a dense raster (NaN where a cell
+//! holds no elevation). [`GridSurface::cast`] walks a pixel ray in steps of half a cell and
+//! stops in the first cell whose elevation is at or above the ray: the surface is piecewise
+//! constant per cell, so the hit is exact to the cell, which is all a vote needs. Occlusion
+//! comes with the first hit, as with [`super::ElevationSurface`].
+//!
+//! Unobserved cells are where water usually is: lidar returns nothing from a pond beyond the
+//! diagnostic interval, stereo rarely matches a sky reflection, and the near bank of a
+//! depression that falls away faster than the ray is hidden from every sensor. A ray that
+//! crosses such a hole, from an observed near rim to the first observed cell beyond it (the
+//! far bank, which faces the sensor and is seen down to the waterline), stops where it drops
+//! to the lower of the two rims' elevations inside the hole: water lies at or below both. If
+//! it stays above that level it goes on and may hit the far bank. A ray that meets a hole
+//! before any observed cell, or never leaves it, stops nowhere in it.
+
+use nalgebra::{Point3, Vector3};
+
+use crate::error::{Error, Result};
+use crate::grid::{CellKey, RollingGrid};
+
+/// Dense elevation snapshot of a [`RollingGrid`] window. See the module documentation.
+#[derive(Debug, Clone)]
+pub struct GridSurface {
+    n: usize,
+    resolution: f64,
+    origin: CellKey,
+    /// Elevations (map frame, metres) row-major from the window's lower-left key; NaN = none.
+    z: Vec<f32>,
+}
+
+impl GridSurface {
+    pub fn from_grid(grid: &RollingGrid) -> Self {
+        Self::from_grid_gated(grid, f64::INFINITY)
+    }
+
+    /// As [`Self::from_grid`], but a cell whose elevation standard deviation
+    /// ([`crate::grid::CellStats::elevation_std_m`]) exceeds `max_std_m` counts as
+    /// unobserved: a cell seen only by a few far stereo points (σ grows with range²) holds
+    /// an elevation that may belong to a cell metres nearer, and would stop rays short.
+    pub fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
+        let n = grid.size();
+        let o = grid.origin();
+        let z_ref = grid.config().z_ref;
+        let mut z = vec![f32::NAN; n * n];
+        for (k, c) in grid.observed() {
+            let Some(m) = c.mean_mm() else { continue };
+            if c.elevation_std_m().is_some_and(|sd| sd <= max_std_m) {
+                z[(k.y - o.y) as usize * n + (k.x - o.x) as usize] = (z_ref + m * 1e-3) as f32;
+            }
+        }
+        GridSurface {
+            n,
+            resolution: grid.resolution(),
+            origin: o,
+            z,
+        }
+    }
+
+    /// A surface from a raster of elevations (row-major from `origin`; NaN = unobserved).
+    pub fn from_raster(n: usize, resolution: f64, origin: CellKey, z: Vec<f32>) -> Result<Self> {
+        if z.len() != n * n || !(resolution.is_finite() && resolution > 0.0) {
+            return Err(Error::invalid(
+                "grid surface",
+                format!(
+                    "{} elevations for {n} × {n} cells at {resolution} m",
+                    z.len()
+                ),
+            ));
+        }
+        Ok(GridSurface {
+            n,
+            resolution,
+            origin,
+            z,
+        })
+    }
+
+    pub fn size(&self) -> usize {
+        self.n
+    }
+
+    pub fn origin(&self) -> CellKey {
+        self.origin
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.resolution
+    }
+
+    /// Raster index of the cell under `(x, y)`, if inside the window.
+    #[inline]
+    pub fn index_of(&self, x: f64, y: f64) -> Option<usize> {
+        let i = (x / self.resolution).floor() as i64 - self.origin.x;
+        let j = (y / self.resolution).floor() as i64 - self.origin.y;
+        let n = self.n as i64;
+        (i >= 0 && j >= 0 && i < n && j < n).then(|| j as usize * self.n + i as usize)
+    }
+
+    /// Elevation of the cell under `(x, y)` (NaN: unobserved or outside).
+    pub fn elevation(&self, x: f64, y: f64) -> f32 {
+        self.index_of(x, y).map_or(f32::NAN, |i| self.z[i])
+    }
+
+    /// The first hit of the unit ray `dir` from `origin` within `max_range` (horizontal
+    /// travel is also limited to the window): the hit point and its raster index.
+    pub fn cast(
+        &self,
+        origin: &Point3<f64>,
+        dir: &Vector3<f64>,
+        max_range: f64,
+    ) -> Option<(Point3<f64>, usize)> {
+        let horiz = dir.xy().norm();
+        if horiz.is_nan() || horiz <= 1e-9 || !origin.coords.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        // Steps of half a cell horizontally.
+        let dt = 0.5 * self.resolution / horiz;
+        let steps = (max_range / dt).ceil() as usize;
+        let mut level = f64::NAN;
+        // Where the ray entered the current hole (after an observed rim), if it is in one.
+        let mut entry: Option<f64> = None;
+        let mut was_inside = false;
+        for s in 1..=steps {
+            let t = s as f64 * dt;
+            let p = origin + dir * t;
+            let Some(i) = self.index_of(p.x, p.y) else {
+                if was_inside {
+                    break;
+                }
+                continue;
+            };
+            was_inside = true;
+            let z = self.z[i] as f64;
+            if z.is_nan() {
+                if level.is_finite() && entry.is_none() {
+                    entry = Some(t - dt);
+                }
+                continue;
+            }
+            if let Some(t0) = entry.take() {
+                // Out of a hole: water would lie at or below both rims.
+                let l = level.min(z);
+                let tl = (l - origin.z) / dir.z;
+                if dir.z < 0.0 && tl >= t0 && tl <= t {
+                    let q = origin + dir * tl;
+                    return Some((q, self.index_of(q.x, q.y).unwrap_or(i)));
+                }
+            }
+            if p.z <= z {
+                return Some((p, i));
+            }
+            level = z;
+        }
+        // Still in a hole entered from an observed rim, with no far rim in reach (a far
+        // shore beyond range or the window): the near rim's level is the best there is.
+        match entry {
+            Some(t0) if dir.z < 0.0 => {
+                let tl = (level - origin.z) / dir.z;
+                let q = origin + dir * tl;
+                let i = self.index_of(q.x, q.y)?;
+                (tl >= t0 && tl <= max_range && self.z[i].is_nan()).then_some((q, i))
+            }
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::project::ElevationSurface;
+    use proptest::prelude::*;
+
+    fn grid_of(f: impl Fn(f64, f64) -> Option<f64>) -> (RollingGrid, GridSurface) {
+        use crate::geom::PointCloud;
+        use crate::grid::{GridConfig, RangeNoise};
+        let cfg = GridConfig {
+            size_cells: 200,
+            resolution: 0.1,
+            ..GridConfig::default()
+        };
+        let mut g = RollingGrid::new(cfg, 0.0, 0.0).unwrap();
+        let mut pts = Vec::new();
+        for j in 0..200 {
+            for i in 0..200 {
+                let (x, y) = (
+                    -10.0 + (i as f64 + 0.5) * 0.1,
+                    -10.0 + (j as f64 + 0.5) * 0.1,
+                );
+                if let Some(z) = f(x, y) {
+                    pts.push([x as f32, y as f32, z as f32]);
+                }
+            }
+        }
+        g.ingest(&PointCloud::unorganized(pts), &RangeNoise::constant(0.02))
+            .unwrap();
+        let s = GridSurface::from_grid(&g);
+        (g, s)
+    }
+
+    #[test]
+    fn flat_ground_hit_is_the_plane_hit() {
+        let (_, s) = grid_of(|_, _| Some(0.0));
+        let o = Point3::new(0.0, 0.0, 1.5);
+        let d = Vector3::new(1.0, 0.3, -0.2).normalize();
+        let (p, _) = s.cast(&o, &d, 50.0).unwrap();
+        // The plane z = 0 is hit at t = 1.5 / 0.2 (times the norm); the march is within a step.
+        let t = 1.5 / -d.z;
+        assert!((p - (o + d * t)).xy().norm() <= 0.05 + 1e-9, "{p}");
+        // Upward or vertical rays hit nothing.
+        assert!(s
+            .cast(&o, &Vector3::new(1.0, 0.0, 0.1).normalize(), 50.0)
+            .is_none());
+        assert!(s.cast(&o, &Vector3::new(0.0, 0.0, -1.0), 50.0).is_none());
+    }
+
+    #[test]
+    fn a_ridge_occludes_what_is_behind_it() {
+        let (_, s) = grid_of(|x, _| Some(if (3.0..3.3).contains(&x) { 1.0 } else { 0.0 }));
+        let o = Point3::new(0.0, 0.0, 1.2);
+        // Aimed at x = 6 on the ground: the ridge at x = 3 (1 m high) is hit first.
+        let d = Vector3::new(6.0, 0.0, -1.2).normalize();
+        let (p, _) = s.cast(&o, &d, 50.0).unwrap();
+        assert!((3.0..3.35).contains(&p.x), "{p}");
+    }
+
+    #[test]
+    fn a_hole_takes_the_level_of_its_near_rim() {
+        // Ground at 0, an unobserved pond for 4 ≤ x < 8; the far shore beyond.
+        let (_, s) = grid_of(|x, _| (!(4.0..8.0).contains(&x)).then_some(0.0));
+        let o = Point3::new(0.0, 0.0, 1.5);
+        // Aimed at x = 6: it crosses the hole and drops to the rims' level (0) at x = 6.
+        let d = Vector3::new(6.0, 0.0, -1.5).normalize();
+        let (p, i) = s.cast(&o, &d, 50.0).unwrap();
+        assert!((p.x - 6.0).abs() < 1e-6 && p.z.abs() < 1e-9, "{p}");
+        assert_eq!(Some(i), s.index_of(p.x, p.y));
+        // A far rim lower than the near one sets the level: far bank at −0.3 m, aimed at
+        // (7, −0.3): the hit is there, not where the ray passes z = 0 (x = 6).
+        let (_, s3) =
+            grid_of(|x, _| (!(4.0..8.0).contains(&x)).then_some(if x >= 8.0 { -0.3 } else { 0.0 }));
+        let d3 = Vector3::new(7.0, 0.0, -1.8).normalize();
+        let (p3, _) = s3.cast(&o, &d3, 50.0).unwrap();
+        assert!(
+            (p3.x - 7.0).abs() < 1e-6 && (p3.z + 0.3).abs() < 1e-6,
+            "{p3}"
+        );
+        // No far rim (the hole runs to the window's edge): the near rim's level.
+        let (_, s4) = grid_of(|x, _| (x < 4.0).then_some(0.0));
+        let (p4, _) = s4.cast(&o, &d, 50.0).unwrap();
+        assert!((p4.x - 6.0).abs() < 1e-6 && p4.z.abs() < 1e-9, "{p4}");
+        // A ray that starts above a hole with no rim behind it passes on.
+        let (_, s2) = grid_of(|x, _| (x >= 8.0).then_some(0.0));
+        let (p2, _) = s2.cast(&o, &d, 50.0).unwrap();
+        assert!(p2.x >= 8.0, "{p2}");
+    }
+
+    #[test]
+    fn gated_surface_drops_uncertain_cells() {
+        use crate::geom::PointCloud;
+        use crate::grid::{GridConfig, RangeNoise};
+        let cfg = GridConfig {
+            size_cells: 100,
+            resolution: 0.1,
+            ..GridConfig::default()
+        };
+        let mut g = RollingGrid::new(cfg, 0.0, 0.0).unwrap();
+        // One precise point at (1, 1), one noisy point at (2, 2).
+        let precise = PointCloud::unorganized(vec![[1.05, 1.05, 0.0]]);
+        let noisy = PointCloud::unorganized(vec![[2.05, 2.05, 0.3]]);
+        g.ingest(&precise, &RangeNoise::constant(0.02)).unwrap();
+        g.ingest(&noisy, &RangeNoise::constant(0.5)).unwrap();
+        let all = GridSurface::from_grid(&g);
+        assert!(all.elevation(1.05, 1.05).is_finite() && all.elevation(2.05, 2.05).is_finite());
+        let gated = GridSurface::from_grid_gated(&g, 0.1);
+        assert!(gated.elevation(1.05, 1.05).abs() < 1e-3);
+        assert!(gated.elevation(2.05, 2.05).is_nan());
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        /// On a fully observed smooth surface the march and parry's height field agree to the
+        /// cell (the march is piecewise constant, parry's surface piecewise linear).
+        #[test]
+        fn march_agrees_with_parry_heightfield(
+            az in -1.2f64..1.2, dep in 0.08f64..0.6, a in -0.2f64..0.2, b in -0.2f64..0.2,
+        ) {
+            let (g, s) = grid_of(|x, y| Some(0.3 * (a * x).sin() + 0.2 * (b * y).cos()));
+            let hf = ElevationSurface::from_grid(&g).unwrap();
+            let o = Point3::new(0.0, 0.0, 1.6);
+            let d = Vector3::new(az.cos(), az.sin(), -dep).normalize();
+            let mine = s.cast(&o, &d, 9.0);
+            let theirs = hf.cast(&o, &d, 9.0).map(|t| o + d * t);
+            if let (Some((p, _)), Some(q)) = (mine, theirs) {
+                // Within two cells horizontally (one for the march step, one for the
+                // piecewise-constant against piecewise-linear surface).
+                prop_assert!((p - q).xy().norm() < 0.2 + 0.1 / dep, "{p} {q}");
+            } else {
+                // Both miss only at the window's edge (9 m of range from the centre).
+                prop_assert!(mine.is_none() && theirs.is_none() || (o + d * 9.0).coords.xy().norm() > 8.0);
+            }
+        }
+    }
+}
