@@ -231,11 +231,23 @@ pub fn build_file(
 ) -> Result<BuildReport> {
     let t0 = Instant::now();
     let cloud = crate::io::read_point_cloud(input)?;
+    if cloud.valid_count() == 0 {
+        // Nothing to map: refuse rather than replace a previous map with an empty one.
+        return Err(Error::format(
+            input,
+            "points",
+            format!(
+                "no finite point among the {} points (all NaN, infinite or missing returns)",
+                cloud.len()
+            ),
+        ));
+    }
     let t_read = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let built = build_cloud(&cloud, cfg, progress)?;
     drop(cloud);
     let t_fuse = t1.elapsed().as_secs_f64();
+    crate::interrupt::check("fusing the cloud")?;
     let t2 = Instant::now();
     let map = HazardMap::from_elevation(&built.tiles);
     export::write_map_files(out, &map)?;
@@ -408,6 +420,7 @@ pub fn build_log(
     let mut frames_fused = 0u64;
     let mut t_fuse = 0.0;
     while let Some(item) = stream.next() {
+        crate::interrupt::check("reading the log")?;
         let (done, total) = stream.progress();
         progress(done, total);
         let frame = match item {
