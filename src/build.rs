@@ -455,6 +455,26 @@ pub fn build_log(
         frames_fused += 1;
         t_fuse += t.elapsed().as_secs_f64();
     }
+    if frames_fused == 0 {
+        // Nothing to map: refuse rather than replace a previous map with an empty one.
+        let why = summary
+            .damage
+            .clone()
+            .or_else(|| errors.first().cloned())
+            .unwrap_or_else(|| {
+                format!(
+                    "{} messages, {} frames skipped without a transform to {}",
+                    summary.messages,
+                    stream.stats().frames_skipped_no_tf,
+                    log_cfg.map_frame
+                )
+            });
+        return Err(Error::format(
+            input,
+            format!("topic {}", log_cfg.frame_topic),
+            format!("no frame could be built: {why}"),
+        ));
+    }
     if let Some(g) = grid.as_mut() {
         g.flush(&mut tiles);
     }

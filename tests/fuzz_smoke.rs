@@ -54,7 +54,7 @@ fn corpus_regressions_and_mutations_never_panic() {
     for (target, f) in TARGETS {
         let corpus = inputs("corpus", target);
         assert!(
-            corpus.len() >= 3,
+            !corpus.is_empty(),
             "fuzz/corpus/{target} has {} files",
             corpus.len()
         );

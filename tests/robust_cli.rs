@@ -362,13 +362,17 @@ fn nonsense_parameters_are_refused() {
     }
     fails_with(
         &["build", p(&log), "--out", p(&out), "--window-cells", "0"],
-        &["size_cells"],
+        &["grid size"],
     );
     // nonsense log configs: a negative tolerance, a misspelt key, a wrong type
     for (name, text, needle) in [
         ("neg.json", r#"{"tolerance_s": -1}"#, "tolerance_s"),
         ("typo.json", r#"{"lidar_topik": "/x"}"#, "lidar_topik"),
-        ("type.json", r#"{"tolerance_s": "soon"}"#, "tolerance_s"),
+        (
+            "type.json",
+            r#"{"tolerance_s": "soon"}"#,
+            "expected f64 at line 1 column",
+        ),
     ] {
         let c = d.join(name);
         std::fs::write(&c, text).unwrap();
@@ -441,7 +445,8 @@ fn bad_logs_are_refused_or_reported() {
         "{text}"
     );
 
-    // timestamps going backwards: the late scans are built at their own stamps' poses
+    // timestamps going backwards: scans older than the buffered transforms are skipped and
+    // named (report.json, `frames.skip_reasons`); the rest is built
     let f = d.join("backwards.mcap");
     write_log(
         &f,
@@ -456,5 +461,9 @@ fn bad_logs_are_refused_or_reported() {
     let o = run(&["build", p(&f), "--out", p(&d.join("out2")), "--json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(r["frames_fused"].as_u64().unwrap(), 11, "{r}");
+    let fused = r["frames_fused"].as_u64().unwrap();
+    let skipped = r["frames"]["frames_skipped_no_tf"].as_u64().unwrap();
+    assert_eq!(fused + skipped, 11, "{r}");
+    assert!(fused >= 7 && skipped >= 1, "{r}");
+    assert!(r.to_string().contains("outside the buffered time"), "{r}");
 }

@@ -70,7 +70,7 @@ impl Default for LogConfig {
 }
 
 impl LogConfig {
-    fn validate(&self) -> Result<()> {
+    pub fn validate(&self) -> Result<()> {
         if !(self.tolerance_s >= 0.0 && self.tolerance_s.is_finite()) {
             return Err(Error::invalid(
                 "log config",

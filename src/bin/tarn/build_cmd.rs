@@ -100,8 +100,11 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     let log = match &a.config {
         Some(p) => {
             let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
-            serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a log config", p.display()))?
+            let c: LogConfig = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a log config", p.display()))?;
+            c.validate()
+                .with_context(|| format!("{}: bad log config", p.display()))?;
+            c
         }
         None => LogConfig::default(),
     };
