@@ -21,18 +21,18 @@ fn path(s: f64) -> (f64, f64, f64) {
     (x, y, yaw)
 }
 
-/// A 16 × 360 scan from 1.8 m above the terrain at arc length `s`: rays hit the terrain
+/// An 8 × 180 scan from 1.8 m above the terrain at arc length `s`: rays hit the terrain
 /// (found by bisection along the ray), returns beyond 12 m are missing.
 fn scan(s: f64) -> PointCloud {
     let (x, y, yaw) = path(s);
     let pose: Pose = pose_xyz_rpy(x, y, terrain(x, y) + 1.8, 0.0, 0.0, yaw);
     let o = pose * Point3::origin();
-    let (rings, cols) = (16, 360);
+    let (rings, cols) = (8, 180);
     let mut xyz = Vec::with_capacity(rings * cols);
     for r in 0..rings {
         let el = (-30.0 + 25.0 * r as f64 / (rings - 1) as f64).to_radians();
         for c in 0..cols {
-            let az = (c as f64).to_radians();
+            let az = (c as f64 * 2.0).to_radians();
             let ds = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
             let d = pose.rotation * ds;
             let above = |t: f64| {
@@ -43,7 +43,7 @@ fn scan(s: f64) -> PointCloud {
             xyz.push(if above(hi) > 0.0 {
                 [f32::NAN; 3]
             } else {
-                for _ in 0..30 {
+                for _ in 0..20 {
                     let m = 0.5 * (lo + hi);
                     if above(m) > 0.0 {
                         lo = m

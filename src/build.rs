@@ -230,6 +230,7 @@ pub fn build_file(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<BuildReport> {
     let t0 = Instant::now();
+    cfg.grid.validate()?;
     let cloud = crate::io::read_point_cloud(input)?;
     if cloud.valid_count() == 0 {
         // Nothing to map: refuse rather than replace a previous map with an empty one.
