@@ -4,6 +4,7 @@
 //! `cargo run --example fuzz_seeds` (then `cargo fuzz run <target>` grows the corpus, and
 //! `cargo fuzz cmin <target>` minimises it).
 
+use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
 use tarn::classify::gmm::{ClassModel, ColorModel, ColorModelData, Component};
@@ -86,7 +87,7 @@ fn log(path: &Path, opts: &WriteOptions) -> anyhow::Result<()> {
                 "base_link",
                 "camera_optical",
                 0,
-                pose_xyz_rpy(0.3, 0.0, 1.5, -1.5708, 0.0, -1.5708),
+                pose_xyz_rpy(0.3, 0.0, 1.5, -FRAC_PI_2, 0.0, -FRAC_PI_2),
             ),
         ],
     };
