@@ -184,6 +184,18 @@ impl LogReader {
                     }
                 }
                 LinearReadEvent::Record { data, opcode } => {
+                    // Only schemas, channels and messages matter here. Other records are
+                    // not parsed at all: mcap 0.26's attachment parser panics on a record
+                    // shorter than its own header (found by fuzzing, kept in
+                    // fuzz/regressions/mcap/attachment-shorter-than-header.mcap).
+                    if !matches!(
+                        opcode,
+                        mcap::records::op::SCHEMA
+                            | mcap::records::op::CHANNEL
+                            | mcap::records::op::MESSAGE
+                    ) {
+                        continue;
+                    }
                     let rec = match mcap::parse_record(opcode, data) {
                         Ok(r) => r,
                         Err(e) => {
