@@ -231,12 +231,25 @@ pub fn build_file(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<BuildReport> {
     let t0 = Instant::now();
+    cfg.grid.validate()?;
     let cloud = crate::io::read_point_cloud(input)?;
+    if cloud.valid_count() == 0 {
+        // Nothing to map: refuse rather than replace a previous map with an empty one.
+        return Err(Error::format(
+            input,
+            "points",
+            format!(
+                "no finite point among the {} points (all NaN, infinite or missing returns)",
+                cloud.len()
+            ),
+        ));
+    }
     let t_read = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let built = build_cloud(&cloud, cfg, progress)?;
     drop(cloud);
     let t_fuse = t1.elapsed().as_secs_f64();
+    crate::interrupt::check("fusing the cloud")?;
     let t2 = Instant::now();
     let map = HazardMap::from_elevation(&built.tiles);
     export::write_map_files(out, &map)?;
@@ -544,6 +557,7 @@ pub fn build_log(
     let mut per_frame = Vec::new();
     let mut label_totals: Option<crate::project::FrameLabelsReport> = None;
     while let Some(item) = stream.next() {
+        crate::interrupt::check("reading the log")?;
         let (done, total) = stream.progress();
         progress(done, total);
         let frame = match item {
@@ -576,6 +590,26 @@ pub fn build_log(
             Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
         }
         t_fuse += t.elapsed().as_secs_f64();
+    }
+    if frames_fused == 0 {
+        // Nothing to map: refuse rather than replace a previous map with an empty one.
+        let why = summary
+            .damage
+            .clone()
+            .or_else(|| errors.first().cloned())
+            .unwrap_or_else(|| {
+                format!(
+                    "{} messages, {} frames skipped without a transform to {}",
+                    summary.messages,
+                    stream.stats().frames_skipped_no_tf,
+                    log_cfg.map_frame
+                )
+            });
+        return Err(Error::format(
+            input,
+            format!("topic {}", log_cfg.frame_topic),
+            format!("no frame could be built: {why}"),
+        ));
     }
     let cues = cue_names(mapper.config());
     let lidar_height_m = mapper.lidar_height();

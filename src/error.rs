@@ -23,6 +23,10 @@ pub enum Error {
     /// A parameter or configuration value that cannot be used (zero resolution, NaN pose...).
     #[error("invalid {what}: {message}")]
     Invalid { what: String, message: String },
+    /// A stop was requested (SIGINT, see [`crate::interrupt`]) while doing the named work;
+    /// nothing was written.
+    #[error("interrupted while {0}: stopped before writing anything")]
+    Interrupted(String),
 }
 
 impl Error {

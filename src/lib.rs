@@ -13,9 +13,12 @@ pub mod classify;
 pub mod cues;
 pub mod error;
 pub mod eval;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod geom;
 pub mod grid;
 pub mod hazard;
+pub mod interrupt;
 pub mod io;
 pub mod mapper;
 pub mod optics;

@@ -51,26 +51,56 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
 }
 
 /// `map.ply`: binary little-endian, one vertex per observed cell, the contract's schema.
+/// The offset written as `comment origin X Y 0` into `map.ply` and `terrain.ply` when the
+/// map lies far from the map frame's origin (UTM-like coordinates): `float` holds 0.5 m
+/// steps at 5,000 km, so vertices are then stored relative to this origin (whole metres,
+/// the centre of the map's extent) and readers add it back ([`crate::io::ply`] and
+/// [`crate::io::mapfile`] do). `[0, 0]` — and no comment line — when every cell centre lies
+/// within [`crate::io::ply::FAR_FROM_ORIGIN_M`] of the origin, as in every simulated scene.
+pub fn map_origin(map: &HazardMap) -> [f64; 2] {
+    let far = crate::io::ply::FAR_FROM_ORIGIN_M;
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for c in &map.cells {
+        lo = [lo[0].min(c.x), lo[1].min(c.y)];
+        hi = [hi[0].max(c.x), hi[1].max(c.y)];
+    }
+    if map.cells.is_empty() || (0..2).all(|i| lo[i] >= -far && hi[i] <= far) {
+        return [0.0; 2];
+    }
+    [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])].map(f64::round)
+}
+
+fn origin_comment(o: [f64; 2]) -> String {
+    if o == [0.0; 2] {
+        String::new()
+    } else {
+        format!("comment origin {} {} 0\n", o[0], o[1])
+    }
+}
+
 pub fn write_map_ply(path: &Path, map: &HazardMap) -> Result<()> {
+    let o = map_origin(map);
     write_atomic(path, |w| {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\ncomment tarn map: one vertex per observed cell\n\
              comment class 0 unknown 1 ground 2 water 3 vegetation 4 obstacle 5 snow/ice\n\
              comment hazard 0 free 1 shallow water 2 deep or unknown-depth water 3 obstacle\n\
-             comment resolution {}\nelement vertex {}\n\
+             comment resolution {}\n{}element vertex {}\n\
              property float x\nproperty float y\nproperty float z\n\
              property float elevation_std\nproperty float water\nproperty float depth\n\
              property uchar class\nproperty uchar hazard\n\
              property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
             map.resolution,
+            origin_comment(o),
             map.cells.len()
         )?;
         let mut rec = [0u8; 29];
         for c in &map.cells {
             let f = [
-                c.x as f32,
-                c.y as f32,
+                (c.x - o[0]) as f32,
+                (c.y - o[1]) as f32,
                 c.z as f32,
                 c.elevation_std as f32,
                 c.water,
@@ -168,23 +198,20 @@ pub fn write_mesh_ply(
 
 /// `terrain.ply`: the terrain surface over observed cells, coloured by class.
 pub fn write_terrain_ply(path: &Path, map: &HazardMap) -> Result<()> {
+    let o = map_origin(map);
     let verts: Vec<_> = map
         .cells
         .iter()
         .map(|c| {
             (
-                [c.x as f32, c.y as f32, c.z as f32],
+                [(c.x - o[0]) as f32, (c.y - o[1]) as f32, c.z as f32],
                 c.class.colour(),
                 c.class as u8,
             )
         })
         .collect();
-    write_mesh_ply(
-        path,
-        "tarn terrain surface",
-        &verts,
-        &terrain_triangles(map),
-    )
+    let comment = format!("tarn terrain surface\n{}", origin_comment(o));
+    write_mesh_ply(path, comment.trim_end(), &verts, &terrain_triangles(map))
 }
 
 /// Colour of a water-mesh vertex `d` metres below the surface: the top sheet light to dark

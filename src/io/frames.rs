@@ -24,7 +24,7 @@ use crate::geom::{PointCloud, Pose};
 
 /// Topic names, frame names and timing for reading a log. Defaults follow DESIGN.md.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
+#[serde(deny_unknown_fields, default)]
 pub struct LogConfig {
     pub tf_topic: String,
     pub tf_static_topic: String,
@@ -70,7 +70,7 @@ impl Default for LogConfig {
 }
 
 impl LogConfig {
-    fn validate(&self) -> Result<()> {
+    pub fn validate(&self) -> Result<()> {
         if !(self.tolerance_s >= 0.0 && self.tolerance_s.is_finite()) {
             return Err(Error::invalid(
                 "log config",
@@ -187,9 +187,15 @@ fn secs(ns: i64) -> f64 {
 impl FrameStream {
     pub fn open(path: impl AsRef<Path>, cfg: &LogConfig) -> Result<Self> {
         cfg.validate()?;
+        Self::from_reader(LogReader::open(path)?, cfg)
+    }
+
+    /// The frame stream of an already opened log (e.g. [`LogReader::from_bytes`]).
+    pub fn from_reader(reader: LogReader, cfg: &LogConfig) -> Result<Self> {
+        cfg.validate()?;
         Ok(FrameStream {
             cfg: cfg.clone(),
-            reader: LogReader::open(path)?,
+            reader,
             tf: TfBuffer::new(),
             scans: VecDeque::new(),
             other_clouds: VecDeque::new(),

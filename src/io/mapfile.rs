@@ -67,6 +67,7 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
         ));
     }
     let mut resolution = None;
+    let mut origin = [0.0f64; 3];
     let mut count = None;
     let mut props = Vec::new();
     for (n, l) in lines {
@@ -87,6 +88,10 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
                     ));
                 }
                 resolution = Some(r);
+            }
+            if let Some(o) = c.strip_prefix("origin ") {
+                origin = super::ply::parse_origin(o)
+                    .map_err(|m| fmt(path, format!("header line {n}"), m))?;
             }
             continue;
         }
@@ -182,7 +187,7 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
                 ))
             }
         };
-        let (x, y) = (f(0) as f64, f(1) as f64);
+        let (x, y) = (f(0) as f64 + origin[0], f(1) as f64 + origin[1]);
         if !(x.is_finite() && y.is_finite()) {
             return Err(fmt(path, format!("vertex {i}"), "x or y is not finite"));
         }
@@ -193,7 +198,7 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
             ),
             x,
             y,
-            z: f(2) as f64,
+            z: f(2) as f64 + origin[2],
             elevation_std: f(3) as f64,
             water: f(4),
             depth: f(5),

@@ -47,6 +47,10 @@
 //! Otherwise `o = 0` and the file's `f32`-exact values are stored unchanged. A cloud
 //! 5,000 km from the origin in `double` keeps sub-millimetre detail near its first point
 //! (f32 steps are ≤ 0.5 mm within 4,096 m of `o`).
+//!
+//! A header line `comment origin X Y Z` (finite metres; tarn writes it into `map.ply` and
+//! `terrain.ply` of maps far from the map origin) says the vertices are relative to that
+//! point of the map frame: it goes into `frame_to_map` (f64), never into the `f32` points.
 
 use std::path::Path;
 
@@ -60,6 +64,21 @@ use crate::geom::{PointCloud, Pose};
 /// reader choose a local origin even for `float` coordinates. Below 2^12 m an `f32` has
 /// steps of 0.49 mm or finer.
 pub const FAR_FROM_ORIGIN_M: f64 = 4096.0;
+
+/// Parses the three numbers of a `comment origin X Y Z` line: finite metres.
+pub fn parse_origin(text: &str) -> std::result::Result<[f64; 3], String> {
+    let v: Vec<f64> = text
+        .split_whitespace()
+        .map(|t| t.parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| format!("origin {text:?} is not three numbers"))?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+        _ => Err(format!(
+            "origin {text:?} must be three finite numbers (metres)"
+        )),
+    }
+}
 
 /// Reads a PLY point cloud from a file.
 pub fn read(path: &Path) -> Result<PointCloud> {
@@ -101,7 +120,12 @@ pub fn read_from_bytes(bytes: &[u8], name: impl AsRef<Path>) -> Result<PointClou
             read_binary(bytes, path, &header, vi, &plan, big_endian, &mut builder)?
         }
     }
-    builder.finish(layout)
+    let mut cloud = builder.finish(layout)?;
+    if let Some(g) = header.origin {
+        // Vertices are relative to the header's origin: keep it in the pose (f64).
+        cloud.frame_to_map = Pose::translation(g[0], g[1], g[2]) * cloud.frame_to_map;
+    }
+    Ok(cloud)
 }
 
 // ------------------------------------------------------------------------------------
@@ -282,6 +306,8 @@ struct Header {
     /// Number of the first body line (1-based), for ascii error messages.
     body_line: usize,
     layout: Option<Layout>,
+    /// `comment origin X Y Z`: the vertices are relative to this point of the map frame.
+    origin: Option<[f64; 3]>,
 }
 
 impl Header {
@@ -336,6 +362,7 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut layout = None;
+    let mut origin = None;
     let mut line_no = 1;
     loop {
         if pos >= bytes.len() {
@@ -393,6 +420,9 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                 if toks[2] != "1.0" {
                     return Err(bad(format!("unsupported PLY version `{}`", toks[2])));
                 }
+            }
+            Some("comment") if toks.get(1) == Some(&"origin") => {
+                origin = Some(parse_origin(&toks[2..].join(" ")).map_err(bad)?);
             }
             Some("comment") | Some("obj_info") => {
                 if let [_, "width", w, "height", h] = toks.as_slice() {
@@ -477,6 +507,7 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
         body_start: pos,
         body_line: line_no + 1,
         layout,
+        origin,
     })
 }
 

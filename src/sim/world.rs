@@ -205,6 +205,18 @@ impl World {
         if nx < 2 || ny < 2 {
             return Err(Error::invalid("terrain.size", "smaller than one cell"));
         }
+        // A grid beyond 2^26 vertices (8,192² — e.g. 800 m square at 0.1 m) is a typo in
+        // size or resolution, not a scene: refuse it instead of allocating it.
+        const MAX_VERTICES: usize = 1 << 26;
+        if nx.checked_mul(ny).is_none_or(|n| n > MAX_VERTICES) {
+            return Err(Error::invalid(
+                "terrain.size",
+                format!(
+                    "{} × {} m at resolution {} m is {nx} × {ny} height samples; at most {MAX_VERTICES}",
+                    t.size[0], t.size[1], t.resolution
+                ),
+            ));
+        }
         let mut z = vec![0.0; nx * ny];
         for j in 0..ny {
             for i in 0..nx {

@@ -220,8 +220,11 @@ pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
     let log = match &a.log_config {
         Some(p) => {
             let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
-            serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a log config", p.display()))?
+            let c: LogConfig = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a log config", p.display()))?;
+            c.validate()
+                .with_context(|| format!("{}: bad log config", p.display()))?;
+            c
         }
         None => LogConfig::default(),
     };

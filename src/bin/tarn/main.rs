@@ -181,11 +181,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    // SIGINT asks a running build to stop between frames; it then writes nothing, so the
+    // output directory keeps its previous files (tarn::interrupt).
+    if let Err(e) = ctrlc::set_handler(tarn::interrupt::request_stop) {
+        eprintln!("tarn: warning: cannot handle SIGINT: {e}");
+    }
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("tarn: error: {e:#}");
-            ExitCode::FAILURE
+            let interrupted = e
+                .chain()
+                .any(|c| matches!(c.downcast_ref(), Some(tarn::Error::Interrupted(_))));
+            // 128 + SIGINT, as a shell reports a process stopped by Ctrl-C.
+            ExitCode::from(if interrupted { 130 } else { 1 })
         }
     }
 }

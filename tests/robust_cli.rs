@@ -1,0 +1,469 @@
+//! Robustness of the `tarn` command: an interrupted build (SIGINT) leaves the previous
+//! outputs or complete new ones and no temporary files; `map.ply` is byte-identical across
+//! runs and thread counts; and the catalogue of bad input in README ("Bad input") — each
+//! row is a test here that checks the message on stderr and the failing exit code.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use nalgebra::{Point3, Vector3};
+use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
+use tarn::io::mcap_log::{LogWriter, WriteOptions};
+use tarn::io::ros::{Header, TfMessage, TransformStamped};
+
+const NS: u64 = 1_000_000_000;
+
+fn tarn() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_tarn"))
+}
+
+fn run(args: &[&str]) -> Output {
+    tarn().args(args).output().unwrap()
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+fn base(t: f64) -> Pose {
+    pose_xyz_rpy(2.0 * t, 0.2 * t, 0.0, 0.0, 0.0, 0.02 * t)
+}
+
+fn lidar_ext() -> Pose {
+    pose_xyz_rpy(0.2, 0.0, 1.8, 0.0, 0.0, 0.0)
+}
+
+/// A `rings` × `cols` scan of the plane z = 0 seen from `sensor_to_map`.
+fn scan(sensor_to_map: &Pose, rings: usize, cols: usize) -> PointCloud {
+    let o = sensor_to_map * Point3::origin();
+    let mut xyz = Vec::with_capacity(rings * cols);
+    for r in 0..rings {
+        let el = (-25.0 + 23.0 * r as f64 / (rings - 1) as f64).to_radians();
+        for c in 0..cols {
+            let az = (c as f64 * 360.0 / cols as f64).to_radians();
+            let ds = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+            let d = sensor_to_map * ds;
+            let t = -o.z / d.z;
+            xyz.push(if t > 0.5 && t < 30.0 {
+                let q = ds * t;
+                [q.x as f32, q.y as f32, q.z as f32]
+            } else {
+                [f32::NAN; 3]
+            });
+        }
+    }
+    PointCloud::organized(rings, cols, xyz).unwrap()
+}
+
+/// What a test log holds besides a plain drive.
+#[derive(Default, Clone, Copy)]
+struct Twist {
+    /// TF of this frame has a NaN translation.
+    nan_pose_at: Option<u64>,
+    /// Scan stamps run backwards from this frame on.
+    backwards_from: Option<u64>,
+}
+
+/// A drive of `frames` scans (10 Hz) with TF at every scan.
+fn write_log(path: &Path, frames: u64, rings: usize, cols: usize, tw: Twist) {
+    let mut w = LogWriter::create(path, &WriteOptions::default()).unwrap();
+    let ext = TransformStamped::new("base_link", "lidar", 0, lidar_ext());
+    w.write_tf(
+        "/tf_static",
+        &TfMessage {
+            transforms: vec![ext],
+        },
+        0,
+    )
+    .unwrap();
+    for k in 0..=frames {
+        let ns = k * NS / 10;
+        let t = ns as f64 * 1e-9;
+        let mut pose = base(t);
+        if tw.nan_pose_at == Some(k) {
+            pose.translation.vector.x = f64::NAN;
+        }
+        let tf = TransformStamped::new("map", "base_link", ns as i64, pose);
+        w.write_tf(
+            "/tf",
+            &TfMessage {
+                transforms: vec![tf],
+            },
+            ns,
+        )
+        .unwrap();
+        if k > 0 && k < frames {
+            let stamp = match tw.backwards_from {
+                Some(b) if k >= b => ns - (k - b + 1) * NS / 5,
+                _ => ns,
+            };
+            let c = scan(&(base(t) * lidar_ext()), rings, cols);
+            w.write_cloud("/lidar/points", &c, Header::new("lidar", stamp as i64), ns)
+                .unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs `tarn ARGS`, expects failure with exit code 1 and every `needles` on stderr.
+fn fails_with(args: &[&str], needles: &[&str]) -> String {
+    let o = run(args);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "tarn {args:?}: {e}");
+    for n in needles {
+        assert!(e.contains(n), "tarn {args:?}: stderr lacks {n:?}: {e}");
+    }
+    assert!(!e.contains("panicked"), "{e}");
+    e
+}
+
+fn files(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = match std::fs::read_dir(dir) {
+        Ok(r) => r.map(|e| e.unwrap().path()).collect(),
+        Err(_) => Vec::new(),
+    };
+    v.sort();
+    v
+}
+
+fn no_temp_files(dir: &Path) {
+    for f in files(dir) {
+        let name = f.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(!name.starts_with(".tarn-"), "temporary file left: {name}");
+    }
+}
+
+// ------------------------------------------------------------------------------------
+// SIGINT
+
+/// Starts `tarn build LOG --out OUT`, sends SIGINT after `after_ms`, returns its output.
+fn build_interrupted(log: &Path, out: &Path, after_ms: u64) -> Output {
+    let child = tarn()
+        .args(["build", p(log), "--out", p(out)])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(after_ms));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn sigint_keeps_previous_outputs_and_leaves_no_partial_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("small.mcap");
+    write_log(&small, 5, 8, 64, Twist::default());
+    // A long log: hundreds of frames of 32 × 1024 points take seconds in any build.
+    let long = dir.path().join("long.mcap");
+    write_log(&long, 600, 32, 1024, Twist::default());
+    let out = dir.path().join("out");
+    let o = run(&["build", p(&small), "--out", p(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before: Vec<(PathBuf, Vec<u8>)> = files(&out)
+        .into_iter()
+        .map(|f| {
+            let b = std::fs::read(&f).unwrap();
+            (f, b)
+        })
+        .collect();
+    assert_eq!(before.len(), 4, "{before:?}");
+
+    let o = build_interrupted(&long, &out, 700);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(130), "{e}");
+    assert!(e.contains("interrupted while reading the log"), "{e}");
+    // Exactly the old files, byte for byte, and nothing else.
+    let after: Vec<(PathBuf, Vec<u8>)> = files(&out)
+        .into_iter()
+        .map(|f| {
+            let b = std::fs::read(&f).unwrap();
+            (f, b)
+        })
+        .collect();
+    assert!(before == after, "outputs changed after SIGINT");
+
+    // Into an empty directory: nothing at all.
+    let fresh = dir.path().join("fresh");
+    let o = build_interrupted(&long, &fresh, 700);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(files(&fresh).is_empty(), "{:?}", files(&fresh));
+}
+
+// ------------------------------------------------------------------------------------
+// Determinism
+
+fn map_bytes(args: &[&str], threads: &str) -> Vec<u8> {
+    let out = tempfile::tempdir().unwrap();
+    let mut all: Vec<&str> = args.to_vec();
+    all.extend(["--out", p(out.path())]);
+    let o = tarn()
+        .args(&all)
+        .env("RAYON_NUM_THREADS", threads)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    no_temp_files(out.path());
+    std::fs::read(out.path().join("map.ply")).unwrap()
+}
+
+#[test]
+fn map_ply_is_identical_across_runs_and_thread_counts() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("drive.mcap");
+    write_log(&log, 40, 16, 360, Twist::default());
+    // A cloud in the map frame: every lidar point of the drive, as a double PLY.
+    let cloud = dir.path().join("cloud.ply");
+    let mut body = Vec::new();
+    let mut n = 0;
+    for k in 1..40u64 {
+        let t = k as f64 / 10.0;
+        let s2m = base(t) * lidar_ext();
+        let c = scan(&s2m, 16, 360);
+        for i in 0..c.len() {
+            if c.is_valid(i) {
+                let [x, y, z] = c.xyz[i];
+                let q = s2m * Point3::new(x as f64, y as f64, z as f64);
+                for v in [q.x, q.y, q.z] {
+                    body.extend_from_slice(&v.to_le_bytes());
+                }
+                n += 1;
+            }
+        }
+    }
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty double x\n\
+         property double y\nproperty double z\nend_header\n"
+    )
+    .into_bytes();
+    bytes.extend_from_slice(&body);
+    std::fs::write(&cloud, bytes).unwrap();
+
+    for input in [&log, &cloud] {
+        let args = ["build", p(input), "--resolution", "0.2"];
+        let a = map_bytes(&args, "1");
+        assert!(a.len() > 1000, "{} bytes", a.len());
+        for threads in ["1", "2", "2"] {
+            let b = map_bytes(&args, threads);
+            assert!(
+                a == b,
+                "{}: map.ply differs with {threads} threads",
+                input.display()
+            );
+        }
+    }
+}
+
+// ------------------------------------------------------------------------------------
+// The catalogue of bad input (README, "Bad input")
+
+#[test]
+fn bad_clouds_are_refused_with_the_place_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    let w = |name: &str, bytes: &[u8]| {
+        let f = d.join(name);
+        std::fs::write(&f, bytes).unwrap();
+        f
+    };
+    let hdr = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n\
+               property float y\nproperty float z\nend_header\n";
+    // empty
+    let f = w("empty.ply", b"");
+    fails_with(&["build", p(&f), "--out", p(&out)], &["empty.ply"]);
+    let f = w("empty.bin", b"");
+    fails_with(
+        &["build", p(&f), "--out", p(&out)],
+        &["empty.bin", "empty file"],
+    );
+    // truncated: 3 vertices declared, 1.5 present
+    let mut t = hdr.as_bytes().to_vec();
+    t.extend_from_slice(&[0u8; 18]);
+    let f = w("truncated.ply", &t);
+    fails_with(
+        &["build", p(&f), "--out", p(&out)],
+        &["truncated.ply", "byte"],
+    );
+    let f = w("truncated.bin", &[0u8; 24]);
+    fails_with(
+        &["build", p(&f), "--out", p(&out)],
+        &["truncated.bin", "16-byte"],
+    );
+    // malformed header
+    let f = w(
+        "malformed.ply",
+        b"ply\nformat binary_little_endian 1.0\nelement vertex three\nend_header\n",
+    );
+    fails_with(
+        &["build", p(&f), "--out", p(&out)],
+        &["malformed.ply", "header line 3"],
+    );
+    // wrong types: x as a list, and an unknown scalar type
+    let f = w(
+        "list.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\nproperty float z\nend_header\n1 1 2 3\n",
+    );
+    fails_with(&["build", p(&f), "--out", p(&out)], &["list.ply", "x"]);
+    let f = w(
+        "type.ply",
+        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nproperty float y\nproperty float z\nend_header\n1 2 3\n",
+    );
+    fails_with(&["build", p(&f), "--out", p(&out)], &["type.ply", "quad"]);
+    // a size that lies: 10^12 vertices in a few bytes
+    let f = w(
+        "lies.ply",
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n\0\0\0\0",
+    );
+    fails_with(
+        &["build", p(&f), "--out", p(&out)],
+        &["lies.ply", "1000000000000"],
+    );
+    // NaN and inf everywhere
+    let mut nan = hdr.as_bytes().to_vec();
+    for v in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY].repeat(3) {
+        nan.extend_from_slice(&v.to_le_bytes());
+    }
+    let f = w("nan.ply", &nan);
+    fails_with(
+        &["build", p(&f), "--out", p(&out)],
+        &["nan.ply", "no finite point"],
+    );
+    // nothing was written for any of these
+    assert!(files(&out).is_empty(), "{:?}", files(&out));
+}
+
+#[test]
+fn nonsense_parameters_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    let log = d.join("drive.mcap");
+    write_log(&log, 4, 8, 64, Twist::default());
+    for r in ["0", "-0.1", "NaN", "inf"] {
+        fails_with(
+            &[
+                "build",
+                p(&log),
+                "--out",
+                p(&out),
+                &format!("--resolution={r}"),
+            ],
+            &["resolution"],
+        );
+    }
+    fails_with(
+        &["build", p(&log), "--out", p(&out), "--window-cells", "0"],
+        &["grid size"],
+    );
+    // nonsense log configs: a negative tolerance, a misspelt key, a wrong type
+    for (name, text, needle) in [
+        ("neg.json", r#"{"tolerance_s": -1}"#, "tolerance_s"),
+        ("typo.json", r#"{"lidar_topik": "/x"}"#, "lidar_topik"),
+        (
+            "type.json",
+            r#"{"tolerance_s": "soon"}"#,
+            "expected f64 at line 1 column",
+        ),
+    ] {
+        let c = d.join(name);
+        std::fs::write(&c, text).unwrap();
+        fails_with(
+            &["build", p(&log), "--out", p(&out), "--config", p(&c)],
+            &[name, needle],
+        );
+    }
+    // a nonsense scene
+    let s = d.join("scene.toml");
+    std::fs::write(&s, "name = \"x\"\ntruth_resolution = -1\n").unwrap();
+    fails_with(
+        &["simulate", p(&s), "--out", p(&d.join("sim"))],
+        &["scene.toml"],
+    );
+    // a colour model that is not one
+    let m = d.join("model.json");
+    std::fs::write(&m, r#"{"format": "tarn-color-gmm-1", "classes": [{"label": "water", "name": "w", "prior": 1, "components": [{"weight": 1, "mean": [0,0,0], "cov": [[0,0,0],[0,0,0],[0,0,0]]}]}]}"#).unwrap();
+    let img = d.join("img.png");
+    image::RgbImage::new(4, 4).save(&img).unwrap();
+    fails_with(
+        &[
+            "classify",
+            p(&img),
+            "--model",
+            p(&m),
+            "--out",
+            p(&d.join("mask.png")),
+        ],
+        &["model.json", "positive definite"],
+    );
+    assert!(files(&out).is_empty());
+}
+
+#[test]
+fn bad_logs_are_refused_or_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    // empty and not a log
+    let f = d.join("empty.mcap");
+    std::fs::write(&f, b"").unwrap();
+    fails_with(&["build", p(&f), "--out", p(&out)], &["empty.mcap"]);
+    let f = d.join("text.mcap");
+    std::fs::write(&f, b"this is not an MCAP file at all").unwrap();
+    fails_with(&["build", p(&f), "--out", p(&out)], &["text.mcap", "byte"]);
+    assert!(files(&out).is_empty());
+
+    // poses with NaN: the frame at that pose is skipped and named, the rest is built
+    let f = d.join("nanpose.mcap");
+    write_log(
+        &f,
+        10,
+        8,
+        64,
+        Twist {
+            nan_pose_at: Some(5),
+            ..Default::default()
+        },
+    );
+    let o = run(&["build", p(&f), "--out", p(&out), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let skipped = r["frames"]["frames_skipped_no_tf"].as_u64().unwrap()
+        + r["errors"].as_array().unwrap().len() as u64;
+    assert!(skipped >= 1, "{r}");
+    let text = r.to_string();
+    assert!(
+        text.contains("not finite") || text.contains("NaN"),
+        "{text}"
+    );
+
+    // timestamps going backwards: scans older than the buffered transforms are skipped and
+    // named (report.json, `frames.skip_reasons`); the rest is built
+    let f = d.join("backwards.mcap");
+    write_log(
+        &f,
+        12,
+        8,
+        64,
+        Twist {
+            backwards_from: Some(8),
+            ..Default::default()
+        },
+    );
+    let o = run(&["build", p(&f), "--out", p(&d.join("out2")), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let fused = r["frames_fused"].as_u64().unwrap();
+    let skipped = r["frames"]["frames_skipped_no_tf"].as_u64().unwrap();
+    assert_eq!(fused + skipped, 11, "{r}");
+    assert!(fused >= 7 && skipped >= 1, "{r}");
+    assert!(r.to_string().contains("outside the buffered time"), "{r}");
+}
