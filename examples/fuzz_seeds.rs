@@ -162,16 +162,15 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
             Path::new(env!("CARGO_MANIFEST_DIR")).join("maps/vertical_scanner.toml"),
         )?,
     )?)?);
-    let small = tarn::hazard::HazardMap {
-        resolution: map.resolution,
-        cells: map
-            .cells
+    let small = tarn::hazard::HazardMap::new(
+        map.resolution,
+        map.cells
             .iter()
             .step_by(map.cells.len().max(8) / 8)
             .take(8)
             .cloned()
             .collect(),
-    };
+    );
     tarn::io::export::write_map_ply(&tmp.path().join("map.ply"), &small)?;
     put(
         "ply",

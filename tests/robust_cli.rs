@@ -175,7 +175,8 @@ fn sigint_keeps_previous_outputs_and_leaves_no_partial_file() {
             (f, b)
         })
         .collect();
-    assert_eq!(before.len(), 4, "{before:?}");
+    // map.ply, terrain.ply, water.ply, map.png, report.json
+    assert_eq!(before.len(), 5, "{before:?}");
 
     let o = build_interrupted(&long, &out, 700);
     let e = stderr(&o);
@@ -373,6 +374,19 @@ fn nonsense_parameters_are_refused() {
             r#"{"tolerance_s": "soon"}"#,
             "expected f64 at line 1 column",
         ),
+    ] {
+        let c = d.join(name);
+        std::fs::write(&c, text).unwrap();
+        fails_with(
+            &["build", p(&log), "--out", p(&out), "--log-config", p(&c)],
+            &[name, needle],
+        );
+    }
+    // nonsense mapper configs: a probability of 2, a negative fording depth, a misspelt key
+    for (name, text, needle) in [
+        ("prior.toml", "[fusion]\nprior = 2.0\n", "fusion"),
+        ("ford.toml", "[vehicle]\nfording_depth_m = -1.0\n", "vehicle.fording_depth_m"),
+        ("key.toml", "[water]\np_hihg = 0.9\n", "p_hihg"),
     ] {
         let c = d.join(name);
         std::fs::write(&c, text).unwrap();
