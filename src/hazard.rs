@@ -129,32 +129,38 @@ pub struct HazardMap {
     pub bodies: Vec<WaterBody>,
 }
 
-/// Class and hazard of a dry cell at `key` with elevation `z` from its dry 8-neighbours:
-/// the upper side of a step higher than `max_step` is an obstacle (class and hazard), a
-/// slope steeper than `max_grad` (rise over run, from a least-squares fit over the 3 × 3
-/// neighbourhood) is a hazard on ground.
+/// Class and hazard of a dry cell at `key` with elevation `z` ± `sz` from its dry
+/// 8-neighbours: the upper side of a step higher than `max_step` is an obstacle (class and
+/// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
+/// the 3 × 3 neighbourhood) is a hazard on ground. Only what the elevations show beyond
+/// their noise counts: each difference to a neighbour is shrunk towards zero by two
+/// standard deviations of that difference, so far cells seen by a few noisy stereo points
+/// do not turn into obstacles.
 fn terrain_hazard(
-    dry: &HashMap<CellKey, f64>,
+    dry: &HashMap<CellKey, (f64, f64)>,
     key: CellKey,
-    z: f64,
+    (z, sz): (f64, f64),
     res: f64,
     max_step: f64,
     max_grad: f64,
 ) -> (Class, Hazard) {
-    let (mut lowest, mut gx, mut gy, mut wx, mut wy) = (z, 0.0, 0.0, 0.0, 0.0);
+    let (mut step, mut gx, mut gy, mut wx, mut wy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
     for dy in -1i64..=1 {
         for dx in -1i64..=1 {
-            let Some(&zn) = dry.get(&CellKey::new(key.x + dx, key.y + dy)) else {
+            let Some(&(zn, sn)) = dry.get(&CellKey::new(key.x + dx, key.y + dy)) else {
                 continue;
             };
-            lowest = lowest.min(zn);
-            gx += (zn - z) * dx as f64;
+            let d = zn - z;
+            let margin = 2.0 * (sz * sz + sn * sn).sqrt();
+            let d = d.signum() * (d.abs() - margin).max(0.0);
+            step = step.max(-d);
+            gx += d * dx as f64;
             wx += (dx * dx) as f64;
-            gy += (zn - z) * dy as f64;
+            gy += d * dy as f64;
             wy += (dy * dy) as f64;
         }
     }
-    if z - lowest > max_step {
+    if step > max_step {
         return (Class::Obstacle, Hazard::Obstacle);
     }
     let g = |s: f64, w: f64| if w > 0.0 { s / (w * res) } else { 0.0 };
@@ -252,10 +258,13 @@ impl HazardMap {
             }
         }
         // Dry terrain for the step and slope tests.
-        let dry: HashMap<CellKey, f64> = tiles
+        let dry: HashMap<CellKey, (f64, f64)> = tiles
             .observed()
             .filter(|(k, _)| !water.contains_key(k))
-            .filter_map(|(k, c)| Some((k, tiles.elevation(&c)?)))
+            .filter_map(|(k, c)| {
+                let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
+                Some((k, (tiles.elevation(&c)?, sz)))
+            })
             .collect();
         let v = &cfg.vehicle;
         let max_grad = v.max_slope_deg.to_radians().tan();
@@ -280,7 +289,7 @@ impl HazardMap {
                         hazard,
                     ));
                 }
-                let Some(&z) = dry.get(&key) else {
+                let Some(&(z, sz)) = dry.get(&key) else {
                     // Observed through water evidence only, not water: its level, if any.
                     let z = c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3)?;
                     return Some(MapCell::of(
@@ -294,7 +303,8 @@ impl HazardMap {
                         Hazard::Free,
                     ));
                 };
-                let (class, hazard) = terrain_hazard(&dry, key, z, res, v.max_step_m, max_grad);
+                let (class, hazard) =
+                    terrain_hazard(&dry, key, (z, sz), res, v.max_step_m, max_grad);
                 Some(MapCell::of(tiles, key, &c, z, p, 0.0, class, hazard))
             })
             .collect();
