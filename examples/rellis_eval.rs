@@ -81,6 +81,40 @@ fn main() {
     }
 
     // Where the errors are: the puddle polygon covers wet mud between the puddles.
+    // Speed against error of the mixture size: BIC picks 1..=k components per class; the
+    // time is training (left half) and direct classification of the whole image (the
+    // lookup table costs the same for every model).
+    println!("\nMixture components (speed against error), right half, + horizon:\n");
+    println!("| max components k | components (water/sky/other) | train s | direct classify ms | precision | recall | IoU |\n| ---: | --- | ---: | ---: | ---: | ---: | ---: |");
+    for k in [1usize, 2, 4, 6, 8] {
+        let t = Instant::now();
+        let m = train(
+            &r,
+            &TrainConfig {
+                max_components: k,
+                ..TrainConfig::default()
+            },
+        );
+        let train_s = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let l = m.classify(&r.rgb);
+        let classify_ms = t.elapsed().as_secs_f64() * 1e3;
+        let c = score_right(&with_h(&l), &r.ids);
+        let sizes: Vec<String> = m
+            .data()
+            .classes
+            .iter()
+            .map(|c| c.components.len().to_string())
+            .collect();
+        println!(
+            "| {k} | {} | {train_s:.2} | {classify_ms:.1} | {:.3} | {:.3} | {:.3} |",
+            sizes.join("/"),
+            c.precision(),
+            c.recall(),
+            c.iou()
+        );
+    }
+
     let l6 = with_h(&ColorLut::compile(&model, 6).unwrap().classify(&r.rgb));
     let (mut bright, mut bright_hit, mut dark, mut dark_hit) = (0u64, 0u64, 0u64, 0u64);
     let w = r.ids.width();

@@ -347,23 +347,27 @@ mod tests {
         let mut ground = CellStats::default();
         ground.add(100, 65536);
         t.add(CellKey::new(0, 0), &ground);
-        // Observed with no return only: no elevation, a level of 0.05 m, water.
+        // Observed with no return only: no elevation, a level of 0.05 m, water; 5 × 5
+        // cells, the smallest body kept (0.25 m²).
         let mut ev = Evidence {
             noret: 20,
             ..Evidence::default()
         };
         ev.add_level(50);
         ev.add_depth(0.2);
-        t.add(
-            CellKey::new(1, 0),
-            &CellStats {
-                ev,
-                ..CellStats::default()
-            },
-        );
+        for x in 1..6 {
+            for y in 0..5 {
+                let c = CellStats {
+                    ev,
+                    ..CellStats::default()
+                };
+                t.add(CellKey::new(x, y), &c);
+            }
+        }
         let m = HazardMap::with_water(&t, &Fusion::default(), 0.3);
-        assert_eq!(m.cells.len(), 2);
-        let (g, w) = (&m.cells[0], &m.cells[1]);
+        assert_eq!(m.cells.len(), 26);
+        let g = m.cells.iter().find(|c| c.key == CellKey::new(0, 0)).unwrap();
+        let w = m.cells.iter().find(|c| c.key == CellKey::new(1, 0)).unwrap();
         assert_eq!(g.class, Class::Ground);
         assert!((g.water - 0.05).abs() < 1e-6 && g.depth == 0.0);
         assert_eq!(w.class, Class::Water);

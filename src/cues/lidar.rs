@@ -5,7 +5,11 @@
 //! Each scan line (a column of a spinning lidar from the steepest ring out, or the row of a
 //! single-row vertical scanner ordered by beam elevation) is walked in the order of
 //! increasing lookahead, keeping the *local ground level*: the last return within
-//! `below_gate_m`/`above_gate_m` of the level, starting from the sensor height. Then:
+//! `below_gate_m`/`above_gate_m` of the ground expected there, starting from the sensor
+//! height. The expected ground continues the level with the slope of the last ground
+//! returns (averaged, clamped to `max_ground_slope`): a vehicle on a 3 % slope sees the
+//! ground behind it fall 0.8 m over 27 m, which a flat level took for the bottom of water.
+//! The water cues below still use the flat level: water lies level. Then:
 //!
 //! * a **missing** beam is cast against the level; if it meets it at a lookahead inside
 //!   [`LidarCueModel::interval`] (the optics' diagnostic interval for water at least
@@ -19,6 +23,8 @@
 //!   come from the bottom and is a specular return from beyond the water: the cell where
 //!   its ray crosses the level gets reflection evidence and the point, mirrored about the
 //!   level, is put back where the object is.
+
+use std::collections::VecDeque;
 
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -57,6 +63,23 @@ impl Default for BeamModel {
     }
 }
 
+/// Shortest run over which the local ground's slope is measured (m).
+const SLOPE_BASELINE_M: f64 = 1.0;
+/// The local ground's slope is that of the ground returns of this much lookahead (m).
+const SLOPE_WINDOW_M: f64 = 3.0;
+
+/// Least-squares slope dz/dd of (d, z) pairs; `None` without spread in d.
+fn line_slope(pts: &VecDeque<(f64, f64)>) -> Option<f64> {
+    let n = pts.len() as f64;
+    let (md, mz) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), &(d, z)| (a + d / n, b + z / n));
+    let (sdz, sdd) = pts.iter().fold((0.0, 0.0), |(a, b), &(d, z)| {
+        (a + (d - md) * (z - mz), b + (d - md) * (d - md))
+    });
+    (sdd > 1e-12).then(|| sdz / sdd)
+}
+
 /// Gates and thresholds of the lidar cues.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -76,6 +99,11 @@ pub struct LidarCueConfig {
     /// ground or vegetation dipping under the last ground return. Shallower ones are
     /// counted as unexplained and give no evidence.
     pub specular_min_depth_m: f64,
+    /// Steepest ground slope (rise over run) the local ground level follows along a scan
+    /// line. The level is extrapolated with the slope of the last two ground returns,
+    /// clamped to this, so dry ground falling away gently (a road downhill) is not taken
+    /// for the bottom of water; water lies level, so its bottom returns still fall below.
+    pub max_ground_slope: f64,
 }
 
 impl Default for LidarCueConfig {
@@ -86,6 +114,7 @@ impl Default for LidarCueConfig {
             above_gate_m: 0.30,
             depth_tolerance_m: 0.05,
             specular_min_depth_m: 0.5,
+            max_ground_slope: 0.08,
         }
     }
 }
@@ -98,6 +127,7 @@ impl LidarCueConfig {
             ("above_gate_m", self.above_gate_m),
             ("depth_tolerance_m", self.depth_tolerance_m),
             ("specular_min_depth_m", self.specular_min_depth_m),
+            ("max_ground_slope", self.max_ground_slope),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(
@@ -378,16 +408,33 @@ impl LidarCueModel {
         level0: f64,
     ) -> Vec<Event> {
         let cfg = &self.cfg;
+        let g_max = cfg.max_ground_slope;
+        // The local ground: `level` at lookahead `d_level`, falling or rising with `slope`
+        // beyond it. Under the vehicle the slope is not known yet: the first return may lie
+        // anywhere within ±g_max of level ground.
         let mut level = level0;
+        let mut d_level = 0.0;
+        let mut slope: Option<f64> = None;
+        // (lookahead, z) of the ground returns of the last SLOPE_WINDOW_M, starting with the
+        // ground under the sensor: the slope is their least-squares line, so 1 cm of range
+        // noise does not tilt it by the 6 % it would between two returns 25 cm apart.
+        let mut recent: VecDeque<(f64, f64)> = VecDeque::from([(0.0, level0)]);
         let mut out = Vec::new();
         for &s in line {
             let s = s as usize;
             if cloud.is_valid(s) {
                 let p = cloud.point_in_map(s);
-                let dz = p.z - level;
                 let v = p - o;
                 let range = v.norm();
-                if dz < -cfg.below_gate_m && v.z < 0.0 && o.z > level {
+                let d = v.x.hypot(v.y);
+                let run = (d - d_level).max(0.0);
+                // Only a falling slope is followed: ground rising ahead moves the level up
+                // through the above-gate anyway, while a rising slope carried over a long
+                // run would put level ground beyond it "below" and call it a bottom.
+                let expected = level + slope.unwrap_or(0.0).min(0.0) * run;
+                let slack = if slope.is_some() { 0.0 } else { g_max * run };
+                let dz = p.z - expected;
+                if dz < -(cfg.below_gate_m + slack) && v.z < 0.0 && o.z > level {
                     // Below the level: bottom or specular.
                     let u = v / range;
                     let t = (o.z - level) / -u.z;
@@ -416,9 +463,18 @@ impl LidarCueModel {
                             mirrored: Point3::new(p.x, p.y, 2.0 * level - p.z),
                         });
                     }
-                } else if dz <= cfg.above_gate_m {
+                } else if dz <= cfg.above_gate_m + slack {
+                    // Ground. The slope of the recent ground, once it spans enough
+                    // lookahead to measure one, clamped to what ground does.
+                    recent.push_back((d, p.z));
+                    while recent.len() > 2 && recent.front().is_some_and(|f| d - f.0 > SLOPE_WINDOW_M) {
+                        recent.pop_front();
+                    }
+                    if recent.front().is_some_and(|f| d - f.0 >= SLOPE_BASELINE_M) {
+                        slope = line_slope(&recent).map(|g| g.clamp(-g_max, g_max));
+                    }
                     level = p.z;
-                    let d = v.x.hypot(v.y);
+                    d_level = d;
                     let diag = self.in_interval(d);
                     // A ground return outside the interval matters only to the
                     // reflectivity cue: no event (and no allocation) without it.

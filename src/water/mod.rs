@@ -32,12 +32,15 @@
 //! tall grass on the near shore is seen *above* the ground, and the ground behind it is not
 //! seen at all (paper §2.2). Raised samples are never too low, only too high, so the filter
 //! is one-sided: a sample is dropped when it stands more than `occluder_height_m` (10 cm)
-//! above the `shore_quantile` (25 %) quantile of the samples within `shore_radius_m`
-//! (1.5 m) of it. A local low quantile rather than the body's global minimum, because a
-//! stream's shore legitimately descends along its course, and a local quantile rather than
-//! the local minimum, because one noisy low cell must not decide. A 1 m bush covering a
-//! third of the shore within 1.5 m leaves the quantile on the ground, and is dropped
-//! (tested: the level stays within 3 cm).
+//! above the `shore_quantile` (25 %) quantile of the elevations within `shore_radius_m`
+//! (1.5 m) of it: the other shore samples and the dry, reliably measured ground cells
+//! there. A local low quantile rather than the body's global minimum, because a stream's
+//! shore legitimately descends along its course, and a local quantile rather than the local
+//! minimum, because one noisy low cell must not decide. A 1 m bush covering a third of the
+//! shore within 1.5 m leaves the quantile on the ground, and is dropped (tested: the level
+//! stays within 3 cm). The ground beside the shore is in the reference because a bush seen
+//! from the vehicle hides the water behind it: every shore cell along it is bush, and on
+//! the simulated `pond_bush` scene, shore samples alone put the level 20 cm high.
 //!
 //! Only reliably measured shore cells count when there are at least `min_shore_samples`
 //! of them: a cell whose elevation σ exceeds `shore_max_std_m` (5 cm; far cells seen by a
@@ -63,6 +66,11 @@
 //! other sample predicted from the triangulation of the others) must beat the level's, or
 //! the body stays level. Both residuals are reported per body. Degenerate samples
 //! (collinear, duplicates, fewer than three) cannot be triangulated and keep the level.
+//! A body kept level this way (its shore neither level nor smooth) takes the level of its
+//! lowest samples, the median of those within `occluder_height_m` of the `shore_quantile`
+//! quantile, not the median of all: water cannot stand above its lowest shore, and what
+//! raises the others (a shore that is all bush for a metre, a bank top where the water's
+//! edge was hidden) only ever raises them.
 //! (spade's natural-neighbour interpolation exists only for unconstrained triangulations;
 //! the constraints were worth more than the smoother interpolant.)
 //!
@@ -543,7 +551,8 @@ fn body_of(
         .iter()
         .map(|&k| sample(k, info[&k].elevation.unwrap_or(f64::NAN)))
         .collect();
-    let kept = surface::reject_occluders(&shore, cfg);
+    let ground = ground_near(&set, &shore_keys, info, tiles, cfg);
+    let kept = surface::reject_occluders(&shore, &ground, cfg);
     let (samples, keys, source) = if kept.len() >= cfg.min_shore_samples.max(1) {
         (
             kept.iter().map(|&i| shore[i]).collect::<Vec<_>>(),
@@ -628,6 +637,43 @@ fn body_of(
         body.volume_m3 = Some(m.volume());
     }
     Some(body)
+}
+
+/// Dry, reliably measured cells (elevation σ ≤ `shore_max_std_m`, water probability below
+/// `p_low`) within about `shore_radius_m` of the shore cells: the occluder test's reference
+/// for the ground beside the shore. Visits only the blocks of cells around the shore.
+fn ground_near(
+    body: &BTreeSet<CellKey>,
+    shore: &[CellKey],
+    info: &BTreeMap<CellKey, Info>,
+    tiles: &TileMap,
+    cfg: &WaterConfig,
+) -> Vec<surface::ShoreSample> {
+    let n = (cfg.shore_radius_m / tiles.resolution()).ceil().max(1.0) as i64;
+    let blocks: BTreeSet<(i64, i64)> = shore
+        .iter()
+        .flat_map(|k| {
+            let (bx, by) = (k.x.div_euclid(n), k.y.div_euclid(n));
+            (-1..=1).flat_map(move |dx| (-1..=1).map(move |dy| (bx + dx, by + dy)))
+        })
+        .collect();
+    let shore: BTreeSet<CellKey> = shore.iter().copied().collect();
+    let mut out = Vec::new();
+    for (bx, by) in blocks {
+        for x in bx * n..(bx + 1) * n {
+            let rows = info.range(CellKey { x, y: by * n }..CellKey { x, y: (by + 1) * n });
+            for (&k, i) in rows {
+                let reliable = i.std.is_some_and(|s| s <= cfg.shore_max_std_m);
+                if let (true, true, Some(z)) = (reliable, i.p < cfg.p_low, i.elevation) {
+                    if !body.contains(&k) && !shore.contains(&k) {
+                        let (x, y) = tiles.centre_of(k);
+                        out.push(surface::ShoreSample { x, y, z });
+                    }
+                }
+            }
+        }
+    }
+    out
 }
 
 #[cfg(test)]

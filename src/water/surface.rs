@@ -195,16 +195,22 @@ pub fn median(v: Vec<f64>) -> Option<f64> {
 }
 
 /// Drops occluded shore samples: a sample more than `cfg.occluder_height_m` above the
-/// `cfg.shore_quantile` quantile of the samples within `cfg.shore_radius_m` of it (itself
-/// included) stands on something raised (a bush, a rock, a bank top seen past the edge).
-/// Returns the indices of the samples kept, in input order.
-pub fn reject_occluders(samples: &[ShoreSample], cfg: &WaterConfig) -> Vec<usize> {
+/// `cfg.shore_quantile` quantile of the elevations within `cfg.shore_radius_m` of it stands
+/// on something raised (a bush, a rock, a bank top seen past the edge). The elevations are
+/// those of the shore samples (itself included) and of `ground`, dry cells near the shore:
+/// where a bush covers a stretch of shore, every shore sample there is bush, but the ground
+/// beside it is not. Returns the indices of the samples kept, in input order.
+pub fn reject_occluders(
+    samples: &[ShoreSample],
+    ground: &[ShoreSample],
+    cfg: &WaterConfig,
+) -> Vec<usize> {
     let r = cfg.shore_radius_m;
     let r2 = r * r;
     let bucket = |s: &ShoreSample| ((s.x / r).floor() as i64, (s.y / r).floor() as i64);
-    let mut buckets: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-    for (i, s) in samples.iter().enumerate() {
-        buckets.entry(bucket(s)).or_default().push(i);
+    let mut buckets: HashMap<(i64, i64), Vec<&ShoreSample>> = HashMap::new();
+    for s in samples.iter().chain(ground) {
+        buckets.entry(bucket(s)).or_default().push(s);
     }
     let mut keep = Vec::with_capacity(samples.len());
     let mut near = Vec::new();
@@ -214,8 +220,7 @@ pub fn reject_occluders(samples: &[ShoreSample], cfg: &WaterConfig) -> Vec<usize
         for dx in -1..=1 {
             for dy in -1..=1 {
                 if let Some(b) = buckets.get(&(bx + dx, by + dy)) {
-                    for &j in b {
-                        let o = &samples[j];
+                    for o in b {
                         if (o.x - s.x).powi(2) + (o.y - s.y).powi(2) <= r2 {
                             near.push(o.z);
                         }
@@ -223,7 +228,7 @@ pub fn reject_occluders(samples: &[ShoreSample], cfg: &WaterConfig) -> Vec<usize
                 }
             }
         }
-        let reference = quantile(near.clone(), cfg.shore_quantile).unwrap_or(s.z);
+        let reference = quantile(std::mem::take(&mut near), cfg.shore_quantile).unwrap_or(s.z);
         if s.z - reference <= cfg.occluder_height_m {
             keep.push(i);
         }
@@ -283,7 +288,21 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
     // The full triangulation must exist too (it does when half of it does, unless samples
     // are non-finite, which `median` and `tin` both exclude).
     if Surface::tin(samples, constraints).is_none() || held >= level_residual_m {
+        // The shore is neither level nor a smooth surface: raised samples the local
+        // occluder test could not see (a stretch of shore that is all bush, the top of a
+        // bank where the water's edge was hidden). Water cannot stand above its lowest
+        // shore, so the level is that of the lowest samples (paper 2.2): the median of
+        // those within `occluder_height_m` of the `shore_quantile` quantile.
+        let low = quantile(samples.iter().map(|s| s.z).collect(), cfg.shore_quantile)?;
+        let z = median(
+            samples
+                .iter()
+                .map(|s| s.z)
+                .filter(|&z| z <= low + cfg.occluder_height_m)
+                .collect(),
+        )?;
         return Some(Fit {
+            model: SurfaceModel::Level { z },
             delaunay_residual_m: Some(held),
             ..level
         });

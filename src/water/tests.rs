@@ -159,6 +159,62 @@ fn a_raised_bush_on_the_near_shore_does_not_lift_the_water() {
     );
 }
 
+#[test]
+fn a_bush_that_is_the_whole_local_shore_does_not_lift_the_water() {
+    // A bush 1.4 m across standing at the water's edge at +x, its crown 1 m above the
+    // level, overhanging the edge: every shore cell within 0.7 m of the x axis is bush, and
+    // the water right under it is not seen. What tells the bush from the shore is the dry
+    // ground beside it.
+    let bush = |x: f64, y: f64| (x - 3.4).hypot(y) < 0.7;
+    let base = pond(3.0, None);
+    let (t, truth) = scene(60, move |x, y| {
+        let (g, w) = base(x, y);
+        if bush(x, y) {
+            (1.0, None)
+        } else {
+            (g, w)
+        }
+    });
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    let SurfaceModel::Level { z } = b.surface else {
+        panic!("{:?}", b.surface.name())
+    };
+    assert!((0.0..0.03).contains(&z), "level {z}");
+    let (rms, _) = surface_rms(&map, &truth);
+    assert!(rms < 0.03, "{rms}");
+    eprintln!(
+        "bush at the edge: kept {}/{} shore samples, level {z:.4} m, RMS {rms:.4} m",
+        b.shore_samples_kept, b.shore_samples
+    );
+}
+
+#[test]
+fn a_shore_neither_level_nor_smooth_takes_its_lowest_samples() {
+    // Shore samples at the level, five in eight of them raised 0.5 m at random (a ragged
+    // bank top where the edge was hidden): no Delaunay surface predicts them, the median of
+    // all is lifted, the lowest samples are not.
+    let mut samples = Vec::new();
+    for i in 0..200u32 {
+        let a = f64::from(i) * std::f64::consts::TAU / 200.0;
+        let raised = (i.wrapping_mul(2_654_435_761) >> 29) < 5;
+        let z = if raised { 0.5 } else { 0.004 * f64::from(i % 5) };
+        samples.push(surface::ShoreSample {
+            x: 3.0 * a.cos(),
+            y: 3.0 * a.sin(),
+            z,
+        });
+    }
+    let cfg = WaterConfig::default();
+    let f = surface::fit(&samples, &[], &cfg).unwrap();
+    assert!(f.level_residual_m > cfg.level_residual_m);
+    let SurfaceModel::Level { z } = f.model else {
+        panic!("{:?}", f.model.name())
+    };
+    assert!((0.0..=0.016).contains(&z), "level {z}");
+}
+
 /// A stream 2 m wide running 20 m down a 2 % slope in a ditch with 30 % banks.
 fn stream(x: f64, y: f64) -> Cell {
     let s = 0.02 * x;

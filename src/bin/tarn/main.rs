@@ -181,6 +181,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    // A closed stdout (`tarn eval ... | head`) ends the process as it ends every Unix tool,
+    // instead of a panic in println!. Rust sets SIGPIPE to "ignore" before main.
+    #[cfg(unix)]
+    // SAFETY: called first in main, before any other thread exists; SIG_DFL is a valid
+    // disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     // SIGINT asks a running build to stop between frames; it then writes nothing, so the
     // output directory keeps its previous files (tarn::interrupt).
     if let Err(e) = ctrlc::set_handler(tarn::interrupt::request_stop) {

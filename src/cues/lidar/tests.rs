@@ -475,3 +475,49 @@ fn sensor_height_is_estimated_from_the_ground_ring() {
     let h = estimate_sensor_height(&cloud).unwrap();
     assert!((h - 1.73).abs() < 1e-3, "{h}");
 }
+
+#[test]
+fn dry_ground_sloping_away_is_not_the_bottom_of_water() {
+    // A spinning lidar 1.8 m above a plane falling 3 % along +x and rising along −x (the
+    // stream scene's slope), every beam returning out to 40 m. Behind the vehicle downhill
+    // the ground drops 1.2 m below the level under it: no bottom, specular or no-return
+    // evidence may come of that.
+    let (g, h) = (-0.03, 1.8);
+    let o = Point3::new(0.0, 0.0, h);
+    let (rings, cols) = (32, 512);
+    let mut xyz = Vec::new();
+    for r in 0..rings {
+        let el = (5.0 - 30.0 * r as f64 / (rings - 1) as f64).to_radians();
+        for c in 0..cols {
+            let az = 2.0 * std::f64::consts::PI * c as f64 / cols as f64;
+            let u = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+            // o + t u on z = g x: h + t u.z = g t u.x.
+            let den = g * u.x - u.z;
+            let t = if den > 0.0 { h / den } else { f64::INFINITY };
+            let p = o + u * t;
+            xyz.push(if t.is_finite() && p.x.hypot(p.y) <= 40.0 {
+                [p.x as f32, p.y as f32, p.z as f32]
+            } else {
+                [f32::NAN; 3]
+            });
+        }
+    }
+    let mut cloud = PointCloud::organized(rings, cols, xyz).unwrap();
+    cloud.sensor_origin = o;
+    let run = |cfg: LidarCueConfig| {
+        LidarCueModel::new(optics(h), BeamModel::default(), cfg, None)
+            .unwrap()
+            .run(&cloud, RES, 0.0)
+            .unwrap()
+            .stats
+    };
+    let s = run(LidarCueConfig::default());
+    assert_eq!((s.bottom, s.specular, s.noret), (0, 0, 0), "{s:?}");
+    // Holding the level flat (the cue before it followed the slope) reads the ground
+    // behind as the bottom of water.
+    let flat = run(LidarCueConfig {
+        max_ground_slope: 0.0,
+        ..LidarCueConfig::default()
+    });
+    assert!(flat.bottom + flat.specular + flat.unexplained > 1000, "{flat:?}");
+}

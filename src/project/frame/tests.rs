@@ -175,6 +175,23 @@ fn unconfigured_or_missing_sensors_do_nothing() {
     let rep = swir.apply(&frame(), &mut g).unwrap();
     assert_eq!(rep.swir.unwrap().frames_skipped, 1);
     assert_eq!(g.observed().collect::<Vec<_>>(), before);
+    // A colour image without CameraInfo, or whose CameraInfo gives another size: skipped
+    // and counted, no vote, no error.
+    let mut colour = FrameLabels::new(colour_cfg(4)).unwrap();
+    for spoil in [
+        (|f: &mut Frame| f.image.as_mut().unwrap().camera = None) as fn(&mut Frame),
+        |f: &mut Frame| {
+            let cam = f.image.as_mut().unwrap().camera.as_mut().unwrap();
+            cam.width += 1;
+        },
+    ] {
+        let mut f = frame();
+        spoil(&mut f);
+        let rep = colour.apply(&f, &mut g).unwrap();
+        let st = rep.colour.unwrap();
+        assert_eq!((st.frames, st.frames_skipped, st.cells_water), (0, 1, 0));
+        assert_eq!(g.observed().collect::<Vec<_>>(), before);
+    }
     assert!(FrameLabels::new(FrameLabelConfig {
         ray_stride: 0,
         ..FrameLabelConfig::default()
