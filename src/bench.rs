@@ -219,7 +219,10 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         None => {
             let scene = crate::sim::Scene::load(&opts.scene)?;
             crate::sim::simulate(&scene, tmp.path(), crate::sim::SimOptions::default())?;
-            (tmp.path().join("log.mcap"), crate::sim::mapper_config(&scene))
+            (
+                tmp.path().join("log.mcap"),
+                crate::sim::mapper_config(&scene),
+            )
         }
     };
     let log_cfg = LogBuildConfig {
@@ -693,7 +696,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     let stream_dir = tmp.path().join("stream");
     crate::sim::simulate(&stream, &stream_dir, crate::sim::SimOptions::default())?;
     let mut mapper = crate::mapper::Mapper::new(crate::sim::mapper_config(&stream))?;
-    for f in FrameStream::open(&stream_dir.join("log.mcap"), &LogConfig::default())? {
+    for f in FrameStream::open(stream_dir.join("log.mcap"), &LogConfig::default())? {
         mapper.update(&f?)?;
     }
     let tiles = mapper.finish();
@@ -726,7 +729,8 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
         .into();
     rows.push(r);
     let mut r = row("mixture components", "–", "–", None, "–", None);
-    r.note = "measured on the real RELLIS-3D frame: cargo run --release --example rellis_eval".into();
+    r.note =
+        "measured on the real RELLIS-3D frame: cargo run --release --example rellis_eval".into();
     rows.push(r);
     Ok(rows)
 }

@@ -1,13 +1,17 @@
 //! The map product: one record per observed cell, with the classes and hazards of the
 //! export contract (DESIGN.md, "Map export").
 
-use serde::{Deserialize, Serialize};
-
 use std::collections::HashMap;
 
+use serde::{Deserialize, Serialize};
+
+use crate::cues::BuildKeyHasher;
 use crate::error::Result;
 use crate::grid::{CellKey, Fusion, TileMap};
 use crate::water::{find_bodies, HazardConfig, Vehicle, WaterBody};
+
+/// Cell-keyed maps of the hazard pass: every observed cell goes through them each frame.
+type CellMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
 
 /// Cell class codes of the export contract.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -137,7 +141,7 @@ pub struct HazardMap {
 /// standard deviations of that difference, so far cells seen by a few noisy stereo points
 /// do not turn into obstacles.
 fn terrain_hazard(
-    dry: &HashMap<CellKey, (f64, f64)>,
+    dry: &CellMap<(f64, f64)>,
     key: CellKey,
     (z, sz): (f64, f64),
     res: f64,
@@ -249,7 +253,7 @@ impl HazardMap {
         let bodies = find_bodies(tiles, cfg, previous)?;
         let res = tiles.resolution();
         // Water cells: surface z and depth from their body.
-        let mut water: HashMap<CellKey, (f64, f32)> = HashMap::new();
+        let mut water: CellMap<(f64, f32)> = CellMap::default();
         for b in &bodies {
             let s = b.surface.evaluator();
             for (&k, &d) in b.cells.iter().zip(&b.cell_depth_m) {
@@ -258,7 +262,7 @@ impl HazardMap {
             }
         }
         // Dry terrain for the step and slope tests.
-        let dry: HashMap<CellKey, (f64, f64)> = tiles
+        let dry: CellMap<(f64, f64)> = tiles
             .observed()
             .filter(|(k, _)| !water.contains_key(k))
             .filter_map(|(k, c)| {
@@ -366,8 +370,16 @@ mod tests {
         }
         let m = HazardMap::with_water(&t, &Fusion::default(), 0.3);
         assert_eq!(m.cells.len(), 26);
-        let g = m.cells.iter().find(|c| c.key == CellKey::new(0, 0)).unwrap();
-        let w = m.cells.iter().find(|c| c.key == CellKey::new(1, 0)).unwrap();
+        let g = m
+            .cells
+            .iter()
+            .find(|c| c.key == CellKey::new(0, 0))
+            .unwrap();
+        let w = m
+            .cells
+            .iter()
+            .find(|c| c.key == CellKey::new(1, 0))
+            .unwrap();
         assert_eq!(g.class, Class::Ground);
         assert!((g.water - 0.05).abs() < 1e-6 && g.depth == 0.0);
         assert_eq!(w.class, Class::Water);

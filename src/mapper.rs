@@ -46,9 +46,9 @@ use crate::cues::{
 use crate::error::{Error, Result};
 use crate::grid::{Fusion, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap};
 use crate::hazard::HazardMap;
-use crate::water::{HazardConfig, Vehicle, WaterConfig};
 use crate::io::frames::Frame;
 use crate::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
+use crate::water::{HazardConfig, Vehicle, WaterConfig};
 
 /// The lidar: how its scans are fused and which of its cues run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -202,8 +202,8 @@ impl MapperConfig {
     pub fn hazard_config(&self) -> HazardConfig {
         HazardConfig {
             fusion: self.fusion,
-            water: self.water.clone(),
-            vehicle: self.vehicle.clone(),
+            water: self.water,
+            vehicle: self.vehicle,
         }
     }
 

@@ -30,10 +30,12 @@ for r in "${runs[@]}"; do
   map="$OUT/map/$scene-${labels//,/+}"
   # An 80 m window (800 cells at 0.1 m) holds every cell within --label-max-range (40 m)
   # of the vehicle: with the default 40 m window, votes beyond 20 m fall outside it.
-  "$T" build "$sim/log.mcap" --labels "$labels" "${extra[@]}" --window-cells 800 \
-    --out "$map" --json > "$map.report.json"
+  # --cues none: the labels alone decide what is water (the geometry still comes from the
+  # rig's lidar and stereo, configured by the simulator's mapper.toml).
+  "$T" build "$sim/log.mcap" --config "$sim/mapper.toml" --cues none --labels "$labels" \
+    "${extra[@]}" --window-cells 800 --out "$map" --json > "$map.report.json"
   echo
-  echo "### $scene, \`tarn build --labels $labels ${extra[*]} --window-cells 800\`"
+  echo "### $scene, \`tarn build --cues none --labels $labels ${extra[*]} --window-cells 800\`"
   echo
   "$T" eval "$map" --truth "$sim"
 done

@@ -32,12 +32,13 @@ import json, sys
 out, scenes = sys.argv[1], sys.argv[2:]
 def f(v, d=3):
     return "–" if v is None else f"{v:.{d}f}"
-print("| scene | body | area (m²) | model | shore kept / all | level residual (m) | Delaunay hold-out (m) | surface z (m) | depth | scene surface RMS (m) | water recall | false-positive rate |")
-print("| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: |")
+print("| scene | body | area (m²) | model | shore kept / all | level residual (m) | Delaunay hold-out (m) | surface z (m) | depth | scene surface RMS (m) | scene depth RMS (m) | water recall | false-positive rate |")
+print("| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |")
 for s in scenes:
     r = json.load(open(f"{out}/{s}/map/report.json"))
     e = json.load(open(f"{out}/{s}/map.eval.json"))["all"]
-    tail = f"{f(e['surface_rms_m'])} | {f(e['water_recall'])} | {f(e['false_positive_rate'], 4)}"
+    tail = (f"{f(e['surface_rms_m'])} | {f(e['depth_rms_m'])} | {f(e['water_recall'])} | "
+            f"{f(e['false_positive_rate'], 4)}")
     bodies = r["water"]["bodies"]
     if not bodies:
         print(f"| {s} | none | | | | | | | | {tail} |")

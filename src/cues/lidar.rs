@@ -43,6 +43,10 @@ pub enum BeamModel {
     /// interpolated (azimuth and elevation, linearly in column index) between the nearest
     /// valid slots of its row, across at most `max_gap_fraction` of the row (cyclic for a
     /// multi-row spinning scan). Slots with no valid neighbour on both sides say nothing.
+    /// A single-column scan (a vertical scanner published one beam per row) has no row
+    /// neighbours: its beams are evenly spaced in elevation, so the elevation of every row
+    /// is the least-squares line through the valid rows (when they fit it within 0.1°),
+    /// which also reaches the missing beams past the last return, over water.
     Infer { max_gap_fraction: f64 },
     /// A spinning lidar: elevation per row (rad) and azimuth of column `c`
     /// `azimuth0_rad ∓ 2π c / cols` (minus when `clockwise`).
@@ -467,7 +471,9 @@ impl LidarCueModel {
                     // Ground. The slope of the recent ground, once it spans enough
                     // lookahead to measure one, clamped to what ground does.
                     recent.push_back((d, p.z));
-                    while recent.len() > 2 && recent.front().is_some_and(|f| d - f.0 > SLOPE_WINDOW_M) {
+                    while recent.len() > 2
+                        && recent.front().is_some_and(|f| d - f.0 > SLOPE_WINDOW_M)
+                    {
                         recent.pop_front();
                     }
                     if recent.front().is_some_and(|f| d - f.0 >= SLOPE_BASELINE_M) {
@@ -597,6 +603,9 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
                 }
             }
         }
+        BeamModel::Infer { .. } if cols == 1 && rows > 2 => {
+            infer_single_column(&mut local);
+        }
         BeamModel::Infer { max_gap_fraction } => {
             let cyclic = rows > 1;
             let max_gap = ((cols as f64 * max_gap_fraction).floor() as usize).max(1);
@@ -639,6 +648,54 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
         }
     }
     local.into_iter().map(|d| d.map(|v| rot * v)).collect()
+}
+
+/// Fills the missing beams of a single-column scan (sensor frame, one beam per row) from
+/// the least-squares line of elevation against row through the valid beams, at their median
+/// azimuth; leaves them unknown when fewer than 3 beams returned or the beams do not lie on
+/// a line within 0.1° RMS (not an evenly spaced scanner).
+fn infer_single_column(local: &mut [Option<Vector3<f64>>]) {
+    let pts: Vec<(f64, f64, f64)> = local
+        .iter()
+        .enumerate()
+        .filter_map(|(r, v)| v.map(|v| (r as f64, v.z.clamp(-1.0, 1.0).asin(), v.y.atan2(v.x))))
+        .collect();
+    if pts.len() < 3 {
+        return;
+    }
+    let n = pts.len() as f64;
+    let (mr, me) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let (sre, srr) = pts.iter().fold((0.0, 0.0), |(a, b), p| {
+        (a + (p.0 - mr) * (p.1 - me), b + (p.0 - mr) * (p.0 - mr))
+    });
+    if srr <= 0.0 {
+        return;
+    }
+    let slope = sre / srr;
+    let el = |r: f64| me + slope * (r - mr);
+    let rms = (pts.iter().map(|p| (p.1 - el(p.0)).powi(2)).sum::<f64>() / n).sqrt();
+    // Also refuses a NaN residual.
+    if rms.is_nan() || rms > 0.1f64.to_radians() {
+        return;
+    }
+    let mut az: Vec<f64> = pts.iter().map(|p| p.2).collect();
+    let m = az.len() / 2;
+    az.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
+    let az = az[m];
+    for (r, v) in local.iter_mut().enumerate() {
+        if v.is_none() {
+            let e = el(r as f64);
+            if e.abs() < std::f64::consts::FRAC_PI_2 {
+                *v = Some(Vector3::new(
+                    e.cos() * az.cos(),
+                    e.cos() * az.sin(),
+                    e.sin(),
+                ));
+            }
+        }
+    }
 }
 
 /// Scan lines in order of increasing lookahead: columns ordered by each row's median

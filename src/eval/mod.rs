@@ -236,7 +236,7 @@ pub fn evaluate_band(
     lo: f64,
     hi: f64,
 ) -> Result<BinMetrics> {
-    if !(truth.resolution > 0.0) {
+    if truth.resolution.is_nan() || truth.resolution <= 0.0 {
         return Err(Error::invalid(
             "truth",
             format!("resolution {} must be > 0", truth.resolution),

@@ -198,8 +198,12 @@ impl Evidence {
     pub fn cue_log_odds(&self, f: &Fusion) -> CueLogOdds {
         let cap = |v: f64| v.clamp(-f.cue_cap, f.cue_cap);
         let ln = |a: f64, b: f64| (a / b).ln();
+        // n · ln(a / b), with no logarithm for a count of 0 (most cells of a map have no
+        // evidence of most cues; the water stage asks every cell every frame). The sum is
+        // the same: the ratios are finite, so 0 · ln(a / b) is ±0.
+        let term = |n: u32, a: f64, b: f64| if n == 0 { 0.0 } else { f64::from(n) * ln(a, b) };
         let image = |w: u16, d: u16, pd: f64, pf: f64| {
-            (w as f64 * ln(pd, pf) + d as f64 * ln(1.0 - pd, 1.0 - pf))
+            (term(w.into(), pd, pf) + term(d.into(), 1.0 - pd, 1.0 - pf))
                 .clamp(-f.image_cap, f.image_cap)
         };
         CueLogOdds {
@@ -221,10 +225,14 @@ impl Evidence {
                 f.p_mwir_detect,
                 f.p_mwir_false,
             ),
-            noret: cap(self.noret as f64 * ln(1.0 - f.p_water_return, f.p_dropout)
-                + self.diag_ret as f64 * ln(f.p_water_return, 1.0 - f.p_dropout)),
-            reflect: cap(self.reflect as f64 * ln(f.p_reflect_detect, f.p_reflect_false)),
-            bottom: cap(self.depth_n as f64 * ln(f.p_bottom_detect, f.p_bottom_false)),
+            noret: cap(term(self.noret.into(), 1.0 - f.p_water_return, f.p_dropout)
+                + term(self.diag_ret.into(), f.p_water_return, 1.0 - f.p_dropout)),
+            reflect: cap(term(
+                self.reflect.into(),
+                f.p_reflect_detect,
+                f.p_reflect_false,
+            )),
+            bottom: cap(term(self.depth_n, f.p_bottom_detect, f.p_bottom_false)),
             // The returns of one cell see one surface: one observation, by majority.
             reflectivity: match (self.dark, self.lit) {
                 (0, 0) => 0.0,

@@ -404,24 +404,31 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         fill_rect(&mut img, px, py, s, s, col);
     }
 
-    // Body labels: "#id" and the depth, at the body's centroid.
+    // Body labels: "#id" and the depth, centred above the body (below it when there is no
+    // room above), so the label never hides the water it names.
     let text_scale = if mw >= 400 { 2 } else { 1 };
     for b in &map.bodies {
         let n = b.cells.len().max(1) as f64;
         let cx = b.cells.iter().map(|k| k.x as f64).sum::<f64>() / n;
-        let cy = b.cells.iter().map(|k| k.y as f64).sum::<f64>() / n;
+        let top = b.cells.iter().map(|k| k.y).max().unwrap_or(hi.y);
+        let bottom = b.cells.iter().map(|k| k.y).min().unwrap_or(lo.y);
         let depth = match (b.depth.max_m, b.depth.unknown_cells) {
             (Some(d), 0) => format!("max {d:.2} m"),
             (Some(d), _) => format!("max {d:.2} m+?"),
             (None, _) => "depth ?".to_string(),
         };
         let px = ((cx - lo.x as f64 + 0.5) * s as f64) as i64;
-        let py = ((hi.y as f64 - cy + 0.5) * s as f64) as i64;
+        let line = 9 * text_scale as i64;
+        let above = (hi.y - top) * s as i64 - 2 * line - 2;
+        let y0 = if above >= 0 {
+            above
+        } else {
+            (hi.y - bottom + 1) * s as i64 + 2
+        };
         for (row, text) in [format!("#{}", b.id), depth].iter().enumerate() {
             let tw = (text.len() as u32 * 8 * text_scale) as i64;
             let x = (px - tw / 2).clamp(0, (width as i64 - tw).max(0)) as u32;
-            let y = (py - 8 * text_scale as i64 + row as i64 * 9 * text_scale as i64)
-                .clamp(0, mh.saturating_sub(8) as i64) as u32;
+            let y = (y0 + row as i64 * line).clamp(0, mh.saturating_sub(8) as i64) as u32;
             // A dark box behind the text keeps it readable on any colour.
             fill_rect(
                 &mut img,

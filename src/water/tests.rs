@@ -199,7 +199,11 @@ fn a_shore_neither_level_nor_smooth_takes_its_lowest_samples() {
     for i in 0..200u32 {
         let a = f64::from(i) * std::f64::consts::TAU / 200.0;
         let raised = (i.wrapping_mul(2_654_435_761) >> 29) < 5;
-        let z = if raised { 0.5 } else { 0.004 * f64::from(i % 5) };
+        let z = if raised {
+            0.5
+        } else {
+            0.004 * f64::from(i % 5)
+        };
         samples.push(surface::ShoreSample {
             x: 3.0 * a.cos(),
             y: 3.0 * a.sin(),

@@ -289,7 +289,7 @@ pub fn print_summary(r: &BuildReport) {
         t.export,
         t.total
     );
-    println!("  wrote map.ply terrain.ply map.png report.json");
+    println!("  wrote map.ply terrain.ply water.ply map.png report.json");
 }
 
 fn print_log_summary(r: &LogBuildReport) {
@@ -358,7 +358,7 @@ fn print_log_summary(r: &LogBuildReport) {
             r.errors.len() - 10
         );
     }
-    println!("  wrote map.ply terrain.ply map.png report.json");
+    println!("  wrote map.ply terrain.ply water.ply map.png report.json");
 }
 
 pub fn print_water(w: &WaterSummary) {

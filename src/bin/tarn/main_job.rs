@@ -63,7 +63,7 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
     println!("tarn: accuracy against the truth (by distance from the vehicle's path)");
     print!("{}", e.markdown());
     println!(
-        "  wrote map.ply terrain.ply map.png report.json into {}",
+        "  wrote map.ply terrain.ply water.ply map.png report.json into {}",
         out.display()
     );
     if let Some(d) = &r.damage {

@@ -145,6 +145,22 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
         out.stats.noret
     );
     assert_eq!(out.stats.noret as usize, expected.len());
+    // The same scan published one beam per row (as the simulator and a SICK driver do),
+    // with no beam model: the directions of the missing beams come from the line through
+    // the returned ones, and the no-returns are the same.
+    let column = PointCloud {
+        rows: cloud.cols,
+        cols: 1,
+        ..cloud.clone()
+    };
+    let inferred = LidarCueModel {
+        beams: BeamModel::default(),
+        ..cue.clone()
+    }
+    .run(&column, RES, 0.0)
+    .unwrap();
+    assert_eq!(inferred.stats.no_direction, 0);
+    assert_eq!(inferred.stats.noret, out.stats.noret);
     let water_missing = shots
         .iter()
         .filter(|s| {
@@ -519,5 +535,8 @@ fn dry_ground_sloping_away_is_not_the_bottom_of_water() {
         max_ground_slope: 0.0,
         ..LidarCueConfig::default()
     });
-    assert!(flat.bottom + flat.specular + flat.unexplained > 1000, "{flat:?}");
+    assert!(
+        flat.bottom + flat.specular + flat.unexplained > 1000,
+        "{flat:?}"
+    );
 }
