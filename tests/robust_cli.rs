@@ -385,7 +385,11 @@ fn nonsense_parameters_are_refused() {
     // nonsense mapper configs: a probability of 2, a negative fording depth, a misspelt key
     for (name, text, needle) in [
         ("prior.toml", "[fusion]\nprior = 2.0\n", "fusion"),
-        ("ford.toml", "[vehicle]\nfording_depth_m = -1.0\n", "vehicle.fording_depth_m"),
+        (
+            "ford.toml",
+            "[vehicle]\nfording_depth_m = -1.0\n",
+            "vehicle.fording_depth_m",
+        ),
         ("key.toml", "[water]\np_hihg = 0.9\n", "p_hihg"),
     ] {
         let c = d.join(name);
