@@ -72,16 +72,17 @@ const SLOPE_BASELINE_M: f64 = 1.0;
 /// The local ground's slope is that of the ground returns of this much lookahead (m).
 const SLOPE_WINDOW_M: f64 = 3.0;
 
-/// Least-squares slope dz/dd of (d, z) pairs; `None` without spread in d.
-fn line_slope(pts: &VecDeque<(f64, f64)>) -> Option<f64> {
-    let n = pts.len() as f64;
-    let (md, mz) = pts
-        .iter()
-        .fold((0.0, 0.0), |(a, b), &(d, z)| (a + d / n, b + z / n));
-    let (sdz, sdd) = pts.iter().fold((0.0, 0.0), |(a, b), &(d, z)| {
-        (a + (d - md) * (z - mz), b + (d - md) * (d - md))
+/// Least-squares line through (x, y) pairs: (mean x, mean y, slope dy/dx); `None` without
+/// spread in x.
+fn fit_line(pts: impl Iterator<Item = (f64, f64)> + Clone) -> Option<(f64, f64, f64)> {
+    let n = pts.clone().count() as f64;
+    let (mx, my) = pts
+        .clone()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let (sxy, sxx) = pts.fold((0.0, 0.0), |(a, b), (x, y)| {
+        (a + (x - mx) * (y - my), b + (x - mx) * (x - mx))
     });
-    (sdd > 1e-12).then(|| sdz / sdd)
+    (sxx > 1e-12).then(|| (mx, my, sxy / sxx))
 }
 
 /// Gates and thresholds of the lidar cues.
@@ -477,7 +478,8 @@ impl LidarCueModel {
                         recent.pop_front();
                     }
                     if recent.front().is_some_and(|f| d - f.0 >= SLOPE_BASELINE_M) {
-                        slope = line_slope(&recent).map(|g| g.clamp(-g_max, g_max));
+                        slope = fit_line(recent.iter().copied())
+                            .map(|(_, _, g)| g.clamp(-g_max, g_max));
                     }
                     level = p.z;
                     d_level = d;
@@ -664,16 +666,9 @@ fn infer_single_column(local: &mut [Option<Vector3<f64>>]) {
         return;
     }
     let n = pts.len() as f64;
-    let (mr, me) = pts
-        .iter()
-        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
-    let (sre, srr) = pts.iter().fold((0.0, 0.0), |(a, b), p| {
-        (a + (p.0 - mr) * (p.1 - me), b + (p.0 - mr) * (p.0 - mr))
-    });
-    if srr <= 0.0 {
+    let Some((mr, me, slope)) = fit_line(pts.iter().map(|p| (p.0, p.1))) else {
         return;
-    }
-    let slope = sre / srr;
+    };
     let el = |r: f64| me + slope * (r - mr);
     let rms = (pts.iter().map(|p| (p.1 - el(p.0)).powi(2)).sum::<f64>() / n).sqrt();
     // Also refuses a NaN residual.
