@@ -257,6 +257,10 @@ impl Evidence {
 
     /// Fused water probability, 0..1.
     pub fn water_probability(&self, f: &Fusion) -> f64 {
+        // No evidence: the prior (most cells of a map, asked every frame).
+        if *self == Evidence::default() {
+            return f.prior;
+        }
         let l = self.water_log_odds(f);
         1.0 / (1.0 + (-l).exp())
     }

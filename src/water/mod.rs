@@ -95,7 +95,7 @@
 pub mod mesh;
 pub mod surface;
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 
 use serde::{Deserialize, Serialize};
 
@@ -431,8 +431,28 @@ pub fn find_bodies(
 ) -> Result<Vec<WaterBody>> {
     cfg.validate()?;
     let res = tiles.resolution();
+    // Only the neighbourhood of possible water matters: the cells a body can grow over
+    // (p ≥ p_low), their shore and the ground the occluder test reads around it, all within
+    // 2n + 1 cells of a body cell for n = ⌈shore_radius / resolution⌉. So only cells in
+    // blocks of 2n + 2 cells next to such a cell's block are looked at (most of a map is
+    // dry and far from water: every frame, this skips an ordered map of all of it).
+    let n = (cfg.water.shore_radius_m / res).ceil().max(1.0) as i64;
+    let b = 2 * n + 2;
+    let block = |k: CellKey| (k.x.div_euclid(b), k.y.div_euclid(b));
+    let mut near: HashSet<(i64, i64)> = HashSet::new();
+    for (k, c) in tiles.observed() {
+        if c.ev.water_probability(&cfg.fusion) >= cfg.water.p_low {
+            let (bx, by) = block(k);
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    near.insert((bx + dx, by + dy));
+                }
+            }
+        }
+    }
     let info: BTreeMap<CellKey, Info> = tiles
         .observed()
+        .filter(|(k, _)| near.contains(&block(*k)))
         .map(|(k, c)| {
             (
                 k,
