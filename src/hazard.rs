@@ -7,8 +7,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cues::BuildKeyHasher;
 use crate::error::Result;
-use crate::grid::{CellKey, Fusion, TileMap};
-use crate::water::{find_bodies, HazardConfig, Vehicle, WaterBody};
+use crate::grid::{CellKey, CellStats, Fusion, TileMap};
+use crate::water::{find_bodies_among, HazardConfig, Vehicle, WaterBody};
 
 /// Cell-keyed maps of the hazard pass: every observed cell goes through them each frame.
 type CellMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
@@ -250,7 +250,20 @@ impl HazardMap {
         cfg: &HazardConfig,
         previous: &[WaterBody],
     ) -> Result<Self> {
-        let bodies = find_bodies(tiles, cfg, previous)?;
+        Self::from_cells_after(tiles, tiles.observed().collect(), cfg, previous)
+    }
+
+    /// [`HazardMap::from_tiles_after`] of the cells `observed` (unique keys, in the order the
+    /// map's cells should have); `geometry` gives only the resolution and reference height.
+    /// The mapper's window snapshot takes this path, skipping the copy into tiles.
+    pub(crate) fn from_cells_after(
+        geometry: &TileMap,
+        observed: Vec<(CellKey, CellStats)>,
+        cfg: &HazardConfig,
+        previous: &[WaterBody],
+    ) -> Result<Self> {
+        let tiles = geometry;
+        let bodies = find_bodies_among(tiles, &observed, cfg, previous)?;
         let res = tiles.resolution();
         // Water cells: surface z and depth from their body.
         let mut water: CellMap<(f64, f32)> = CellMap::default();
@@ -262,19 +275,19 @@ impl HazardMap {
             }
         }
         // Dry terrain for the step and slope tests.
-        let dry: CellMap<(f64, f64)> = tiles
-            .observed()
+        let dry: CellMap<(f64, f64)> = observed
+            .iter()
             .filter(|(k, _)| !water.contains_key(k))
-            .filter_map(|(k, c)| {
+            .filter_map(|&(k, c)| {
                 let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
                 Some((k, (tiles.elevation(&c)?, sz)))
             })
             .collect();
         let v = &cfg.vehicle;
         let max_grad = v.max_slope_deg.to_radians().tan();
-        let cells = tiles
-            .observed()
-            .filter_map(|(key, c)| {
+        let cells = observed
+            .iter()
+            .filter_map(|&(key, c)| {
                 let p = c.ev.water_probability(&cfg.fusion) as f32;
                 if let Some(&(z, depth)) = water.get(&key) {
                     let hazard = if depth.is_finite() && depth as f64 <= v.fording_depth_m {
@@ -343,7 +356,7 @@ impl HazardMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::{CellStats, Evidence};
+    use crate::grid::Evidence;
 
     #[test]
     fn water_evidence_reaches_the_map() {

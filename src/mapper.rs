@@ -644,12 +644,21 @@ impl Mapper {
     /// The hazard map of the current window. Water bodies keep the ids of the previous
     /// snapshot's bodies they grew from.
     fn window_map(&self) -> Result<HazardMap> {
-        let mut t = TileMap::new(self.cfg.grid.resolution, self.cfg.grid.z_ref)?;
-        if let Some(g) = &self.grid {
-            t.absorb_window(g)?;
-        }
+        let geometry = TileMap::new(self.cfg.grid.resolution, self.cfg.grid.z_ref)?;
+        // In the order a tile map holds them: a snapshot lists its cells as the map of the
+        // same cells built offline does.
+        let cells: Vec<_> = self
+            .grid
+            .iter()
+            .flat_map(|g| g.observed_by_tile())
+            .collect();
         let previous = self.snapshots.latest();
-        HazardMap::from_tiles_after(&t, &self.cfg.hazard_config(), &previous.bodies)
+        HazardMap::from_cells_after(
+            &geometry,
+            cells,
+            &self.cfg.hazard_config(),
+            &previous.bodies,
+        )
     }
 
     /// The hazard map of a tile map under this mapper's fusion, water and vehicle settings.

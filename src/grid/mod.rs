@@ -369,6 +369,28 @@ impl RollingGrid {
         })
     }
 
+    /// Every in-window cell that holds data, in the order of [`TileMap::observed`] (tile by
+    /// tile, row by row within a tile): the window's cells listed as a tile map of them would
+    /// list them, without building one.
+    pub fn observed_by_tile(&self) -> impl Iterator<Item = (CellKey, CellStats)> + '_ {
+        let t = tiles::TILE_CELLS;
+        let n = self.n as i64;
+        let (x0, y0) = (self.origin.x, self.origin.y);
+        let (x1, y1) = (x0 + n, y0 + n);
+        let ty = y0.div_euclid(t)..=(y1 - 1).div_euclid(t);
+        (x0.div_euclid(t)..=(x1 - 1).div_euclid(t))
+            .flat_map(move |tx| ty.clone().map(move |ty| (tx, ty)))
+            .flat_map(move |(tx, ty)| {
+                ((ty * t).max(y0)..(ty * t + t).min(y1)).flat_map(move |y| {
+                    ((tx * t).max(x0)..(tx * t + t).min(x1)).filter_map(move |x| {
+                        let k = CellKey::new(x, y);
+                        let i = self.index(k)?;
+                        (!self.layers.is_empty_at(i)).then(|| (k, self.layers.get(i)))
+                    })
+                })
+            })
+    }
+
     /// Number of cells holding data.
     pub fn observed_count(&self) -> usize {
         (0..self.n * self.n)

@@ -422,6 +422,14 @@ proptest! {
         // The same through the global tile maps, in either order.
         let mut ta = TileMap::for_grid(&ga);
         ta.absorb_window(&ga).unwrap();
+        // The window lists its cells in the tile map's order (the mapper's snapshots rely
+        // on it); also for a window that is not aligned with the tiles.
+        prop_assert_eq!(ga.observed_by_tile().collect::<Vec<_>>(), ta.observed().collect::<Vec<_>>());
+        let mut shifted = RollingGrid::new(GridConfig { size_cells: 100, ..GridConfig::default() }, 3.37, -2.11).unwrap();
+        shifted.ingest(&PointCloud::unorganized(a.clone()), &RangeNoise::LIDAR).unwrap();
+        let mut ts = TileMap::for_grid(&shifted);
+        ts.absorb_window(&shifted).unwrap();
+        prop_assert_eq!(shifted.observed_by_tile().collect::<Vec<_>>(), ts.observed().collect::<Vec<_>>());
         let mut tb = TileMap::for_grid(&gb);
         tb.absorb_window(&gb).unwrap();
         let mut tab = TileMap::for_grid(&gab);

@@ -100,7 +100,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::grid::{CellKey, Fusion, TileMap};
+use crate::grid::{CellKey, CellStats, Fusion, TileMap};
 
 pub use surface::{ShoreSample, Surface, SurfaceModel};
 
@@ -429,6 +429,18 @@ pub fn find_bodies(
     cfg: &HazardConfig,
     previous: &[WaterBody],
 ) -> Result<Vec<WaterBody>> {
+    let observed: Vec<(CellKey, CellStats)> = tiles.observed().collect();
+    find_bodies_among(tiles, &observed, cfg, previous)
+}
+
+/// [`find_bodies`] given the tile map's observed cells, collected once by a caller that
+/// reads them again (a scan of the tiles reads every cell slot, observed or not).
+pub(crate) fn find_bodies_among(
+    tiles: &TileMap,
+    observed: &[(CellKey, CellStats)],
+    cfg: &HazardConfig,
+    previous: &[WaterBody],
+) -> Result<Vec<WaterBody>> {
     cfg.validate()?;
     let res = tiles.resolution();
     // Only the neighbourhood of possible water matters: the cells a body can grow over
@@ -440,9 +452,9 @@ pub fn find_bodies(
     let b = 2 * n + 2;
     let block = |k: CellKey| (k.x.div_euclid(b), k.y.div_euclid(b));
     let mut near: HashSet<(i64, i64)> = HashSet::new();
-    for (k, c) in tiles.observed() {
+    for (k, c) in observed {
         if c.ev.water_probability(&cfg.fusion) >= cfg.water.p_low {
-            let (bx, by) = block(k);
+            let (bx, by) = block(*k);
             for dx in -1..=1 {
                 for dy in -1..=1 {
                     near.insert((bx + dx, by + dy));
@@ -450,10 +462,10 @@ pub fn find_bodies(
             }
         }
     }
-    let info: BTreeMap<CellKey, Info> = tiles
-        .observed()
+    let info: BTreeMap<CellKey, Info> = observed
+        .iter()
         .filter(|(k, _)| near.contains(&block(*k)))
-        .map(|(k, c)| {
+        .map(|&(k, c)| {
             (
                 k,
                 Info {
