@@ -133,6 +133,67 @@ pub struct HazardMap {
     pub bodies: Vec<WaterBody>,
 }
 
+/// Elevation and its σ of the dry cells, looked up by key: a dense array over the cells'
+/// bounding box when that is at most four times the cells (a window), else a hash map (a
+/// sparse global map). The step and slope test asks nine cells per cell.
+enum DryCells {
+    Dense {
+        lo: CellKey,
+        width: i64,
+        height: i64,
+        /// NaN elevation: not a dry cell.
+        cells: Vec<(f64, f64)>,
+    },
+    Sparse(CellMap<(f64, f64)>),
+}
+
+impl DryCells {
+    fn new(dry: Vec<(CellKey, (f64, f64))>) -> Self {
+        let Some(&(first, _)) = dry.first() else {
+            return DryCells::Sparse(CellMap::default());
+        };
+        let (lo, hi) = dry.iter().fold((first, first), |(lo, hi), (k, _)| {
+            (
+                CellKey::new(lo.x.min(k.x), lo.y.min(k.y)),
+                CellKey::new(hi.x.max(k.x), hi.y.max(k.y)),
+            )
+        });
+        let (width, height) = (hi.x - lo.x + 1, hi.y - lo.y + 1);
+        if width.saturating_mul(height) > 4 * dry.len() as i64 {
+            return DryCells::Sparse(dry.into_iter().collect());
+        }
+        let mut cells = vec![(f64::NAN, 0.0); (width * height) as usize];
+        for (k, v) in dry {
+            cells[((k.y - lo.y) * width + (k.x - lo.x)) as usize] = v;
+        }
+        DryCells::Dense {
+            lo,
+            width,
+            height,
+            cells,
+        }
+    }
+
+    fn get(&self, k: CellKey) -> Option<(f64, f64)> {
+        match self {
+            DryCells::Dense {
+                lo,
+                width,
+                height,
+                cells,
+            } => {
+                let (x, y) = (k.x - lo.x, k.y - lo.y);
+                if x < 0 || y < 0 || x >= *width || y >= *height {
+                    return None;
+                }
+                let v = cells[(y * width + x) as usize];
+                (!v.0.is_nan()).then_some(v)
+            }
+            DryCells::Sparse(m) => m.get(&k).copied(),
+        }
+    }
+}
+
 /// Class and hazard of a dry cell at `key` with elevation `z` ± `sz` from its dry
 /// 8-neighbours: the upper side of a step higher than `max_step` is an obstacle (class and
 /// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
@@ -141,7 +202,7 @@ pub struct HazardMap {
 /// standard deviations of that difference, so far cells seen by a few noisy stereo points
 /// do not turn into obstacles.
 fn terrain_hazard(
-    dry: &CellMap<(f64, f64)>,
+    dry: &DryCells,
     key: CellKey,
     (z, sz): (f64, f64),
     res: f64,
@@ -151,7 +212,7 @@ fn terrain_hazard(
     let (mut step, mut gx, mut gy, mut wx, mut wy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
     for dy in -1i64..=1 {
         for dx in -1i64..=1 {
-            let Some(&(zn, sn)) = dry.get(&CellKey::new(key.x + dx, key.y + dy)) else {
+            let Some((zn, sn)) = dry.get(CellKey::new(key.x + dx, key.y + dy)) else {
                 continue;
             };
             let d = zn - z;
@@ -275,14 +336,16 @@ impl HazardMap {
             }
         }
         // Dry terrain for the step and slope tests.
-        let dry: CellMap<(f64, f64)> = observed
-            .iter()
-            .filter(|(k, _)| !water.contains_key(k))
-            .filter_map(|&(k, c)| {
-                let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
-                Some((k, (tiles.elevation(&c)?, sz)))
-            })
-            .collect();
+        let dry = DryCells::new(
+            observed
+                .iter()
+                .filter(|(k, _)| !water.contains_key(k))
+                .filter_map(|&(k, c)| {
+                    let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
+                    Some((k, (tiles.elevation(&c)?, sz)))
+                })
+                .collect(),
+        );
         let v = &cfg.vehicle;
         let max_grad = v.max_slope_deg.to_radians().tan();
         let cells = observed
@@ -306,7 +369,7 @@ impl HazardMap {
                         hazard,
                     ));
                 }
-                let Some(&(z, sz)) = dry.get(&key) else {
+                let Some((z, sz)) = dry.get(key) else {
                     // Observed through water evidence only, not water: its level, if any.
                     let z = c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3)?;
                     return Some(MapCell::of(
@@ -357,6 +420,30 @@ impl HazardMap {
 mod tests {
     use super::*;
     use crate::grid::Evidence;
+
+    #[test]
+    fn dry_cells_dense_and_sparse_answer_alike() {
+        // A compact patch (dense array) and the same patch plus a cell far away (hash map).
+        let patch: Vec<(CellKey, (f64, f64))> = (0..20)
+            .flat_map(|x| (0..10).map(move |y| (CellKey::new(x - 7, y + 3), (x as f64, y as f64))))
+            .filter(|(k, _)| (k.x + k.y) % 7 != 0)
+            .collect();
+        let mut far = patch.clone();
+        far.push((CellKey::new(1_000_000, -5), (1.0, 2.0)));
+        let (dense, sparse) = (DryCells::new(patch.clone()), DryCells::new(far));
+        assert!(matches!(dense, DryCells::Dense { .. }));
+        assert!(matches!(sparse, DryCells::Sparse(_)));
+        let truth: HashMap<CellKey, (f64, f64)> = patch.into_iter().collect();
+        for x in -10..16 {
+            for y in 0..16 {
+                let k = CellKey::new(x, y);
+                assert_eq!(dense.get(k), truth.get(&k).copied());
+                assert_eq!(sparse.get(k), truth.get(&k).copied());
+            }
+        }
+        assert_eq!(sparse.get(CellKey::new(1_000_000, -5)), Some((1.0, 2.0)));
+        assert_eq!(DryCells::new(Vec::new()).get(CellKey::new(0, 0)), None);
+    }
 
     #[test]
     fn water_evidence_reaches_the_map() {
