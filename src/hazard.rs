@@ -315,15 +315,15 @@ impl HazardMap {
     }
 
     /// [`HazardMap::from_tiles_after`] of the cells `observed` (unique keys, in the order the
-    /// map's cells should have); `geometry` gives only the resolution and reference height.
-    /// The mapper's window snapshot takes this path, skipping the copy into tiles.
+    /// map's cells should have); of `tiles` only the resolution and reference height are
+    /// read. The mapper's window snapshot takes this path with an empty tile map, skipping
+    /// the copy of the window into tiles.
     pub(crate) fn from_cells_after(
-        geometry: &TileMap,
+        tiles: &TileMap,
         observed: Vec<(CellKey, CellStats)>,
         cfg: &HazardConfig,
         previous: &[WaterBody],
     ) -> Result<Self> {
-        let tiles = geometry;
         let bodies = find_bodies_among(tiles, &observed, cfg, previous)?;
         let res = tiles.resolution();
         // Water cells: surface z and depth from their body.

@@ -7,8 +7,9 @@
 //! increasing lookahead, keeping the *local ground level*: the last return within
 //! `below_gate_m`/`above_gate_m` of the ground expected there, starting from the sensor
 //! height. The expected ground continues the level with the slope of the last ground
-//! returns (averaged, clamped to `max_ground_slope`): a vehicle on a 3 % slope sees the
-//! ground behind it fall 0.8 m over 27 m, which a flat level took for the bottom of water.
+//! returns when it falls (least squares over 3 m, clamped to `max_ground_slope`): a
+//! vehicle on a 3 % slope sees the ground behind it fall 0.8 m over 27 m, which a flat
+//! level took for the bottom of water.
 //! The water cues below still use the flat level: water lies level. Then:
 //!
 //! * a **missing** beam is cast against the level; if it meets it at a lookahead inside
@@ -105,9 +106,10 @@ pub struct LidarCueConfig {
     /// counted as unexplained and give no evidence.
     pub specular_min_depth_m: f64,
     /// Steepest ground slope (rise over run) the local ground level follows along a scan
-    /// line. The level is extrapolated with the slope of the last two ground returns,
-    /// clamped to this, so dry ground falling away gently (a road downhill) is not taken
-    /// for the bottom of water; water lies level, so its bottom returns still fall below.
+    /// line. A falling level is extrapolated with the least-squares slope of the last 3 m
+    /// of ground returns, clamped to this, so dry ground falling away gently (a road
+    /// downhill) is not taken for the bottom of water; water lies level, so its bottom
+    /// returns still fall below.
     pub max_ground_slope: f64,
 }
 

@@ -154,6 +154,11 @@ fn check(what: &str, ok: bool, v: impl std::fmt::Display, must: &str) -> Result<
 }
 
 impl WaterConfig {
+    /// `shore_radius_m` in whole cells of size `resolution` (at least 1).
+    fn shore_radius_cells(&self, resolution: f64) -> i64 {
+        (self.shore_radius_m / resolution).ceil().max(1.0) as i64
+    }
+
     pub fn validate(&self) -> Result<()> {
         let prob = |p: f64| p > 0.0 && p < 1.0;
         check(
@@ -448,12 +453,15 @@ pub(crate) fn find_bodies_among(
     // 2n + 1 cells of a body cell for n = ⌈shore_radius / resolution⌉. So only cells in
     // blocks of 2n + 2 cells next to such a cell's block are looked at (most of a map is
     // dry and far from water: every frame, this skips an ordered map of all of it).
-    let n = (cfg.water.shore_radius_m / res).ceil().max(1.0) as i64;
-    let b = 2 * n + 2;
+    let b = 2 * cfg.water.shore_radius_cells(res) + 2;
     let block = |k: CellKey| (k.x.div_euclid(b), k.y.div_euclid(b));
+    let p: Vec<f64> = observed
+        .iter()
+        .map(|(_, c)| c.ev.water_probability(&cfg.fusion))
+        .collect();
     let mut near: HashSet<(i64, i64)> = HashSet::new();
-    for (k, c) in observed {
-        if c.ev.water_probability(&cfg.fusion) >= cfg.water.p_low {
+    for ((k, _), &p) in observed.iter().zip(&p) {
+        if p >= cfg.water.p_low {
             let (bx, by) = block(*k);
             for dx in -1..=1 {
                 for dy in -1..=1 {
@@ -464,12 +472,13 @@ pub(crate) fn find_bodies_among(
     }
     let info: BTreeMap<CellKey, Info> = observed
         .iter()
-        .filter(|(k, _)| near.contains(&block(*k)))
-        .map(|&(k, c)| {
+        .zip(p)
+        .filter(|((k, _), _)| near.contains(&block(*k)))
+        .map(|(&(k, c), p)| {
             (
                 k,
                 Info {
-                    p: c.ev.water_probability(&cfg.fusion),
+                    p,
                     elevation: tiles.elevation(&c),
                     std: c.elevation_std_m().filter(|s| s.is_finite()),
                     level: c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3),
@@ -681,7 +690,7 @@ fn ground_near(
     tiles: &TileMap,
     cfg: &WaterConfig,
 ) -> Vec<surface::ShoreSample> {
-    let n = (cfg.shore_radius_m / tiles.resolution()).ceil().max(1.0) as i64;
+    let n = cfg.shore_radius_cells(tiles.resolution());
     let blocks: BTreeSet<(i64, i64)> = shore
         .iter()
         .flat_map(|k| {
@@ -695,12 +704,11 @@ fn ground_near(
         for x in bx * n..(bx + 1) * n {
             let rows = info.range(CellKey { x, y: by * n }..CellKey { x, y: (by + 1) * n });
             for (&k, i) in rows {
+                let Some(z) = i.elevation else { continue };
                 let reliable = i.std.is_some_and(|s| s <= cfg.shore_max_std_m);
-                if let (true, true, Some(z)) = (reliable, i.p < cfg.p_low, i.elevation) {
-                    if !body.contains(&k) && !shore.contains(&k) {
-                        let (x, y) = tiles.centre_of(k);
-                        out.push(surface::ShoreSample { x, y, z });
-                    }
+                if reliable && i.p < cfg.p_low && !body.contains(&k) && !shore.contains(&k) {
+                    let (x, y) = tiles.centre_of(k);
+                    out.push(surface::ShoreSample { x, y, z });
                 }
             }
         }
