@@ -315,6 +315,52 @@ fn hysteresis_seeds_and_grows() {
     assert!(HazardMap::from_tiles(&t, &big).unwrap().bodies.is_empty());
 }
 
+/// A pond whose outer ring the lidar saw only through single bottom returns (p ≈ 0.3, the
+/// bed's elevation in the cell): the ring joins the body and is never its shore, so the
+/// level comes from the dry bank beyond it, not from the bed. A bottom return far from any
+/// body stays dry.
+#[test]
+fn bottom_return_cells_join_a_body_and_are_not_its_shore() {
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    let bed = |d: f64| {
+        let mut c = dry(-0.3);
+        c.ev.add_depth(d);
+        c
+    };
+    let mut ring = 0;
+    for ky in -40..40 {
+        for kx in -40..40 {
+            let k = CellKey::new(kx, ky);
+            let (x, y) = t.centre_of(k);
+            let rho = x.hypot(y);
+            if rho < 1.5 {
+                t.add(k, &wet(0.0, None));
+            } else if rho < 2.5 {
+                t.add(k, &bed(0.3));
+                ring += 1;
+            } else {
+                t.add(k, &dry(0.3 * (rho - 2.5)));
+            }
+        }
+    }
+    let lone = CellKey::new(35, 35);
+    t.add(lone, &bed(0.3));
+    let fusion = HazardConfig::default().fusion;
+    let p = bed(0.3).ev.water_probability(&fusion);
+    assert!(p < WaterConfig::default().p_low, "{p}");
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    let wet_n = b.cells.len() - ring;
+    assert!(wet_n > 0 && b.cells.len() > ring, "{} cells", b.cells.len());
+    let SurfaceModel::Level { z } = b.surface else {
+        panic!("{:?}", b.surface.name())
+    };
+    // The bank's cells start 0–1 cell beyond the ring at a 30 % slope: ≤ 3 cm above 0.
+    assert!((0.0..0.03).contains(&z), "level {z}");
+    assert!(!b.cells.contains(&lone));
+}
+
 #[test]
 fn holes_and_islands_are_kept() {
     // An annulus of water around a dry island.
