@@ -389,6 +389,8 @@ pub struct LogBuildReport {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct CueCounts {
     pub lidar_noret: u64,
+    /// Nearest and farthest lookahead of the no-return beams' ground hits (mm).
+    pub lidar_noret_lookahead_mm: Option<[u64; 2]>,
     pub lidar_diag_ret: u64,
     pub lidar_bottom: u64,
     pub lidar_specular: u64,
@@ -403,6 +405,10 @@ impl CueCounts {
     fn add(&mut self, r: &crate::cues::FrameCuesReport) {
         if let Some(l) = &r.lidar {
             self.lidar_noret += l.noret;
+            if let Some([lo, hi]) = l.noret_lookahead_mm {
+                let [a, b] = self.lidar_noret_lookahead_mm.unwrap_or([lo, hi]);
+                self.lidar_noret_lookahead_mm = Some([a.min(lo), b.max(hi)]);
+            }
             self.lidar_diag_ret += l.diag_ret;
             self.lidar_bottom += l.bottom;
             self.lidar_specular += l.specular;

@@ -52,4 +52,14 @@ for scene in scenes:
               f"{f(a['false_positive_rate'], 4)} | {a['false_water']} of {a['dry_cells']} | {a['sunk_cells']} | "
               f"{f(a['surface_rms_m'])} | {f(a['depth_rms_m'])} | {a['depth_cells']} | {f(a['terrain_rms_m'])} | "
               f"{b['cue_counts']['evidence_cells']} | {b['x_realtime']:.1} |")
+    # Where the no-return beams met the ground, against the optics' interval.
+    p = os.path.join(out, scene, "lidar.build.json")
+    if os.path.exists(p):
+        b = json.load(open(p))
+        c, iv = b["cue_counts"], b.get("diagnostic_interval_m")
+        lk = c.get("lidar_noret_lookahead_mm")
+        where = "–" if lk is None else f"{lk[0] / 1000:.2f}–{lk[1] / 1000:.2f} m"
+        ivs = "none" if iv is None else f"[{iv[0]:.2f}, {iv[1]:.2f}] m"
+        print(f"\nNo-return beams (lidar alone): {c['lidar_noret']}, meeting the ground at a lookahead of "
+              f"{where}; the optics' diagnostic interval for this rig is {ivs}.")
 PY

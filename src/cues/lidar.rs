@@ -158,6 +158,9 @@ pub struct LidarCueStats {
     pub missing_cast: u64,
     /// Missing beams meeting the ground inside the diagnostic interval.
     pub noret: u64,
+    /// Nearest and farthest lookahead of those beams' ground hits (mm): they lie inside the
+    /// interval by construction, and this shows where in it.
+    pub noret_lookahead_mm: Option<[u64; 2]>,
     /// Ground returns inside the diagnostic interval.
     pub diag_ret: u64,
     pub bottom: u64,
@@ -336,9 +339,12 @@ impl LidarCueModel {
             match *e {
                 Event::MissingCast => stats.missing_cast += 1,
                 Event::Unexplained => stats.unexplained += 1,
-                Event::NoRet { x, y, level } => {
+                Event::NoRet { x, y, level, d } => {
                     stats.missing_cast += 1;
                     stats.noret += 1;
+                    let mm = (d * 1000.0).round() as u64;
+                    let [lo, hi] = stats.noret_lookahead_mm.unwrap_or([mm, mm]);
+                    stats.noret_lookahead_mm = Some([lo.min(mm), hi.max(mm)]);
                     ev.add_with_level(x, y, level, |e| e.noret = e.noret.saturating_add(1));
                 }
                 Event::Ground {
@@ -513,6 +519,7 @@ impl LidarCueModel {
                         x: hit.x,
                         y: hit.y,
                         level,
+                        d,
                     });
                 } else {
                     out.push(Event::MissingCast);
@@ -532,6 +539,8 @@ enum Event {
         x: f64,
         y: f64,
         level: f64,
+        /// Lookahead of the ground hit (m).
+        d: f64,
     },
     Ground {
         slot: usize,

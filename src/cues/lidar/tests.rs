@@ -145,6 +145,12 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
         out.stats.noret
     );
     assert_eq!(out.stats.noret as usize, expected.len());
+    // The reported lookahead range is that of the diagnostic beams (to the millimetre).
+    let lo = expected.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = expected.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let [rlo, rhi] = out.stats.noret_lookahead_mm.unwrap();
+    assert!((rlo as f64 * 1e-3 - lo).abs() < 2e-3 && (rhi as f64 * 1e-3 - hi).abs() < 2e-3);
+    assert!(rlo as f64 * 1e-3 >= start - 1e-3 && rhi as f64 * 1e-3 <= end + 1e-3);
     // The same scan published one beam per row (as the simulator and a SICK driver do),
     // with no beam model: the directions of the missing beams come from the line through
     // the returned ones, and the no-returns are the same.
