@@ -13,7 +13,7 @@
 //! - terrain error: RMS of map z − true terrain over true dry ground (ground or snow/ice
 //!   cells, not objects) the map does not call water.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use serde::Serialize;
@@ -21,7 +21,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::grid::CellKey;
 use crate::hazard::{Class, HazardMap, MapCell};
-use crate::sim::TruthInfo;
+use crate::sim::{ColourView, TruthInfo};
 
 /// Upper edges of the range bins (m); the last bin is open.
 pub const BIN_EDGES: [f64; 4] = [5.0, 10.0, 20.0, 30.0];
@@ -95,7 +95,6 @@ impl Acc {
     }
 
     fn finish(mut self) -> BinMetrics {
-        let ratio = |a: usize, b: usize| (b > 0).then(|| a as f64 / b as f64);
         let rms = |s: f64, n: usize| (n > 0).then(|| (s / n as f64).sqrt());
         self.m.water_recall = ratio(self.m.water_detected, self.m.water_cells);
         self.m.false_positive_rate = ratio(self.m.false_water, self.m.dry_cells);
@@ -106,6 +105,10 @@ impl Acc {
     }
 }
 
+fn ratio(a: usize, b: usize) -> Option<f64> {
+    (b > 0).then(|| a as f64 / b as f64)
+}
+
 /// What `tarn eval` reports.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EvalReport {
@@ -114,6 +117,56 @@ pub struct EvalReport {
     pub truth_resolution: f64,
     pub bins: Vec<BinMetrics>,
     pub all: BinMetrics,
+    /// Water recall split by what the colour camera saw of each water cell (all ranges),
+    /// when the truth records it ([`crate::sim::ColourView`]).
+    pub colour_view: Option<ColourViewRecall>,
+}
+
+/// Observed true-water map cells and those called water, by what the colour camera saw of
+/// their truth cell: a sky reflection in some frame, only terrain reflections, or nothing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct ColourViewRecall {
+    pub sky: ViewCount,
+    pub terrain: ViewCount,
+    pub unseen: ViewCount,
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct ViewCount {
+    pub water_cells: usize,
+    pub water_detected: usize,
+    pub recall: Option<f64>,
+}
+
+impl ViewCount {
+    fn add(&mut self, called: bool) {
+        self.water_cells += 1;
+        self.water_detected += usize::from(called);
+        self.recall = ratio(self.water_detected, self.water_cells);
+    }
+}
+
+impl ColourViewRecall {
+    fn of(map: &HazardMap, index: &HashMap<CellKey, &MapCell>, res: f64, v: &ColourView) -> Self {
+        let sky: HashSet<[i64; 2]> = v.sky.iter().copied().collect();
+        let terrain: HashSet<[i64; 2]> = v.terrain.iter().copied().collect();
+        let mut r = ColourViewRecall::default();
+        for c in &map.cells {
+            let k = [(c.x / res).floor() as i64, (c.y / res).floor() as i64];
+            if index
+                .get(&CellKey::new(k[0], k[1]))
+                .is_some_and(|t| t.class == Class::Water)
+            {
+                let called = c.class == Class::Water;
+                match (sky.contains(&k), terrain.contains(&k)) {
+                    (true, _) => r.sky.add(called),
+                    (false, true) => r.terrain.add(called),
+                    _ => r.unseen.add(called),
+                }
+            }
+        }
+        r
+    }
 }
 
 impl EvalReport {
@@ -224,6 +277,10 @@ pub fn evaluate(map: &HazardMap, truth: &HazardMap, info: &TruthInfo) -> Result<
             m.range = "all".into();
             m
         },
+        colour_view: info
+            .colour_view
+            .as_ref()
+            .map(|v| ColourViewRecall::of(map, &index, res, v)),
     })
 }
 
@@ -339,7 +396,27 @@ mod tests {
             water_bodies: Vec::new(),
             class_counts: [0; 6],
             topics: Vec::new(),
+            colour_view: None,
         };
+        // Recall by what the camera saw: cell 12 seen as sky, 13 (water too) only as
+        // terrain, 14 never; the map calls 12 and 14 water.
+        let mut t2 = truth.clone();
+        t2.cells[13].class = Class::Water;
+        t2.cells[14].class = Class::Water;
+        let mut m2 = t2.clone();
+        m2.cells[13].class = Class::Ground;
+        let info2 = TruthInfo {
+            colour_view: Some(ColourView {
+                sky: vec![[12, 0], [30, 0]],
+                terrain: vec![[13, 0]],
+            }),
+            ..info.clone()
+        };
+        let v = evaluate(&m2, &t2, &info2).unwrap().colour_view.unwrap();
+        assert_eq!((v.sky.water_cells, v.sky.water_detected), (1, 1));
+        assert_eq!((v.terrain.water_cells, v.terrain.recall), (1, Some(0.0)));
+        assert_eq!((v.unseen.water_cells, v.unseen.water_detected), (1, 1));
+        assert!(evaluate(&m2, &t2, &info).unwrap().colour_view.is_none());
         let b = evaluate_band(&map, &truth, &info, 5.0, 25.0).unwrap();
         // Cells 5..=24 have centres at 5.5..24.5 m.
         assert_eq!(b.observed_cells, 20);

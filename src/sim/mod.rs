@@ -26,12 +26,12 @@ use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 pub use render::{
-    body_to_optical, mount, pinhole, radiance, render_image, sun, Band, Lidar, LidarReturn, Light,
-    Radiance, Stereo, N_WATER,
+    body_to_optical, mount, pinhole, radiance, render_image, sun, water_views, Band, Lidar,
+    LidarReturn, Light, Radiance, Stereo, N_WATER,
 };
 pub use rng::{hash, normal, unit_f64};
 pub use scene::*;
-pub use truth::{truth_map, water_stats, TruthInfo, TruthPose, TruthWater};
+pub use truth::{truth_map, water_stats, ColourView, TruthInfo, TruthPose, TruthWater};
 pub use world::{Hit, Material, Surface, Terrain, WaterBody, World};
 
 use crate::error::{Error, Result};
@@ -254,6 +254,10 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         ns0,
     )?;
     let (mut render_s, mut write_s) = (0.0, 0.0);
+    // Per truth cell of water the colour camera saw: (frames' pixels reflecting sky,
+    // reflecting terrain). A BTreeMap: the lists come out in key order.
+    let mut views: std::collections::BTreeMap<[i64; 2], (u32, u32)> = Default::default();
+    let tres = scene.truth_resolution;
     for (fi, p) in poses.iter().enumerate() {
         let base = pose_of(p);
         let ns = stamp_ns(p.stamp) as u64;
@@ -291,6 +295,16 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
                 f,
                 opts.noise,
             );
+            for (x, y, sky) in water_views(&w, &s.camera, &opt, s.spec.max_range_m) {
+                let v = views
+                    .entry([(x / tres).floor() as i64, (y / tres).floor() as i64])
+                    .or_default();
+                if sky {
+                    v.0 += 1;
+                } else {
+                    v.1 += 1;
+                }
+            }
             render_s += tr.elapsed().as_secs_f64();
             rep.stereo_rays += cloud.len() as u64;
             rep.stereo_points += cloud.valid_count() as u64;
@@ -379,6 +393,10 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         water_bodies: water_stats(&w, &truth),
         class_counts: counts,
         topics,
+        colour_view: stereo.is_some().then(|| ColourView {
+            sky: views.iter().filter(|v| v.1 .0 > 0).map(|v| *v.0).collect(),
+            terrain: views.iter().filter(|v| v.1 .0 == 0).map(|v| *v.0).collect(),
+        }),
     };
     crate::io::export::write_json(&out_dir.join("truth.json"), &info)?;
     let mcfg = mapper_config(scene).to_toml()?;

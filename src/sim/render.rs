@@ -428,6 +428,34 @@ pub fn radiance(w: &World, light: &Light, o: &Point3<f64>, d: &Vector3<f64>, max
     }
 }
 
+/// What a camera shows of the water: for every pixel whose ray meets water first, the
+/// hit's map (x, y) and whether the water there reflects the sky (`true`) or terrain and
+/// objects (`false`), by the same one-bounce reflection [`radiance`] renders. Truth for the
+/// colour cue, which can see sky reflections only (paper §2.1, §2.3).
+pub fn water_views(
+    w: &World,
+    camera: &CameraModel,
+    optical_to_map: &Pose,
+    max: f64,
+) -> Vec<(f64, f64, bool)> {
+    let o: Point3<f64> = optical_to_map.translation.vector.into();
+    (0..camera.width * camera.height)
+        .into_par_iter()
+        .filter_map(|i| {
+            let ray = camera.pixel_ray((i % camera.width) as f64, (i / camera.width) as f64)?;
+            let d = optical_to_map.rotation * ray.normalize();
+            let hit = w.cast(&o, &d, max)?;
+            let Surface::Water { body } = hit.surface else {
+                return None;
+            };
+            let n = w.water_normal(body, &hit.point);
+            let r = d + n * (2.0 * (-d.dot(&n)).clamp(1e-6, 1.0));
+            let sky = r.z <= 0.0 || w.cast_solid(&(hit.point + r * EPS), &r, max).is_none();
+            Some((hit.point.x, hit.point.y, sky))
+        })
+        .collect()
+}
+
 /// The stereo pair: its left camera and where it sits.
 #[derive(Debug, Clone)]
 pub struct Stereo {

@@ -352,6 +352,49 @@ fn stereo_on_still_water_triangulates_the_mirror_image() {
     assert!(s.trace(&w2, &o, &d).is_none());
 }
 
+/// The colour camera's view of the water: pixels over the pond reflecting the building are
+/// terrain reflections, the rest sky; on still water that is exactly where stereo matches
+/// a reflection (its independent trace), and the building's reflection lies on the far
+/// part of the pond, towards it.
+#[test]
+fn water_views_split_sky_from_terrain_reflections() {
+    let w = world(0.5);
+    let s = Stereo::new(w.scene.rig.stereo.as_ref().unwrap()).unwrap();
+    let opt = s.optical_mount;
+    let views = water_views(&w, &s.camera, &opt, s.spec.max_range_m);
+    let (sky, terrain): (Vec<_>, Vec<_>) = views.iter().partition(|v| v.2);
+    assert!(
+        !sky.is_empty() && !terrain.is_empty(),
+        "{} sky, {} terrain",
+        sky.len(),
+        terrain.len()
+    );
+    let o: Point3<f64> = opt.translation.vector.into();
+    let mut checked = 0;
+    for i in 0..s.camera.width * s.camera.height {
+        let ray = s
+            .camera
+            .pixel_ray((i % s.camera.width) as f64, (i / s.camera.width) as f64)
+            .unwrap();
+        let d = opt.rotation * ray.normalize();
+        let Some(h) = w.cast(&o, &d, s.spec.max_range_m) else {
+            continue;
+        };
+        if !matches!(h.surface, crate::sim::world::Surface::Water { .. }) {
+            continue;
+        }
+        let v = views
+            .iter()
+            .find(|v| (v.0 - h.point.x).abs() < 1e-9 && (v.1 - h.point.y).abs() < 1e-9)
+            .unwrap();
+        assert_eq!(v.2, s.trace(&w, &o, &d).is_none(), "pixel {i}");
+        checked += 1;
+    }
+    assert_eq!(checked, views.len());
+    let mean_x = |v: &[&(f64, f64, bool)]| v.iter().map(|p| p.0).sum::<f64>() / v.len() as f64;
+    assert!(mean_x(&terrain) > mean_x(&sky));
+}
+
 #[test]
 fn truth_marks_the_pond_with_its_depth() {
     let w = world(0.5);

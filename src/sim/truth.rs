@@ -55,6 +55,19 @@ pub struct TruthInfo {
     pub class_counts: [usize; 6],
     /// Sensors the log carries, by topic.
     pub topics: Vec<String>,
+    /// What the colour camera saw of the water over the whole log, when the rig has one.
+    #[serde(default)]
+    pub colour_view: Option<ColourView>,
+}
+
+/// Truth cells of water (keys at `resolution`) as the colour camera saw them: in some frame
+/// reflecting the sky (what a colour classifier can call water), or only ever reflecting
+/// terrain and objects (paper §2.3: hard to recognise by colour alone). Water cells in
+/// neither list were never seen by the camera (hidden behind a bank, out of view).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ColourView {
+    pub sky: Vec<[i64; 2]>,
+    pub terrain: Vec<[i64; 2]>,
 }
 
 /// The truth raster over every whole cell of the terrain: z is the terrain elevation, or
