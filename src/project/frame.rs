@@ -417,12 +417,16 @@ impl FrameLabels {
                                 }
                             }
                         }
-                        match map_rays[i].and_then(|d| surface.cast(&origin, &d, max_range)) {
-                            Some((p, _)) => {
+                        match map_rays[i].and_then(|d| surface.cast_into(&origin, &d, max_range)) {
+                            // Only water is placed where the ray crosses a hole's rim level:
+                            // whatever else a pixel there shows (a bank the map has not
+                            // seen, terrain reflected in the water) is not at that level,
+                            // and its vote would land on the water.
+                            Some((p, _, over_hole)) if water || !over_hole => {
                                 n[1] += 1;
                                 Some((p, water))
                             }
-                            None => {
+                            _ => {
                                 n[2] += 1;
                                 None
                             }

@@ -111,6 +111,19 @@ impl GridSurface {
         dir: &Vector3<f64>,
         max_range: f64,
     ) -> Option<(Point3<f64>, usize)> {
+        self.cast_into(origin, dir, max_range)
+            .map(|(p, i, _)| (p, i))
+    }
+
+    /// [`GridSurface::cast`], also saying whether the hit is where the ray crosses a
+    /// hole's rim level (`true`: no observed surface was met there; the hit is where water
+    /// in the hole would be) rather than observed terrain.
+    pub fn cast_into(
+        &self,
+        origin: &Point3<f64>,
+        dir: &Vector3<f64>,
+        max_range: f64,
+    ) -> Option<(Point3<f64>, usize, bool)> {
         let horiz = dir.xy().norm();
         if horiz.is_nan() || horiz <= 1e-9 || !origin.coords.iter().all(|v| v.is_finite()) {
             return None;
@@ -145,11 +158,11 @@ impl GridSurface {
                 let tl = (l - origin.z) / dir.z;
                 if dir.z < 0.0 && tl >= t0 && tl <= t {
                     let q = origin + dir * tl;
-                    return Some((q, self.index_of(q.x, q.y).unwrap_or(i)));
+                    return Some((q, self.index_of(q.x, q.y).unwrap_or(i), true));
                 }
             }
             if p.z <= z {
-                return Some((p, i));
+                return Some((p, i, false));
             }
             level = z;
         }
@@ -160,7 +173,7 @@ impl GridSurface {
                 let tl = (level - origin.z) / dir.z;
                 let q = origin + dir * tl;
                 let i = self.index_of(q.x, q.y)?;
-                (tl >= t0 && tl <= max_range && self.z[i].is_nan()).then_some((q, i))
+                (tl >= t0 && tl <= max_range && self.z[i].is_nan()).then_some((q, i, true))
             }
             _ => None,
         }
@@ -236,6 +249,10 @@ mod tests {
         let (p, i) = s.cast(&o, &d, 50.0).unwrap();
         assert!((p.x - 6.0).abs() < 1e-6 && p.z.abs() < 1e-9, "{p}");
         assert_eq!(Some(i), s.index_of(p.x, p.y));
+        // That hit is a hole crossing; one on the ground before the hole is not.
+        assert!(s.cast_into(&o, &d, 50.0).unwrap().2);
+        let d2 = Vector3::new(3.0, 0.0, -1.5).normalize();
+        assert!(!s.cast_into(&o, &d2, 50.0).unwrap().2);
         // A far rim lower than the near one sets the level: far bank at −0.3 m, aimed at
         // (7, −0.3): the hit is there, not where the ray passes z = 0 (x = 6).
         let (_, s3) =

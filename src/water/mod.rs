@@ -592,10 +592,11 @@ fn body_of(
         .copied()
         .filter(|n| info[n].std.is_some_and(|s| s <= cfg.shore_max_std_m))
         .collect();
-    let shore_keys: Vec<CellKey> = if reliable.len() >= cfg.min_shore_samples.max(1) {
-        reliable
-    } else {
+    let few_reliable = reliable.len() < cfg.min_shore_samples.max(1);
+    let shore_keys: Vec<CellKey> = if few_reliable {
         shore_keys.into_iter().collect()
+    } else {
+        reliable
     };
     let sample = |k: CellKey, z: f64| {
         let (x, y) = tiles.centre_of(k);
@@ -652,7 +653,18 @@ fn body_of(
             }
         }
     }
-    let fit = surface::fit(&samples, &constraints, cfg)?;
+    // Too few reliable shore cells: every shore cell counts, weighted by the inverse of its
+    // elevation variance, so that the reliable few still decide the level; samples of σ of
+    // metres make no surface, so the model is level.
+    let fit = if few_reliable && source == SurfaceSource::Shore {
+        let sigma: Vec<f64> = keys
+            .iter()
+            .map(|k| info[k].std.unwrap_or(f64::INFINITY))
+            .collect();
+        surface::weighted_level(&samples, &sigma)?
+    } else {
+        surface::fit(&samples, &constraints, cfg)?
+    };
     let cell_depth_m: Vec<f32> = cells
         .iter()
         .map(|k| info[k].depth.map_or(f32::NAN, |d| d as f32))

@@ -194,6 +194,52 @@ pub fn median(v: Vec<f64>) -> Option<f64> {
     quantile(v, 0.5)
 }
 
+/// Floor of a sample's elevation σ in [`weighted_level`] (m): a cell of a few returns may
+/// report σ ≈ 0, and no one cell should outweigh all others by orders of magnitude.
+const SIGMA_FLOOR_M: f64 = 0.01;
+
+/// A level at the weighted median of the samples' elevations, each weighted by
+/// 1 / max(σ, 1 cm)² (`sigma`, one per sample; non-finite σ weighs nothing unless no
+/// sample has a finite one), with the weighted RMS about it as the residual. `None` without
+/// a finite sample.
+pub fn weighted_level(samples: &[ShoreSample], sigma: &[f64]) -> Option<Fit> {
+    let mut v: Vec<(f64, f64)> = samples
+        .iter()
+        .zip(sigma)
+        .filter(|(s, _)| s.z.is_finite())
+        .map(|(s, &sd)| {
+            let w = if sd.is_finite() {
+                sd.max(SIGMA_FLOOR_M).powi(-2)
+            } else {
+                0.0
+            };
+            (s.z, w)
+        })
+        .collect();
+    if v.is_empty() {
+        return None;
+    }
+    if v.iter().all(|p| p.1 == 0.0) {
+        v.iter_mut().for_each(|p| p.1 = 1.0);
+    }
+    v.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|p| p.1).sum();
+    let mut acc = 0.0;
+    let z = v
+        .iter()
+        .find(|p| {
+            acc += p.1;
+            acc >= 0.5 * total
+        })
+        .map_or(v[v.len() - 1].0, |p| p.0);
+    let level_residual_m = (v.iter().map(|p| p.1 * (p.0 - z).powi(2)).sum::<f64>() / total).sqrt();
+    Some(Fit {
+        model: SurfaceModel::Level { z },
+        level_residual_m,
+        delaunay_residual_m: None,
+    })
+}
+
 /// Drops occluded shore samples: a sample more than `cfg.occluder_height_m` above the
 /// `cfg.shore_quantile` quantile of the elevations within `cfg.shore_radius_m` of it stands
 /// on something raised (a bush, a rock, a bank top seen past the edge). The elevations are
@@ -352,6 +398,29 @@ mod tests {
             fit(&[s(0.0, 0.0, 2.0)], &[], &cfg).unwrap().model,
             SurfaceModel::Level { z: 2.0 }
         );
+    }
+
+    /// One reliable shore cell (σ 2 cm) at the water's edge among eighteen stereo cells of
+    /// σ 2 m lifted 0.1–0.3 m by their noise: the reliable one sets the level. With no
+    /// finite σ at all, the plain median.
+    #[test]
+    fn weighted_level_follows_the_reliable_samples() {
+        let mut v = vec![s(0.0, 0.0, -0.35)];
+        let mut sd = vec![0.02];
+        for i in 0..18 {
+            v.push(s(i as f64, 1.0, -0.25 + 0.2 * (i % 7) as f64 / 6.0));
+            sd.push(2.0);
+        }
+        let f = weighted_level(&v, &sd).unwrap();
+        assert_eq!(f.model, SurfaceModel::Level { z: -0.35 });
+        assert!(f.level_residual_m < 0.02, "{}", f.level_residual_m);
+        let none = vec![f64::NAN; v.len()];
+        let m = median(v.iter().map(|p| p.z).collect()).unwrap();
+        assert_eq!(
+            weighted_level(&v, &none).unwrap().model,
+            SurfaceModel::Level { z: m }
+        );
+        assert!(weighted_level(&[], &[]).is_none());
     }
 
     #[test]
