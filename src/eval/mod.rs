@@ -180,6 +180,21 @@ impl EvalReport {
                 .all(|e| e.is_none_or(|e| e == 0.0))
     }
 
+    /// Water recall by what the colour camera saw, in one line (`None` without the truth).
+    pub fn colour_view_line(&self) -> Option<String> {
+        let v = self.colour_view.as_ref()?;
+        let f = |c: &ViewCount| {
+            let rec = c.recall.map_or("–".to_string(), |v| format!("{v:.3}"));
+            format!("{rec} ({} of {})", c.water_detected, c.water_cells)
+        };
+        Some(format!(
+            "water recall by what the colour camera saw: sky reflection {}, terrain reflection only {}, never seen {}",
+            f(&v.sky),
+            f(&v.terrain),
+            f(&v.unseen)
+        ))
+    }
+
     /// A Markdown table of the bins (for READMEs).
     pub fn markdown(&self) -> String {
         let f = |v: Option<f64>, d: usize| v.map_or("–".to_string(), |v| format!("{v:.d$}"));

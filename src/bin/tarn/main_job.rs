@@ -62,6 +62,9 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
     let e = tarn::eval::evaluate_dirs(out, &sim_dir)?;
     println!("tarn: accuracy against the truth (by distance from the vehicle's path)");
     print!("{}", e.markdown());
+    if let Some(l) = e.colour_view_line() {
+        println!("  {l}");
+    }
     println!(
         "  wrote map.ply terrain.ply water.ply map.png report.json into {}",
         out.display()

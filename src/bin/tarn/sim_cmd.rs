@@ -92,17 +92,8 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
             r.scene, r.map_resolution, r.truth_resolution
         );
         print!("{}", r.markdown());
-        if let Some(v) = &r.colour_view {
-            let f = |c: &tarn::eval::ViewCount| {
-                let rec = c.recall.map_or("–".to_string(), |v| format!("{v:.3}"));
-                format!("{rec} ({} of {})", c.water_detected, c.water_cells)
-            };
-            println!(
-                "water recall by what the colour camera saw: sky reflection {}, terrain reflection only {}, never seen {}",
-                f(&v.sky),
-                f(&v.terrain),
-                f(&v.unseen)
-            );
+        if let Some(l) = r.colour_view_line() {
+            println!("{l}");
         }
         if let Some(b) = &band {
             let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
