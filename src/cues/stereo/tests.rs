@@ -387,3 +387,67 @@ fn symmetry_gives_the_level_when_the_shore_is_a_bank_above_it() {
     let lv = out.evidence.total().level_mm().unwrap();
     assert!(lv.abs() < 30.0, "{lv} mm");
 }
+
+/// A pond whose near shore is a bank `bank` m above the water, reflecting only vertical
+/// planes (a building, a treeline): symmetry has nothing to pair that fixes the level, and
+/// the shore before each run is the bank top. The level must come from the waterline.
+fn bank_and_walls(bank: f64) -> World {
+    let mut w = pond_world();
+    w.bank = bank;
+    w.spheres.clear();
+    w
+}
+
+/// Checks a run of the cue on `w` (level 0): the waterline level, no evidence off the
+/// water, level samples at the water, corrected points at the truth and above the water.
+fn assert_waterline(w: &World, width: usize, height: usize) {
+    let r = render(w, width, height);
+    let out = stereo_reflections(&r.cloud, RES, 0.0, None, &StereoCueConfig::default()).unwrap();
+    assert!(out.runs >= 10, "{} runs", out.runs);
+    let wl = out.waterline_level.unwrap_or_else(|| {
+        panic!(
+            "no waterline level: {} runs, {} far shores",
+            out.runs, out.far_shores
+        )
+    });
+    assert!(
+        wl.abs() < 0.02,
+        "waterline level {wl} m (bank {} m)",
+        w.bank
+    );
+    for (k, e) in out.evidence.iter() {
+        let (x, _) = centre_of(RES, *k);
+        assert!(
+            e.reflect == 0 || (w.near - RES..=w.far + RES).contains(&x),
+            "evidence at x = {x} (bank {} m)",
+            w.bank
+        );
+    }
+    let lv = out.evidence.total().level_mm().unwrap();
+    assert!(lv.abs() < 20.0, "{lv} mm");
+    let mut worst: f64 = 0.0;
+    for (s, truth) in &r.truths {
+        if r.cloud.xyz[*s] != out.corrected.xyz[*s] {
+            let [x, y, z] = out.corrected.xyz[*s];
+            let p = out.corrected.frame_to_map * Point3::new(x as f64, y as f64, z as f64);
+            assert!(p.z >= -0.02, "a corrected point is below the water: {p}");
+            worst = worst.max((p - truth).norm());
+        }
+    }
+    assert!(worst < 0.05, "corrected points off by {worst} m");
+}
+
+#[test]
+fn the_waterline_gives_the_level_behind_a_bank_when_symmetry_cannot() {
+    // Before the waterline, this scene kept the bank's level: symmetry on walls stays where
+    // it starts (the shore), and the rays crossed it before the water, on the bank.
+    assert_waterline(&bank_and_walls(0.25), 320, 240);
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+    #[test]
+    fn waterline_level_for_any_bank_within_the_tolerance(bank in 0.06f64..0.3) {
+        assert_waterline(&bank_and_walls(bank), 160, 120);
+    }
+}
