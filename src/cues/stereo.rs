@@ -271,8 +271,10 @@ pub fn stereo_reflections(
             let mut sigma_g = 0.0;
             let mut run_min_h = f64::INFINITY;
             // A run is a reflection when it follows a gap and the terrain seen after it, up
-            // the column, is *nearer* than the run (range wraps backward: the virtual image
-            // lies beyond the far shore). With nothing after it, its own ranges must wrap.
+            // the column, is *nearer* than the run (by `gap_min_m` than its median distance:
+            // range wraps backward, the virtual image lies beyond the far shore; the bottom
+            // of a ditch lies before its far side). With nothing after it, its own ranges
+            // must wrap.
             let close = |run: &mut Vec<usize>,
                          gap: bool,
                          shore: (f64, f64),
@@ -287,8 +289,12 @@ pub fn stereo_reflections(
                 let hor = |s: usize| (pts[s].x - o.x).hypot(pts[s].y - o.y);
                 let wraps = match next {
                     Some((hn, _, _)) => {
-                        let min_h = slots.iter().map(|&s| hor(s)).fold(f64::INFINITY, f64::min);
-                        hn < min_h - cfg.gap_min_m
+                        // The run's distance is its median: its nearest point is the one
+                        // that range noise pulled nearest (σ ≈ 1 m at 20 m).
+                        let mut hs: Vec<f64> = slots.iter().map(|&s| hor(s)).collect();
+                        let m = hs.len() / 2;
+                        let mid = *hs.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1;
+                        hn < mid - cfg.gap_min_m
                     }
                     None => {
                         let steps = slots.len() - 1;
@@ -380,7 +386,7 @@ pub fn stereo_reflections(
             (runs, rejected_geometry)
         })
         .collect();
-    let rejected_geometry: usize = per_column.iter().map(|c| c.1).sum();
+    let mut rejected_geometry: usize = per_column.iter().map(|c| c.1).sum();
     let runs: Vec<Run> = per_column.into_iter().flat_map(|c| c.0).collect();
 
     // 2. Water level by symmetry (one-parameter ICP against the non-reflected points).
@@ -495,8 +501,25 @@ pub fn stereo_reflections(
             }
             _ => run.shore,
         };
-        let mirrored: Vec<Point3<f64>> = run
+        // A reflection lies below the water: points of the run that are not below the
+        // level by more than their vertical noise are terrain (a far shore lower than
+        // the near bank), not a virtual image.
+        let slots: Vec<usize> = run
             .slots
+            .iter()
+            .copied()
+            .filter(|&s| {
+                let p = pts[s];
+                let range = (p - o).norm();
+                let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
+                p.z < level - cfg.gate_min_m.max(cfg.gate_sigma * vertical)
+            })
+            .collect();
+        if slots.len() < cfg.min_run {
+            rejected_geometry += 1;
+            continue;
+        }
+        let mirrored: Vec<Point3<f64>> = slots
             .iter()
             .map(|&s| Point3::new(pts[s].x, pts[s].y, 2.0 * level - pts[s].z))
             .collect();
@@ -504,7 +527,7 @@ pub fn stereo_reflections(
             let kk = k as f64;
             let half = (kk - 1.0) / 2.0;
             let (mut a, mut b) = (Vec::new(), Vec::new());
-            for (&s, m) in run.slots.iter().zip(&mirrored) {
+            for (&s, m) in slots.iter().zip(&mirrored) {
                 let (row, col) = (s / cols, s % cols);
                 let here = chk
                     .image
@@ -542,7 +565,7 @@ pub fn stereo_reflections(
             }
         }
         confirmed += 1;
-        for (&s, m) in run.slots.iter().zip(&mirrored) {
+        for (&s, m) in slots.iter().zip(&mirrored) {
             let p = pts[s];
             let t = (o.z - level) / (o.z - p.z);
             let cx = o.x + (p.x - o.x) * t;

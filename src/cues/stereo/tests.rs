@@ -451,3 +451,58 @@ proptest::proptest! {
         assert_waterline(&bank_and_walls(bank), 160, 120);
     }
 }
+
+/// One image column, bottom to top, from a camera 1.5 m up at the origin: ground to 6 m,
+/// then the reflection of a wall at x = 20 (0.5–3 m above a level-0 pond), then the far
+/// shore at 19 m. `first_pulled_m` pulls the run's first point that much nearer along
+/// its ray, as range noise does.
+fn column_cloud(first_pulled_m: f64) -> PointCloud {
+    let o = Point3::new(0.0, 0.0, 1.5);
+    let mut up: Vec<Point3<f64>> = (0..7)
+        .map(|i| Point3::new(3.0 + 0.5 * i as f64, 0.0, 0.0))
+        .collect();
+    for (i, z) in [-3.0, -2.5, -2.0, -1.5, -1.0, -0.5].into_iter().enumerate() {
+        let p = Point3::new(20.0, 0.0, z);
+        let r = (p - o).norm();
+        let pull = if i == 0 { first_pulled_m } else { 0.0 };
+        up.push(o + (p - o) * (1.0 - pull / r));
+    }
+    up.push(Point3::new(19.0, 0.0, 0.0));
+    up.push(Point3::new(19.5, 0.0, 0.05));
+    // Rows run top to bottom.
+    let xyz: Vec<[f32; 3]> = up
+        .iter()
+        .rev()
+        .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let mut cloud = PointCloud::organized(xyz.len(), 1, xyz).unwrap();
+    cloud.sensor_origin = o;
+    cloud
+}
+
+#[test]
+fn one_point_pulled_near_by_range_noise_does_not_reject_the_run() {
+    for pull in [0.0, 2.5] {
+        let out = stereo_reflections(
+            &column_cloud(pull),
+            RES,
+            0.0,
+            None,
+            &StereoCueConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(
+            (out.runs, out.reflected_points, out.rejected_geometry),
+            (1, 6, 0),
+            "first point pulled {pull} m nearer"
+        );
+        // The rays cross the level between the shore and the far shore.
+        for (k, e) in out.evidence.iter() {
+            let (x, _) = centre_of(RES, *k);
+            assert!(
+                e.reflect == 0 || (6.0..19.0).contains(&x),
+                "evidence at {x}"
+            );
+        }
+    }
+}
