@@ -34,6 +34,8 @@ pub struct FrameCuesReport {
     pub stereo_runs: usize,
     pub stereo_reflected_points: usize,
     pub stereo_symmetry_level: Option<f64>,
+    /// The stereo cue's waterline level (the level its runs took, when present).
+    pub stereo_waterline_level: Option<f64>,
     pub stereo_ingest: Option<IngestStats>,
     /// Evidence cells merged, and those dropped outside the window.
     pub evidence_cells: usize,
@@ -119,6 +121,7 @@ impl FrameCues {
             rep.stereo_runs = out.runs;
             rep.stereo_reflected_points = out.reflected_points;
             rep.stereo_symmetry_level = out.symmetry_level;
+            rep.stereo_waterline_level = out.waterline_level;
             let batch = out.evidence.into_batch();
             rep.evidence_cells += batch.len();
             rep.evidence_dropped += grid.apply_evidence(&batch);

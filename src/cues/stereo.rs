@@ -12,13 +12,29 @@
 //!   reflection count (and a level sample);
 //! * the point mirrored about `L` is the real object: [`StereoCues::corrected`] holds the
 //!   cloud with every reflected point replaced by its mirror image;
-//! * `L` starts at the shore level (the last ground before the run) and is refined by
-//!   symmetry: each mirrored point is paired with its nearest real point (kiddo k-d tree),
-//!   and `L` moves by half the median height difference, a few times (a one-parameter ICP).
-//!   A vertical planar source (a wall) constrains `L` only at its edges; trees and roofs
-//!   constrain it everywhere. The refined level replaces the shore level of a run when the
-//!   two differ by more than the shore point's vertical noise (`gate_sigma·σ_v`: the shore
-//!   is a bank above the water, or poorly seen) and by at most `level_tolerance_m`;
+//! * `L` starts at the shore level (the last ground before the run). The near bank may
+//!   face away from the camera and hide the water's edge, so that the shore is the bank's
+//!   top, above the water. The *waterline* corrects it: a run that terrain nearer than it
+//!   ends has met the far shore, which faces the camera and is seen down to the water, so
+//!   that shore's height is a level sample taken where the vertical part of the range error
+//!   is small. The frame's waterline level is the median of these (at least
+//!   `min_far_shores`; a far shore more than `level_tolerance_m` plus its noise below the
+//!   near shore is a reflection point that range noise pulled nearer, and is left out).
+//! * `L` is also refined by symmetry, from the waterline level when there is one: each
+//!   mirrored point is paired with its nearest real point (kiddo k-d tree), and `L` moves
+//!   by half the median height difference, a few times (a one-parameter ICP). A vertical
+//!   surface (a wall, a trunk, the side of a crown) pairs a mirrored point with a real
+//!   point at its own height whatever `L` is, so it constrains `L` only at its edges; where
+//!   such surfaces dominate, or the range noise along the rays exceeds the pairing radius
+//!   (stereo at 20 m and more), the median difference barely depends on `L` and the ICP
+//!   stays near where it started. Measured on the simulated `fig4_reflections` pond
+//!   without noise, the median difference moved 0.03 m while `L` moved 0.4 m, where an
+//!   informative pairing moves it 0.8 m. The runs therefore take the waterline level when
+//!   there is one, and the symmetry level only without it;
+//! * the frame's level replaces the shore level of a run when the two differ by more than
+//!   the shore point's vertical noise (`gate_sigma·σ_v`: the shore is a bank above the
+//!   water, or poorly seen) and it is the same water: within `level_tolerance_m` of the
+//!   shore, or met by the run's own far shore within `gate_sigma` of that shore's noise;
 //! * with the intensity image and camera model ([`MirrorCheck`]), the intensities of the
 //!   reflected pixels must correlate (normalised cross-correlation ≥ `min_ncc`) with those
 //!   of the pixels where the mirrored points project; a run whose pixels have no texture
@@ -106,8 +122,12 @@ pub struct StereoCueConfig {
     pub pair_radius_m: f64,
     /// Fewest pairs for a symmetry level.
     pub min_pairs: usize,
-    /// A run's shore level is replaced by the symmetry level when within this (m).
+    /// A run's shore level is replaced by the frame's level when within this (m), or when
+    /// the run's own far shore meets that level; a far shore more than this (and its
+    /// noise) below the near one is not taken for the water's edge.
     pub level_tolerance_m: f64,
+    /// Fewest far shores for a waterline level.
+    pub min_far_shores: usize,
     /// Smallest normalised cross-correlation that confirms a run (with an image).
     pub min_ncc: f64,
 }
@@ -125,6 +145,7 @@ impl Default for StereoCueConfig {
             pair_radius_m: 0.3,
             min_pairs: 10,
             level_tolerance_m: 0.3,
+            min_far_shores: 5,
             min_ncc: 0.5,
         }
     }
@@ -166,6 +187,11 @@ pub struct StereoCues {
     pub symmetry_level: Option<f64>,
     /// Reflected/source pairs behind `symmetry_level`.
     pub pairs: usize,
+    /// The water level at the waterline: the median height of the far shores that ended
+    /// runs (at least `min_far_shores` of them); the level the runs use when present.
+    pub waterline_level: Option<f64>,
+    /// Runs ended by a far shore within the tolerance of their near shore.
+    pub far_shores: usize,
     /// Runs confirmed, runs rejected by geometry, runs rejected by the image check.
     pub runs: usize,
     pub rejected_geometry: usize,
@@ -180,6 +206,9 @@ struct Run {
     shore: f64,
     /// Vertical noise (σ) of the shore point the level came from.
     shore_sigma: f64,
+    /// The height of the terrain that ended the run (the far shore, where the reflection
+    /// meets what it reflects), when terrain nearer than the run ended it.
+    far: Option<(f64, f64)>,
 }
 
 /// Finds reflections in an organized stereo cloud (rows top to bottom as in the image).
@@ -242,12 +271,14 @@ pub fn stereo_reflections(
             let mut sigma_g = 0.0;
             let mut run_min_h = f64::INFINITY;
             // A run is a reflection when it follows a gap and the terrain seen after it, up
-            // the column, is *nearer* than the run (range wraps backward: the virtual image
-            // lies beyond the far shore). With nothing after it, its own ranges must wrap.
+            // the column, is *nearer* than the run (by `gap_min_m` than its median distance:
+            // range wraps backward, the virtual image lies beyond the far shore; the bottom
+            // of a ditch lies before its far side). With nothing after it, its own ranges
+            // must wrap.
             let close = |run: &mut Vec<usize>,
                          gap: bool,
                          shore: (f64, f64),
-                         next_h: Option<f64>,
+                         next: Option<(f64, f64, f64)>,
                          runs: &mut Vec<Run>,
                          rej: &mut usize| {
                 if run.is_empty() {
@@ -256,10 +287,14 @@ pub fn stereo_reflections(
                 let slots = std::mem::take(run);
                 let rng = |s: usize| (pts[s] - o).norm();
                 let hor = |s: usize| (pts[s].x - o.x).hypot(pts[s].y - o.y);
-                let wraps = match next_h {
-                    Some(hn) => {
-                        let min_h = slots.iter().map(|&s| hor(s)).fold(f64::INFINITY, f64::min);
-                        hn < min_h - cfg.gap_min_m
+                let wraps = match next {
+                    Some((hn, _, _)) => {
+                        // The run's distance is its median: its nearest point is the one
+                        // that range noise pulled nearest (σ ≈ 1 m at 20 m).
+                        let mut hs: Vec<f64> = slots.iter().map(|&s| hor(s)).collect();
+                        let m = hs.len() / 2;
+                        let mid = *hs.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1;
+                        hn < mid - cfg.gap_min_m
                     }
                     None => {
                         let steps = slots.len() - 1;
@@ -272,6 +307,13 @@ pub fn stereo_reflections(
                         slots,
                         shore: shore.0,
                         shore_sigma: shore.1,
+                        // A far shore more than the tolerance (and its noise) below the
+                        // near one is not this water's edge: more reflection that range
+                        // noise pulled nearer than the run ended it.
+                        far: next.and_then(|(_, z, sv)| {
+                            (z >= shore.0 - cfg.level_tolerance_m - cfg.gate_sigma * sv)
+                                .then_some((z, sv))
+                        }),
                     });
                 } else {
                     *rej += 1;
@@ -312,7 +354,7 @@ pub fn stereo_reflections(
                         &mut run,
                         run_gap,
                         (run_shore, run_shore_sigma),
-                        Some(h),
+                        Some((h, p.z, vertical)),
                         &mut runs,
                         &mut rejected_geometry,
                     );
@@ -344,7 +386,7 @@ pub fn stereo_reflections(
             (runs, rejected_geometry)
         })
         .collect();
-    let rejected_geometry: usize = per_column.iter().map(|c| c.1).sum();
+    let mut rejected_geometry: usize = per_column.iter().map(|c| c.1).sum();
     let runs: Vec<Run> = per_column.into_iter().flat_map(|c| c.0).collect();
 
     // 2. Water level by symmetry (one-parameter ICP against the non-reflected points).
@@ -354,12 +396,23 @@ pub fn stereo_reflections(
             in_run[s] = true;
         }
     }
+    // The waterline: where a run meets the far shore that ended it. A bank facing the
+    // camera is seen down to the water, and points there are near the level, where the
+    // vertical part of the range error is smallest; the near bank may face away and
+    // hide the water's edge. The median of the far shores, when there are enough.
+    let mut fars: Vec<f64> = runs.iter().filter_map(|r| r.far.map(|f| f.0)).collect();
+    let far_shores = fars.len();
+    let waterline_level = (far_shores >= cfg.min_far_shores.max(1)).then(|| {
+        let m = fars.len() / 2;
+        *fars.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
+    });
     let (mut symmetry_level, mut pairs) = (None, 0);
     if !runs.is_empty() {
         let mut shores: Vec<f64> = runs.iter().map(|r| r.shore).collect();
         let m = shores.len() / 2;
         shores.select_nth_unstable_by(m, |a, b| a.total_cmp(b));
-        let mut level = shores[m];
+        // Water stands at or below its shores: start from the lower of the two.
+        let mut level = waterline_level.map_or(shores[m], |w| w.min(shores[m]));
         // Reflected points to pair: at most 4096, by a fixed stride (deterministic).
         let all: Vec<usize> = runs.iter().flat_map(|r| r.slots.iter().copied()).collect();
         let stride = all.len().div_ceil(4096).max(1);
@@ -433,19 +486,40 @@ pub fn stereo_reflections(
     let mut corrected = cloud.clone();
     let (mut confirmed, mut rejected_image, mut reflected_points) = (0, 0, 0);
     for run in &runs {
-        // The shore level stands unless the symmetry level says it is measurably off (a
-        // bank, a poorly seen shore) and still close enough to be the same water.
-        let level = match symmetry_level {
+        // The shore level stands unless the frame's level (the waterline, else symmetry)
+        // says it is measurably off (a bank, a poorly seen shore) and it is the same water:
+        // within the tolerance of the shore, or met by this run's own far shore.
+        let level = match waterline_level.or(symmetry_level) {
             Some(l)
-                if (l - run.shore).abs() <= cfg.level_tolerance_m
-                    && (l - run.shore).abs() > cfg.gate_sigma * run.shore_sigma =>
+                if (l - run.shore).abs() > cfg.gate_sigma * run.shore_sigma
+                    && ((l - run.shore).abs() <= cfg.level_tolerance_m
+                        || run
+                            .far
+                            .is_some_and(|(f, sf)| (f - l).abs() <= cfg.gate_sigma * sf)) =>
             {
                 l
             }
             _ => run.shore,
         };
-        let mirrored: Vec<Point3<f64>> = run
+        // A reflection lies below the water: points of the run that are not below the
+        // level by more than their vertical noise are terrain (a far shore lower than
+        // the near bank), not a virtual image.
+        let slots: Vec<usize> = run
             .slots
+            .iter()
+            .copied()
+            .filter(|&s| {
+                let p = pts[s];
+                let range = (p - o).norm();
+                let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
+                p.z < level - cfg.gate_min_m.max(cfg.gate_sigma * vertical)
+            })
+            .collect();
+        if slots.len() < cfg.min_run {
+            rejected_geometry += 1;
+            continue;
+        }
+        let mirrored: Vec<Point3<f64>> = slots
             .iter()
             .map(|&s| Point3::new(pts[s].x, pts[s].y, 2.0 * level - pts[s].z))
             .collect();
@@ -453,7 +527,7 @@ pub fn stereo_reflections(
             let kk = k as f64;
             let half = (kk - 1.0) / 2.0;
             let (mut a, mut b) = (Vec::new(), Vec::new());
-            for (&s, m) in run.slots.iter().zip(&mirrored) {
+            for (&s, m) in slots.iter().zip(&mirrored) {
                 let (row, col) = (s / cols, s % cols);
                 let here = chk
                     .image
@@ -491,7 +565,7 @@ pub fn stereo_reflections(
             }
         }
         confirmed += 1;
-        for (&s, m) in run.slots.iter().zip(&mirrored) {
+        for (&s, m) in slots.iter().zip(&mirrored) {
             let p = pts[s];
             let t = (o.z - level) / (o.z - p.z);
             let cx = o.x + (p.x - o.x) * t;
@@ -507,6 +581,8 @@ pub fn stereo_reflections(
         corrected,
         symmetry_level,
         pairs,
+        waterline_level,
+        far_shores,
         runs: confirmed,
         rejected_geometry,
         rejected_image,

@@ -387,3 +387,122 @@ fn symmetry_gives_the_level_when_the_shore_is_a_bank_above_it() {
     let lv = out.evidence.total().level_mm().unwrap();
     assert!(lv.abs() < 30.0, "{lv} mm");
 }
+
+/// A pond whose near shore is a bank `bank` m above the water, reflecting only vertical
+/// planes (a building, a treeline): symmetry has nothing to pair that fixes the level, and
+/// the shore before each run is the bank top. The level must come from the waterline.
+fn bank_and_walls(bank: f64) -> World {
+    let mut w = pond_world();
+    w.bank = bank;
+    w.spheres.clear();
+    w
+}
+
+/// Checks a run of the cue on `w` (level 0): the waterline level, no evidence off the
+/// water, level samples at the water, corrected points at the truth and above the water.
+fn assert_waterline(w: &World, width: usize, height: usize) {
+    let r = render(w, width, height);
+    let out = stereo_reflections(&r.cloud, RES, 0.0, None, &StereoCueConfig::default()).unwrap();
+    assert!(out.runs >= 10, "{} runs", out.runs);
+    let wl = out.waterline_level.unwrap_or_else(|| {
+        panic!(
+            "no waterline level: {} runs, {} far shores",
+            out.runs, out.far_shores
+        )
+    });
+    assert!(
+        wl.abs() < 0.02,
+        "waterline level {wl} m (bank {} m)",
+        w.bank
+    );
+    for (k, e) in out.evidence.iter() {
+        let (x, _) = centre_of(RES, *k);
+        assert!(
+            e.reflect == 0 || (w.near - RES..=w.far + RES).contains(&x),
+            "evidence at x = {x} (bank {} m)",
+            w.bank
+        );
+    }
+    let lv = out.evidence.total().level_mm().unwrap();
+    assert!(lv.abs() < 20.0, "{lv} mm");
+    let mut worst: f64 = 0.0;
+    for (s, truth) in &r.truths {
+        if r.cloud.xyz[*s] != out.corrected.xyz[*s] {
+            let [x, y, z] = out.corrected.xyz[*s];
+            let p = out.corrected.frame_to_map * Point3::new(x as f64, y as f64, z as f64);
+            assert!(p.z >= -0.02, "a corrected point is below the water: {p}");
+            worst = worst.max((p - truth).norm());
+        }
+    }
+    assert!(worst < 0.05, "corrected points off by {worst} m");
+}
+
+#[test]
+fn the_waterline_gives_the_level_behind_a_bank_when_symmetry_cannot() {
+    // Before the waterline, this scene kept the bank's level: symmetry on walls stays where
+    // it starts (the shore), and the rays crossed it before the water, on the bank.
+    assert_waterline(&bank_and_walls(0.25), 320, 240);
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+    #[test]
+    fn waterline_level_for_any_bank_within_the_tolerance(bank in 0.06f64..0.3) {
+        assert_waterline(&bank_and_walls(bank), 160, 120);
+    }
+}
+
+/// One image column, bottom to top, from a camera 1.5 m up at the origin: ground to 6 m,
+/// then the reflection of a wall at x = 20 (0.5–3 m above a level-0 pond), then the far
+/// shore at 19 m. `first_pulled_m` pulls the run's first point that much nearer along
+/// its ray, as range noise does.
+fn column_cloud(first_pulled_m: f64) -> PointCloud {
+    let o = Point3::new(0.0, 0.0, 1.5);
+    let mut up: Vec<Point3<f64>> = (0..7)
+        .map(|i| Point3::new(3.0 + 0.5 * i as f64, 0.0, 0.0))
+        .collect();
+    for (i, z) in [-3.0, -2.5, -2.0, -1.5, -1.0, -0.5].into_iter().enumerate() {
+        let p = Point3::new(20.0, 0.0, z);
+        let r = (p - o).norm();
+        let pull = if i == 0 { first_pulled_m } else { 0.0 };
+        up.push(o + (p - o) * (1.0 - pull / r));
+    }
+    up.push(Point3::new(19.0, 0.0, 0.0));
+    up.push(Point3::new(19.5, 0.0, 0.05));
+    // Rows run top to bottom.
+    let xyz: Vec<[f32; 3]> = up
+        .iter()
+        .rev()
+        .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let mut cloud = PointCloud::organized(xyz.len(), 1, xyz).unwrap();
+    cloud.sensor_origin = o;
+    cloud
+}
+
+#[test]
+fn one_point_pulled_near_by_range_noise_does_not_reject_the_run() {
+    for pull in [0.0, 2.5] {
+        let out = stereo_reflections(
+            &column_cloud(pull),
+            RES,
+            0.0,
+            None,
+            &StereoCueConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(
+            (out.runs, out.reflected_points, out.rejected_geometry),
+            (1, 6, 0),
+            "first point pulled {pull} m nearer"
+        );
+        // The rays cross the level between the shore and the far shore.
+        for (k, e) in out.evidence.iter() {
+            let (x, _) = centre_of(RES, *k);
+            assert!(
+                e.reflect == 0 || (6.0..19.0).contains(&x),
+                "evidence at {x}"
+            );
+        }
+    }
+}
