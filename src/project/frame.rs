@@ -417,7 +417,9 @@ impl FrameLabels {
                                 }
                             }
                         }
-                        match map_rays[i].and_then(|d| surface.cast_into(&origin, &d, max_range)) {
+                        match map_rays[i]
+                            .and_then(|d| surface.cast_marking_holes(&origin, &d, max_range))
+                        {
                             // Only water is placed where the ray crosses a hole's rim level:
                             // whatever else a pixel there shows (a bank the map has not
                             // seen, terrain reflected in the water) is not at that level,

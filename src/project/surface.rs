@@ -111,14 +111,14 @@ impl GridSurface {
         dir: &Vector3<f64>,
         max_range: f64,
     ) -> Option<(Point3<f64>, usize)> {
-        self.cast_into(origin, dir, max_range)
+        self.cast_marking_holes(origin, dir, max_range)
             .map(|(p, i, _)| (p, i))
     }
 
     /// [`GridSurface::cast`], also saying whether the hit is where the ray crosses a
     /// hole's rim level (`true`: no observed surface was met there; the hit is where water
     /// in the hole would be) rather than observed terrain.
-    pub fn cast_into(
+    pub fn cast_marking_holes(
         &self,
         origin: &Point3<f64>,
         dir: &Vector3<f64>,
@@ -250,9 +250,9 @@ mod tests {
         assert!((p.x - 6.0).abs() < 1e-6 && p.z.abs() < 1e-9, "{p}");
         assert_eq!(Some(i), s.index_of(p.x, p.y));
         // That hit is a hole crossing; one on the ground before the hole is not.
-        assert!(s.cast_into(&o, &d, 50.0).unwrap().2);
+        assert!(s.cast_marking_holes(&o, &d, 50.0).unwrap().2);
         let d2 = Vector3::new(3.0, 0.0, -1.5).normalize();
-        assert!(!s.cast_into(&o, &d2, 50.0).unwrap().2);
+        assert!(!s.cast_marking_holes(&o, &d2, 50.0).unwrap().2);
         // A far rim lower than the near one sets the level: far bank at −0.3 m, aimed at
         // (7, −0.3): the hit is there, not where the ray passes z = 0 (x = 6).
         let (_, s3) =

@@ -254,9 +254,9 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         ns0,
     )?;
     let (mut render_s, mut write_s) = (0.0, 0.0);
-    // Per truth cell of water the colour camera saw: (frames' pixels reflecting sky,
-    // reflecting terrain). A BTreeMap: the lists come out in key order.
-    let mut views: std::collections::BTreeMap<[i64; 2], (u32, u32)> = Default::default();
+    // Per truth cell of water the colour camera saw: whether any pixel of any frame saw a
+    // sky reflection there. A BTreeMap: the lists come out in key order.
+    let mut views: std::collections::BTreeMap<[i64; 2], bool> = Default::default();
     let tres = scene.truth_resolution;
     for (fi, p) in poses.iter().enumerate() {
         let base = pose_of(p);
@@ -296,14 +296,9 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
                 opts.noise,
             );
             for (x, y, sky) in water_views(&w, &s.camera, &opt, s.spec.max_range_m) {
-                let v = views
+                *views
                     .entry([(x / tres).floor() as i64, (y / tres).floor() as i64])
-                    .or_default();
-                if sky {
-                    v.0 += 1;
-                } else {
-                    v.1 += 1;
-                }
+                    .or_default() |= sky;
             }
             render_s += tr.elapsed().as_secs_f64();
             rep.stereo_rays += cloud.len() as u64;
@@ -394,8 +389,8 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         class_counts: counts,
         topics,
         colour_view: stereo.is_some().then(|| ColourView {
-            sky: views.iter().filter(|v| v.1 .0 > 0).map(|v| *v.0).collect(),
-            terrain: views.iter().filter(|v| v.1 .0 == 0).map(|v| *v.0).collect(),
+            sky: views.iter().filter(|v| *v.1).map(|v| *v.0).collect(),
+            terrain: views.iter().filter(|v| !*v.1).map(|v| *v.0).collect(),
         }),
     };
     crate::io::export::write_json(&out_dir.join("truth.json"), &info)?;
