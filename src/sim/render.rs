@@ -388,6 +388,26 @@ fn sky_radiance(w: &World, light: &Light, d: &Vector3<f64>) -> Radiance {
     }
 }
 
+/// The one bounce off water at `p` (unit normal `n`) of a ray along `d`: the cosine of
+/// incidence, the reflected direction, and the solid the reflection meets within `max`
+/// (`None`: the sky, or the water itself where a ripple tilts the reflection down).
+fn reflect_off_water(
+    w: &World,
+    p: &Point3<f64>,
+    d: &Vector3<f64>,
+    n: &Vector3<f64>,
+    max: f64,
+) -> (f64, Vector3<f64>, Option<Hit>) {
+    let cos_i = (-d.dot(n)).clamp(1e-6, 1.0);
+    let r = d + n * (2.0 * cos_i);
+    let solid = if r.z <= 0.0 {
+        None
+    } else {
+        w.cast_solid(&(p + r * EPS), &r, max)
+    };
+    (cos_i, r, solid)
+}
+
 /// Radiance along a camera ray: solids shaded with sun and sky; water as a Fresnel mix of
 /// the reflection (one bounce: sky or solid) and the water's body colour; ripples perturb
 /// the normal.
@@ -399,16 +419,12 @@ pub fn radiance(w: &World, light: &Light, o: &Point3<f64>, d: &Vector3<f64>, max
         Surface::Solid { .. } => shade_solid(w, light, &hit),
         Surface::Water { body } => {
             let n = w.water_normal(body, &hit.point);
-            let cos_i = (-d.dot(&n)).clamp(1e-6, 1.0);
-            let r = d + n * (2.0 * cos_i);
-            let refl = if r.z <= 0.0 {
-                // A ripple tilted the reflection into the water: it sees the water itself.
-                sky_radiance(w, light, &Vector3::new(r.x, r.y, 0.0))
-            } else {
-                match w.cast_solid(&(hit.point + r * EPS), &r, max) {
-                    Some(s) => shade_solid(w, light, &s),
-                    None => sky_radiance(w, light, &r),
-                }
+            let (cos_i, r, solid) = reflect_off_water(w, &hit.point, d, &n, max);
+            let refl = match solid {
+                Some(s) => shade_solid(w, light, &s),
+                // A ripple may tilt the reflection into the water: it sees the water itself,
+                // lit like the sky at the horizon.
+                None => sky_radiance(w, light, &Vector3::new(r.x, r.y, r.z.max(0.0))),
             };
             let fr = fresnel(cos_i.acos(), N_WATER)
                 .map(|f| 0.5 * (f.r_s + f.r_p))
@@ -449,9 +465,8 @@ pub fn water_views(
                 return None;
             };
             let n = w.water_normal(body, &hit.point);
-            let r = d + n * (2.0 * (-d.dot(&n)).clamp(1e-6, 1.0));
-            let sky = r.z <= 0.0 || w.cast_solid(&(hit.point + r * EPS), &r, max).is_none();
-            Some((hit.point.x, hit.point.y, sky))
+            let (_, _, solid) = reflect_off_water(w, &hit.point, &d, &n, max);
+            Some((hit.point.x, hit.point.y, solid.is_none()))
         })
         .collect()
 }
