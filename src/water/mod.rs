@@ -47,6 +47,18 @@
 //! from the vehicle hides the water behind it: every shore cell along it is bush, and on
 //! the simulated `pond_bush` scene, shore samples alone put the level 20 cm high.
 //!
+//! A second one-sided test reads the shore across the water: a water surface slopes by
+//! at most `max_surface_slope` (5 %: a steep mountain stream), so the water beside a shore
+//! sample cannot stand higher than another shore sample of the same body a distance d
+//! away plus `max_surface_slope`·d, or it would spill there. A sample more than
+//! `occluder_height_m` above that bound (over the samples within `spill_radius_m`, 4 m) is
+//! not the waterline and is dropped. This is what removes the top of a bank that faces
+//! away from the vehicle: the bank hides the water's edge below it, so its shore cells are
+//! the bank top, and the ground around them is bank top too, which the first test reads as
+//! the local level. On the simulated stream the near bank's shore cells stood 34 cm above
+//! the water, the far bank's 8 cm; dropping the near ones took the surface RMS from 14.2 to
+//! 10.0 cm (the ponds are unchanged).
+//!
 //! Only reliably measured shore cells count when there are at least `min_shore_samples`
 //! of them: a cell whose elevation σ exceeds `shore_max_std_m` (5 cm; far cells seen by a
 //! few stereo points, whose range noise grows with the square of the range) is left out.
@@ -129,6 +141,10 @@ pub struct WaterConfig {
     pub shore_quantile: f64,
     /// A shore sample this far above the local shore level is an occluder (m).
     pub occluder_height_m: f64,
+    /// Steepest water surface (rise over run) the spill test allows between shore samples.
+    pub max_surface_slope: f64,
+    /// Shore samples the spill test compares within this distance (m).
+    pub spill_radius_m: f64,
     /// Shore cells whose elevation σ exceeds this are left out when enough others remain
     /// (m).
     pub shore_max_std_m: f64,
@@ -147,6 +163,8 @@ impl Default for WaterConfig {
             shore_radius_m: 1.5,
             shore_quantile: 0.25,
             occluder_height_m: 0.10,
+            max_surface_slope: 0.05,
+            spill_radius_m: 4.0,
             shore_max_std_m: 0.05,
             min_shore_samples: 6,
             level_residual_m: 0.02,
@@ -207,6 +225,18 @@ impl WaterConfig {
             pos(self.occluder_height_m),
             self.occluder_height_m,
             "must be a finite number > 0",
+        )?;
+        check(
+            "water.max_surface_slope",
+            nonneg(self.max_surface_slope),
+            self.max_surface_slope,
+            "must be a finite number ≥ 0",
+        )?;
+        check(
+            "water.spill_radius_m",
+            nonneg(self.spill_radius_m),
+            self.spill_radius_m,
+            "must be a finite number ≥ 0",
         )?;
         check(
             "water.shore_max_std_m",
@@ -612,7 +642,11 @@ fn body_of(
         .map(|&k| sample(k, info[&k].elevation.unwrap_or(f64::NAN)))
         .collect();
     let ground = ground_near(&set, &shore_keys, info, tiles, cfg);
-    let kept = surface::reject_occluders(&shore, &ground, cfg);
+    let kept = surface::reject_spilling(
+        &shore,
+        &surface::reject_occluders(&shore, &ground, cfg),
+        cfg,
+    );
     let (samples, keys, source) = if kept.len() >= cfg.min_shore_samples.max(1) {
         (
             kept.iter().map(|&i| shore[i]).collect::<Vec<_>>(),

@@ -282,6 +282,42 @@ pub fn reject_occluders(
     keep
 }
 
+/// Of the samples `kept`, those not more than `occluder_height_m` above the highest the
+/// water beside them can stand: `z_j + max_surface_slope · d_ij` for every other kept
+/// sample j within `spill_radius_m` (module documentation, section 2). Indices into
+/// `samples`, in the order of `kept`.
+pub fn reject_spilling(samples: &[ShoreSample], kept: &[usize], cfg: &WaterConfig) -> Vec<usize> {
+    let r = cfg.spill_radius_m;
+    if r <= 0.0 {
+        return kept.to_vec();
+    }
+    let bucket = |s: &ShoreSample| ((s.x / r).floor() as i64, (s.y / r).floor() as i64);
+    let mut buckets: HashMap<(i64, i64), Vec<&ShoreSample>> = HashMap::new();
+    for &i in kept {
+        buckets
+            .entry(bucket(&samples[i]))
+            .or_default()
+            .push(&samples[i]);
+    }
+    kept.iter()
+        .copied()
+        .filter(|&i| {
+            let s = &samples[i];
+            let (bx, by) = bucket(s);
+            let bound = (-1..=1)
+                .flat_map(|dx| (-1..=1).map(move |dy| (bx + dx, by + dy)))
+                .filter_map(|b| buckets.get(&b))
+                .flatten()
+                .filter_map(|o| {
+                    let d = (o.x - s.x).hypot(o.y - s.y);
+                    (d <= r).then_some(o.z + cfg.max_surface_slope * d)
+                })
+                .fold(f64::INFINITY, f64::min);
+            s.z - bound <= cfg.occluder_height_m
+        })
+        .collect()
+}
+
 /// The outcome of choosing a surface model for one body.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fit {
