@@ -355,6 +355,10 @@ pub struct LogBuildReport {
     pub log_duration_s: f64,
     /// Log duration over build time (offline speed).
     pub x_realtime: f64,
+    /// Whether the window's hazard map was published after every frame
+    /// ([`LogBuildConfig::per_frame_maps`]); the `water` stage's latency is zero otherwise.
+    #[serde(default)]
+    pub per_frame_maps: bool,
     /// The cues that ran (`lidar`, `reflectivity`, `stereo`, `mirror`).
     pub cues: Vec<String>,
     /// The lidar height the cue model used (given, or estimated from the first scans).
@@ -514,6 +518,10 @@ pub struct LogBuildConfig {
     /// Use this topic for frames; by default the lidar topic, or the stereo topic when the
     /// log has no lidar messages.
     pub frame_topic: Option<String>,
+    /// Publish the window's hazard map after every frame, as on the vehicle, and report the
+    /// water stage's per-frame latency. Off (the default), the water stage runs once, on
+    /// the whole map at the end; the exported map is the same either way.
+    pub per_frame_maps: bool,
 }
 
 /// Builds the map of a ROS 2 log through the online [`Mapper`] (one code path for online
@@ -534,6 +542,7 @@ pub fn build_log(
 
     let t0 = Instant::now();
     let mut mapper = Mapper::new(cfg.mapper.clone())?;
+    mapper.set_publish(cfg.per_frame_maps);
     let summary = mcap_log::summarize(input)?;
     let mut log_cfg = cfg.log.clone();
     log_cfg.frame_topic = match &cfg.frame_topic {
@@ -641,6 +650,7 @@ pub fn build_log(
         frames_fused,
         log_duration_s: summary.duration_s,
         x_realtime: summary.duration_s / total.max(1e-9),
+        per_frame_maps: cfg.per_frame_maps,
         cues,
         lidar_height_m,
         diagnostic_interval_m,

@@ -479,6 +479,8 @@ pub struct Mapper {
     grid: Option<RollingGrid>,
     global: TileMap,
     snapshots: MapSnapshots,
+    /// Whether `update` publishes the window's hazard map (stage 5).
+    publish: bool,
     frames: u64,
 }
 
@@ -517,6 +519,7 @@ impl Mapper {
             snapshots: MapSnapshots {
                 latest: Arc::new(Mutex::new(empty)),
             },
+            publish: true,
             frames: 0,
         })
     }
@@ -534,6 +537,15 @@ impl Mapper {
 
     pub fn config(&self) -> &MapperConfig {
         &self.cfg
+    }
+
+    /// Whether [`Mapper::update`] ends by publishing the window's hazard map (on by
+    /// default: a vehicle reads it every frame). Off, the water stage is skipped and
+    /// [`Mapper::hazard_map`] keeps the last map published: an offline build needs only
+    /// the map of everything at the end ([`Mapper::finish_map`]), which does not depend on
+    /// the snapshots, and saves the stage that costs most of a frame.
+    pub fn set_publish(&mut self, on: bool) {
+        self.publish = on;
     }
 
     /// Frames fused so far.
@@ -627,12 +639,14 @@ impl Mapper {
         times.labels = t.elapsed().as_secs_f64();
 
         // 5. water: the window's hazard map, published.
-        let t = Instant::now();
-        let map = Arc::new(self.window_map()?);
-        rep.snapshot_cells = map.cells.len();
-        rep.snapshot_water_cells = map.class_counts()[crate::hazard::Class::Water as usize];
-        self.snapshots.publish(map);
-        times.water = t.elapsed().as_secs_f64();
+        if self.publish {
+            let t = Instant::now();
+            let map = Arc::new(self.window_map()?);
+            rep.snapshot_cells = map.cells.len();
+            rep.snapshot_water_cells = map.class_counts()[crate::hazard::Class::Water as usize];
+            self.snapshots.publish(map);
+            times.water = t.elapsed().as_secs_f64();
+        }
 
         self.frames += 1;
         rep.frame_index = self.frames;

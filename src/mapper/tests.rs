@@ -124,6 +124,30 @@ fn offline_build_is_the_online_map() {
     let counts = r.cue_counts;
     assert!(counts.lidar_noret > 0 && counts.evidence_cells > 0);
     assert_eq!(r.stage_latency_ms.len(), StageTimes::NAMES.len());
+    // The offline build skips the per-frame water stage; the map above, with it on in the
+    // online mapper, is the same.
+    let water_ms = |r: &crate::build::LogBuildReport| {
+        r.stage_latency_ms
+            .iter()
+            .find(|l| l.stage == "water")
+            .unwrap()
+            .max_ms
+    };
+    assert!(!r.per_frame_maps);
+    assert_eq!(water_ms(&r), 0.0);
+    let r = crate::build::build_log(
+        &s.log,
+        out.path(),
+        &crate::build::LogBuildConfig {
+            mapper: MapperConfig::default(),
+            per_frame_maps: true,
+            ..Default::default()
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert!(r.per_frame_maps && water_ms(&r) > 0.0);
+    assert_eq!(r.cells_observed, online.cells.len());
 }
 
 #[test]

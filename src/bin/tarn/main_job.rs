@@ -39,6 +39,8 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
     // window keeps the far shore's votes.
     args.labels = vec!["colour".into()];
     args.window_cells = Some(800);
+    // The vehicle's view: the hazard map published after every frame, and its latency.
+    args.per_frame_maps = true;
     println!(
         "tarn: building the map of {} into {}",
         args.input.display(),
