@@ -571,41 +571,64 @@ pub fn build_log(
     let mut stage_totals = StageTimes::default();
     let mut per_frame = Vec::new();
     let mut label_totals: Option<crate::project::FrameLabelsReport> = None;
-    while let Some(item) = stream.next() {
-        crate::interrupt::check("reading the log")?;
-        let (done, total) = stream.progress();
-        progress(done, total);
-        let frame = match item {
-            Ok(f) => f,
-            Err(e) => {
-                errors.push(e.to_string());
-                continue;
+    // Frames are read and decoded on a second thread while this one fuses the previous
+    // frame: the order, and so the map, is the log's. A bounded queue keeps at most two
+    // decoded frames waiting.
+    let (tx, rx) = std::sync::mpsc::sync_channel(2);
+    let stream_stats = std::thread::scope(|scope| -> Result<crate::io::frames::FrameStats> {
+        // Owned here, so that an early return drops it and the reader's next send fails.
+        let rx = rx;
+        let reader = scope.spawn(move || {
+            while let Some(item) = stream.next() {
+                // The fusing side stopped (an interrupt): stop reading.
+                if tx.send((item, stream.progress())).is_err() {
+                    break;
+                }
             }
-        };
-        let t = Instant::now();
-        match mapper.update(&frame) {
-            Ok(r) => {
-                if let Some(s) = r.lidar_points() {
-                    lidar.merge(s);
+            stream.stats().clone()
+        });
+        for (item, (done, total)) in rx.iter() {
+            crate::interrupt::check("reading the log")?;
+            progress(done, total);
+            let frame = match item {
+                Ok(f) => f,
+                Err(e) => {
+                    errors.push(e.to_string());
+                    continue;
                 }
-                if let Some(s) = r.stereo_points() {
-                    stereo.merge(s);
+            };
+            let t = Instant::now();
+            match mapper.update(&frame) {
+                Ok(r) => {
+                    if let Some(s) = r.lidar_points() {
+                        lidar.merge(s);
+                    }
+                    if let Some(s) = r.stereo_points() {
+                        stereo.merge(s);
+                    }
+                    counts.add(&r.cues);
+                    if let Some(l) = &r.labels {
+                        crate::project::FrameLabelsReport::merge(
+                            label_totals.get_or_insert_with(Default::default),
+                            l,
+                        );
+                    }
+                    stage_totals.add(&r.times_s);
+                    per_frame.push(r.times_s);
+                    frames_fused += 1;
                 }
-                counts.add(&r.cues);
-                if let Some(l) = &r.labels {
-                    crate::project::FrameLabelsReport::merge(
-                        label_totals.get_or_insert_with(Default::default),
-                        l,
-                    );
-                }
-                stage_totals.add(&r.times_s);
-                per_frame.push(r.times_s);
-                frames_fused += 1;
+                Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
             }
-            Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
+            t_fuse += t.elapsed().as_secs_f64();
         }
-        t_fuse += t.elapsed().as_secs_f64();
-    }
+        reader.join().map_err(|_| {
+            Error::format(
+                input,
+                "frames",
+                "the thread reading the log stopped unexpectedly",
+            )
+        })
+    })?;
     if frames_fused == 0 {
         // Nothing to map: refuse rather than replace a previous map with an empty one.
         let why = summary
@@ -615,9 +638,7 @@ pub fn build_log(
             .unwrap_or_else(|| {
                 format!(
                     "{} messages, {} frames skipped without a transform to {}",
-                    summary.messages,
-                    stream.stats().frames_skipped_no_tf,
-                    log_cfg.map_frame
+                    summary.messages, stream_stats.frames_skipped_no_tf, log_cfg.map_frame
                 )
             });
         return Err(Error::format(
@@ -657,7 +678,7 @@ pub fn build_log(
         lidar_points: lidar,
         stereo_points: stereo,
         cue_counts: counts,
-        frames: stream.stats().clone(),
+        frames: stream_stats,
         errors,
         damage: summary.damage.clone(),
         labels: label_totals,
