@@ -18,8 +18,15 @@
 //!   of the band at night (5th and 25th percentiles: σ = (q25 − q05)/0.971, μ = q25 + 0.674σ for a
 //!   normal distribution), from the warm side by day (75th, 95th); a pixel more than
 //!   `k_sigma`·σ and `min_contrast` beyond μ on the water side is water. Around dawn and dusk
-//!   the contrast reverses and there is no decision. Beyond `max_lookahead_m` (the paper saw
-//!   the water darken towards the far shore) there is no decision either.
+//!   the contrast reverses and there is no decision. Beyond `max_incidence` (60°) there is
+//!   no decision either: water's apparent temperature is (1 − R)·T_water + R·T_sky, and its
+//!   Fresnel reflectance R (n ≈ 1.35 at 3–5 µm) rises from 6 % at 60° to 35 % at 80° and
+//!   65 % at 86°, so towards grazing incidence the cold sky it reflects takes over and the
+//!   water looks *colder* than the land at night (the paper saw the water darken towards
+//!   the far shore). On the simulated night reservoir, seen at 83–88°, the water reads 5–7 K
+//!   below the land; the cold side of such a band is water, so without the gate the land
+//!   beside it passed for warm water (13 % of the dry cells called water). Nor is there a
+//!   decision beyond `max_lookahead_m`.
 
 use serde::{Deserialize, Serialize};
 
@@ -234,6 +241,8 @@ pub struct MwirConfig {
     pub min_contrast: f32,
     /// No decision beyond this horizontal distance, metres.
     pub max_lookahead_m: f64,
+    /// No decision beyond this incidence angle (radians): the reflected sky takes over.
+    pub max_incidence: f64,
     /// Half-height of the row band, rows.
     pub half_band_rows: usize,
 }
@@ -246,6 +255,7 @@ impl Default for MwirConfig {
             k_sigma: 3.0,
             min_contrast: 1.0,
             max_lookahead_m: 40.0,
+            max_incidence: 60f64.to_radians(),
             half_band_rows: 8,
         }
     }
@@ -286,7 +296,11 @@ pub fn classify_mwir(
     cfg: &MwirConfig,
 ) -> Result<LabelImage> {
     check_sizes(img, geom, "MWIR image")?;
-    if !(cfg.k_sigma >= 0.0 && cfg.min_contrast >= 0.0 && cfg.max_lookahead_m > 0.0) {
+    if !(cfg.k_sigma >= 0.0
+        && cfg.min_contrast >= 0.0
+        && cfg.max_lookahead_m > 0.0
+        && cfg.max_incidence.is_finite())
+    {
         return Err(Error::invalid("MWIR config", format!("{cfg:?}")));
     }
     let regime = cfg.regime(hour)?;
@@ -304,7 +318,9 @@ pub fn classify_mwir(
     };
     let stats = band_percentiles(img, &include, cfg.half_band_rows, &qs);
     for (i, o) in out.data.iter_mut().enumerate() {
-        if !include[i] {
+        // The band's statistics use grazing pixels too (cut at the gate, a band could be
+        // mostly water); only the decision is gated.
+        if !include[i] || geom.incidence[i] as f64 > cfg.max_incidence {
             continue;
         }
         let Some(q) = &stats[i / img.width] else {
@@ -407,6 +423,11 @@ mod tests {
         assert!(classify_swir(&bad, &g, None, &SwirConfig::default()).is_err());
     }
 
+    /// Whether the MWIR classifier decides at pixel `i` (near enough, not grazing).
+    fn mwir_decides(g: &GroundGeometry, cfg: &MwirConfig, i: usize) -> bool {
+        g.lookahead[i] as f64 <= cfg.max_lookahead_m && g.incidence[i] as f64 <= cfg.max_incidence
+    }
+
     #[test]
     fn mwir_by_time_of_day() {
         let (_, g, water) = scene();
@@ -432,7 +453,7 @@ mod tests {
         let wrong_way = classify_mwir(&mk(-3.0), &g, 3.0, &cfg).unwrap();
         let dusk = classify_mwir(&mk(3.0), &g, 20.5, &cfg).unwrap();
         for i in 0..4800 {
-            if g.lookahead[i].is_finite() && g.lookahead[i] as f64 <= cfg.max_lookahead_m {
+            if mwir_decides(&g, &cfg, i) {
                 assert_eq!(night.data[i] == Label::Water, water[i], "night pixel {i}");
                 assert_eq!(day.data[i] == Label::Water, water[i], "day pixel {i}");
                 assert_ne!(
@@ -465,9 +486,66 @@ mod tests {
         .unwrap();
         let l = classify_mwir(&img, &g, 2.0, &cfg).unwrap();
         for i in 0..4800 {
-            let far = !(g.lookahead[i] as f64 <= 5.0);
-            assert_eq!(l.data[i] == Label::Unknown, far, "pixel {i}");
+            assert_eq!(
+                l.data[i] == Label::Unknown,
+                !mwir_decides(&g, &cfg, i),
+                "pixel {i}"
+            );
         }
         assert!(l.data.contains(&Label::Unknown) && l.data.contains(&Label::Water));
+    }
+
+    #[test]
+    fn mwir_grazing_water_reflects_the_cold_sky_and_gets_no_decision() {
+        // At night a puddle near the camera, seen steeply, is 3 K warmer than the land; a
+        // reservoir far off, filling three quarters of the view's width and seen beyond 60°
+        // incidence, reflects the cold sky ((1 − R)·T_w + R·T_sky with the Fresnel R rising
+        // towards grazing) and reads 6 K colder than the land.
+        let (_, g, puddle) = scene();
+        let (col, row) = (|i: usize| i % 80, |i: usize| i / 80);
+        let reservoir = |i: usize| (10..70).contains(&col(i)) && row(i) < 30;
+        assert!((0..4800)
+            .filter(|&i| reservoir(i) && g.incidence[i].is_finite())
+            .all(|i| g.incidence[i] as f64 > 70f64.to_radians()));
+        let water: Vec<bool> = (0..4800).map(|i| puddle[i] || reservoir(i)).collect();
+        let img = MonoImage::new(
+            80,
+            60,
+            (0..4800)
+                .map(|i| {
+                    let dw = if puddle[i] {
+                        3.0
+                    } else if reservoir(i) {
+                        -6.0
+                    } else {
+                        0.0
+                    };
+                    280.0 + 0.3 * noise(i) + dw
+                })
+                .collect(),
+        )
+        .unwrap();
+        let cfg = MwirConfig::default();
+        let l = classify_mwir(&img, &g, 2.0, &cfg).unwrap();
+        let steep = (0..4800).filter(|&i| mwir_decides(&g, &cfg, i)).count();
+        assert!(steep > 100 && steep < 4000, "{steep} pixels decided");
+        for i in 0..4800 {
+            if mwir_decides(&g, &cfg, i) {
+                assert_eq!(l.data[i] == Label::Water, water[i], "pixel {i}");
+            } else {
+                assert_eq!(l.data[i], Label::Unknown, "grazing pixel {i}");
+            }
+        }
+        // Without the gate the cold side of a grazing row is the water, and the land
+        // beside it passes for warm water.
+        let ungated = MwirConfig {
+            max_incidence: 90f64.to_radians(),
+            ..cfg
+        };
+        let l = classify_mwir(&img, &g, 2.0, &ungated).unwrap();
+        let land_called_water = (0..4800)
+            .filter(|&i| !water[i] && l.data[i] == Label::Water)
+            .count();
+        assert!(land_called_water > 100, "{land_called_water}");
     }
 }
