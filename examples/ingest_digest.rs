@@ -25,7 +25,10 @@ fn digest<'a>(cells: impl Iterator<Item = (CellKey, CellStats)> + 'a) -> (usize,
     let mut n = 0;
     for (k, c) in cells {
         n += 1;
-        (k.x, k.y, c.hits, c.below, c.sw, c.swz, c.swzz, c.zmin, c.zmax).hash(&mut h);
+        (
+            k.x, k.y, c.hits, c.below, c.sw, c.swz, c.swzz, c.zmin, c.zmax,
+        )
+            .hash(&mut h);
     }
     (n, h.finish())
 }

@@ -2,8 +2,10 @@
 //!
 //! One call to [`RollingGrid::ingest`] is one batch (a scan, a stereo frame, a chunk of a
 //! file). Points are range-weighted (σ grows with range, [`RangeNoise`]) and fused as exact
-//! integer sums, in parallel over contiguous chunks of the cloud; since the sums are exact
-//! the result does not depend on how many threads ran.
+//! integer sums in two passes: classify the points (in parallel over contiguous chunks of
+//! the cloud) into buckets of cells, then fuse each bucket (in parallel over buckets, each
+//! bucket's accumulators small enough to stay in cache). Since the sums are exact, the
+//! result depends neither on how many threads ran nor on how the cloud was cut.
 //!
 //! The below-surface gate. A point far below its cell's surface (a reflection seen in still
 //! water, the floor of a hole) must not drag the elevation down, and must not be lost: it
@@ -119,16 +121,20 @@ impl IngestStats {
     }
 }
 
-/// One chunk's private accumulator: a dense window of [`Acc`] plus the list of cells it
-/// touched, so that clearing and merging cost only what the chunk touched.
+/// Cells per bucket: a bucket's accumulators (64 bytes each) take 256 KiB, so they stay in
+/// a core's L2 cache while the bucket's points are fused.
+const BUCKET_SHIFT: u32 = 12;
+const BUCKET_CELLS: usize = 1 << BUCKET_SHIFT;
+
+/// One chunk of points after classification: its samples, bucketed by buffer index
+/// (`idx >> BUCKET_SHIFT`), and what happened to the rest.
 #[derive(Debug, Clone, Default)]
-struct Partial {
-    cells: Vec<Acc>,
-    touched: Vec<u32>,
+struct Binned {
+    buckets: Vec<Vec<Sample>>,
     stats: IngestStats,
 }
 
-/// One chunk's accumulator for one cell: elevation only (ingest never writes evidence),
+/// A batch's accumulator for one cell: elevation only (ingest never writes evidence),
 /// with the cell's gate threshold cached, in exactly one 64-byte cache line.
 #[derive(Debug, Clone, Copy)]
 #[repr(C, align(64))]
@@ -181,36 +187,12 @@ impl Acc {
         self.zmin = self.zmin.min(z_mm);
         self.zmax = self.zmax.max(z_mm);
     }
-
-    #[inline]
-    fn merge(&mut self, o: &Acc) {
-        self.hits += o.hits;
-        self.below += o.below;
-        self.sw += o.sw;
-        self.swz += o.swz;
-        self.swzz += o.swzz;
-        self.zmin = self.zmin.min(o.zmin);
-        self.zmax = self.zmax.max(o.zmax);
-    }
-
-    fn to_cell(self) -> CellStats {
-        CellStats {
-            hits: self.hits,
-            below: self.below,
-            sw: self.sw,
-            swz: self.swz,
-            swzz: self.swzz,
-            zmin: self.zmin,
-            zmax: self.zmax,
-            ev: Default::default(),
-        }
-    }
 }
 
 /// The prior's gate reference for cell `i`: (mean mm, spread variance mm²), or `None` when
 /// the prior has too few points to gate.
 #[inline]
-fn prior_gate(prior: &Layers, i: usize, support: u32) -> Option<(f32, f32)> {
+fn prior_gate(prior: &ElevMut, i: usize, support: u32) -> Option<(f32, f32)> {
     (prior.hits[i] >= support).then(|| {
         let sw = prior.sw[i] as f64;
         let mean = prior.swz[i] as f64 / sw;
@@ -276,11 +258,74 @@ pub(crate) fn weight_of(sigma_m: f64) -> u32 {
 /// Reusable scratch memory of a grid's ingest.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Scratch {
-    partials: Vec<Partial>,
+    /// One per chunk of points.
+    binned: Vec<Binned>,
+    /// One per cell of the window, all `Acc::default()` between batches.
+    acc: Vec<Acc>,
+}
+
+/// The elevation layers of one bucket's cells (indices local to the bucket).
+struct ElevMut<'a> {
+    hits: &'a mut [u32],
+    below: &'a mut [u32],
+    sw: &'a mut [u64],
+    swz: &'a mut [i128],
+    swzz: &'a mut [i128],
+    zmin: &'a mut [i32],
+    zmax: &'a mut [i32],
+}
+
+impl ElevMut<'_> {
+    /// [`Layers::merge_at`] for a cell without evidence.
+    #[inline]
+    fn merge(&mut self, i: usize, a: &Acc) {
+        self.hits[i] += a.hits;
+        self.below[i] += a.below;
+        self.sw[i] += a.sw;
+        self.swz[i] += a.swz;
+        self.swzz[i] += a.swzz;
+        self.zmin[i] = self.zmin[i].min(a.zmin);
+        self.zmax[i] = self.zmax[i].max(a.zmax);
+    }
+}
+
+/// The layers cut into buckets of `BUCKET_CELLS` cells, each with its accumulators.
+fn split_buckets<'a>(
+    layers: &'a mut Layers,
+    acc: &'a mut [Acc],
+) -> Vec<(ElevMut<'a>, &'a mut [Acc])> {
+    let b = BUCKET_CELLS;
+    layers
+        .hits
+        .chunks_mut(b)
+        .zip(layers.below.chunks_mut(b))
+        .zip(layers.sw.chunks_mut(b))
+        .zip(layers.swz.chunks_mut(b))
+        .zip(layers.swzz.chunks_mut(b))
+        .zip(layers.zmin.chunks_mut(b))
+        .zip(layers.zmax.chunks_mut(b))
+        .zip(acc.chunks_mut(b))
+        .map(
+            |(((((((hits, below), sw), swz), swzz), zmin), zmax), acc)| {
+                (
+                    ElevMut {
+                        hits,
+                        below,
+                        sw,
+                        swz,
+                        swzz,
+                        zmin,
+                        zmax,
+                    },
+                    acc,
+                )
+            },
+        )
+        .collect()
 }
 
 /// A point reduced to what the grid needs.
-#[derive(Clone, Copy)]
+#[derive(Debug, Clone, Copy)]
 struct Sample {
     idx: u32,
     z_mm: i32,
@@ -410,146 +455,151 @@ impl RollingGrid {
         let support = self.cfg.min_support.max(1);
 
         let ncells = self.n * self.n;
+        let nbuckets = ncells.div_ceil(BUCKET_CELLS);
         let RollingGrid {
             layers, scratch, ..
         } = self;
-        if scratch.partials.len() < chunks {
-            scratch.partials.resize_with(chunks, Partial::default);
+        if scratch.binned.len() < chunks {
+            scratch.binned.resize_with(chunks, Binned::default);
         }
-        for p in &mut scratch.partials[..chunks] {
-            if p.cells.len() != ncells {
-                p.cells = vec![Acc::default(); ncells];
-                p.touched.clear();
-            }
+        if scratch.acc.len() != ncells {
+            scratch.acc = vec![Acc::default(); ncells];
         }
         let step = npts.div_ceil(chunks);
-        let prior: &Layers = layers;
 
-        // Pass 1: classify every point, gate it against the prior surface, accumulate.
-        scratch.partials[..chunks]
-            .par_iter_mut()
+        // Pass 1, in parallel over contiguous chunks of points: classify every point and
+        // bucket the samples by cell, so that pass 2 finds each bucket's accumulators in
+        // cache instead of missing it on nearly every point.
+        let binned = &mut scratch.binned[..chunks];
+        binned.par_iter_mut().enumerate().for_each(|(ci, p)| {
+            let lo = (ci * step).min(npts);
+            let hi = ((ci + 1) * step).min(npts);
+            p.buckets.resize_with(nbuckets, Vec::new);
+            for b in &mut p.buckets {
+                b.clear();
+            }
+            let mut st = IngestStats {
+                points: (hi - lo) as u64,
+                ..Default::default()
+            };
+            for i in lo..hi {
+                match ctx.classify(i) {
+                    Classified::Sample(s) => {
+                        p.buckets[(s.idx >> BUCKET_SHIFT) as usize].push(s);
+                    }
+                    Classified::NonFinite => st.nonfinite += 1,
+                    Classified::Outside => st.outside += 1,
+                }
+            }
+            p.stats = st;
+        });
+        let binned = &scratch.binned[..chunks];
+
+        // Pass 2, in parallel over buckets (each owns its cells' layers and accumulators):
+        // gate each sample against the prior surface and accumulate; then merge each touched
+        // cell, or split its batch points at height gaps. All sums are exact integers, so
+        // neither the chunking nor the order of the samples changes a cell.
+        let parts = split_buckets(layers, &mut scratch.acc);
+        let (fused, below) = parts
+            .into_par_iter()
             .enumerate()
-            .for_each(|(ci, p)| {
-                let lo = (ci * step).min(npts);
-                let hi = ((ci + 1) * step).min(npts);
-                let mut st = IngestStats {
-                    points: (hi - lo) as u64,
-                    ..Default::default()
-                };
-                let cells = &mut p.cells[..];
-                let touched = &mut p.touched;
-                for i in lo..hi {
-                    let s = match ctx.classify(i) {
-                        Classified::Sample(s) => s,
-                        Classified::NonFinite => {
-                            st.nonfinite += 1;
-                            continue;
-                        }
-                        Classified::Outside => {
-                            st.outside += 1;
-                            continue;
-                        }
-                    };
-                    let idx = s.idx as usize;
-                    let a = &mut cells[idx];
-                    if a.is_untouched() {
-                        touched.push(s.idx);
-                        a.gate_fast = fast_threshold(prior_gate(prior, idx, support), k, min_mm);
-                    }
-                    if s.z_mm < a.gate_fast && is_below(prior, idx, support, &s, k, min_mm) {
-                        a.below += 1;
-                        st.below += 1;
-                        continue;
-                    }
-                    a.add(s.z_mm, s.w);
-                    st.fused += 1;
-                }
-                p.stats = st;
-            });
+            .map(|(bi, (mut lay, cells))| {
+                fuse_bucket(binned, bi, &mut lay, cells, k, min_mm, support)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
 
-        // Reduce the partials into the first one (integer sums: order does not matter).
-        let (first, rest) = scratch.partials[..chunks]
-            .split_first_mut()
-            .expect("chunks >= 1");
-        for p in rest {
-            for &i in &p.touched {
-                let iu = i as usize;
-                let c = p.cells[iu];
-                let f = &mut first.cells[iu];
-                if f.is_untouched() {
-                    first.touched.push(i);
-                }
-                f.merge(&c);
-                p.cells[iu] = Acc::default();
-            }
-            p.touched.clear();
-            let st = p.stats;
-            first.stats.merge(&st);
+        let mut stats = IngestStats::default();
+        for p in binned {
+            stats.merge(&p.stats);
         }
-
-        // Decide each touched cell: merge, or split the batch's points at height gaps.
-        let mut flagged: Vec<u32> = Vec::new();
-        for &i in &first.touched {
-            let iu = i as usize;
-            let b = first.cells[iu];
-            let needs_split = layers.hits[iu] < support
-                && b.hits >= 2
-                && (b.zmax as f64 - b.zmin as f64) > min_mm;
-            if needs_split {
-                first.cells[iu].group = flagged.len() as u32;
-                flagged.push(i);
-            } else {
-                layers.merge_at(iu, &b.to_cell());
-                first.cells[iu] = Acc::default();
-            }
-        }
-        let mut stats = first.stats;
-        if !flagged.is_empty() {
-            // Pass 2 (only cells seen for the first time with a wide spread): gather their
-            // points, in parallel, then split each cell's points at height gaps.
-            let cells = &first.cells;
-            let found: Vec<Vec<(u32, Sample)>> = (0..chunks)
-                .into_par_iter()
-                .map(|ci| {
-                    let lo = (ci * step).min(npts);
-                    let hi = ((ci + 1) * step).min(npts);
-                    let mut v = Vec::new();
-                    for i in lo..hi {
-                        if let Classified::Sample(s) = ctx.classify(i) {
-                            let g = cells[s.idx as usize].group;
-                            if g != u32::MAX {
-                                v.push((g, s));
-                            }
-                        }
-                    }
-                    v
-                })
-                .collect();
-            let mut groups: Vec<Vec<Sample>> = vec![Vec::new(); flagged.len()];
-            for (g, s) in found.into_iter().flatten() {
-                groups[g as usize].push(s);
-            }
-            for (g, &i) in groups.iter_mut().zip(&flagged) {
-                let iu = i as usize;
-                let (kept, below) = split_cell(g, k, min_mm);
-                stats.fused -= below as u64;
-                stats.below += below as u64;
-                // No point of a flagged cell was gated in pass 1 (its prior was
-                // unsupported), so the batch's statistics are exactly `kept` and `below`.
-                let mut c = kept;
-                c.below += below;
-                layers.merge_at(iu, &c);
-                first.cells[iu] = Acc::default();
-            }
-        }
-        first.touched.clear();
+        stats.fused = fused;
+        stats.below = below;
         Ok(stats)
     }
 }
 
+/// Pass 2 for bucket `bi`: returns (fused, below) point counts.
+fn fuse_bucket(
+    binned: &[Binned],
+    bi: usize,
+    lay: &mut ElevMut,
+    cells: &mut [Acc],
+    k: f64,
+    min_mm: f64,
+    support: u32,
+) -> (u64, u64) {
+    let mask = (BUCKET_CELLS - 1) as u32;
+    let samples = || binned.iter().flat_map(|p| &p.buckets[bi]);
+    let mut touched: Vec<u32> = Vec::new();
+    let (mut fused, mut below) = (0u64, 0u64);
+    for s in samples() {
+        let l = (s.idx & mask) as usize;
+        let a = &mut cells[l];
+        if a.is_untouched() {
+            touched.push(l as u32);
+            a.gate_fast = fast_threshold(prior_gate(lay, l, support), k, min_mm);
+        }
+        if s.z_mm < a.gate_fast && is_below(lay, l, support, s, k, min_mm) {
+            a.below += 1;
+            below += 1;
+            continue;
+        }
+        a.add(s.z_mm, s.w);
+        fused += 1;
+    }
+
+    // Decide each touched cell: merge, or split the batch's points at height gaps.
+    let mut flagged: Vec<u32> = Vec::new();
+    for &l in &touched {
+        let l = l as usize;
+        let b = cells[l];
+        let needs_split =
+            lay.hits[l] < support && b.hits >= 2 && (b.zmax as f64 - b.zmin as f64) > min_mm;
+        if needs_split {
+            cells[l].group = flagged.len() as u32;
+            flagged.push(l as u32);
+        } else {
+            lay.merge(l, &b);
+            cells[l] = Acc::default();
+        }
+    }
+    if !flagged.is_empty() {
+        // Only cells seen for the first time with a wide spread: gather their points and
+        // split each cell's points at height gaps.
+        let mut groups: Vec<Vec<Sample>> = vec![Vec::new(); flagged.len()];
+        for s in samples() {
+            let g = cells[(s.idx & mask) as usize].group;
+            if g != u32::MAX {
+                groups[g as usize].push(*s);
+            }
+        }
+        for (g, &l) in groups.iter_mut().zip(&flagged) {
+            let l = l as usize;
+            let (kept, nbelow) = split_cell(g, k, min_mm);
+            fused -= nbelow as u64;
+            below += nbelow as u64;
+            // No point of a flagged cell was gated (its prior was unsupported), so the
+            // batch's statistics are exactly `kept` and `nbelow`.
+            let a = Acc {
+                hits: kept.hits,
+                below: nbelow,
+                sw: kept.sw,
+                swz: kept.swz,
+                swzz: kept.swzz,
+                zmin: kept.zmin,
+                zmax: kept.zmax,
+                ..Acc::default()
+            };
+            lay.merge(l, &a);
+            cells[l] = Acc::default();
+        }
+    }
+    (fused, below)
+}
+
 /// The exact gate test against the prior surface (taken only below the fast threshold).
 #[cold]
-fn is_below(prior: &Layers, i: usize, support: u32, s: &Sample, k: f64, min_mm: f64) -> bool {
+fn is_below(prior: &ElevMut, i: usize, support: u32, s: &Sample, k: f64, min_mm: f64) -> bool {
     match prior_gate(prior, i, support) {
         Some((mean, var)) => {
             (s.z_mm as f64) < mean as f64 - gate_mm(var as f64, s.sigma_mm as f64, k, min_mm)
