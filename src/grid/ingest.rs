@@ -126,6 +126,10 @@ impl IngestStats {
 const BUCKET_SHIFT: u32 = 12;
 const BUCKET_CELLS: usize = 1 << BUCKET_SHIFT;
 
+/// A bucket with fewer than `BUCKET_CELLS / SPARSE` samples is fused by sorting
+/// ([`fuse_sparse`]) rather than through its dense accumulators.
+const SPARSE: usize = 4;
+
 /// One chunk of points after classification: its samples, bucketed by buffer index
 /// (`idx >> BUCKET_SHIFT`), and what happened to the rest.
 #[derive(Debug, Clone, Default)]
@@ -597,11 +601,17 @@ impl RollingGrid {
         // bucket the samples by cell, so that pass 2 finds each bucket's accumulators in
         // cache instead of missing it on nearly every point.
         let binned = &mut scratch.binned[..chunks];
-        binned.par_iter_mut().enumerate().for_each(|(ci, p)| {
-            let lo = (ci * step).min(npts);
-            let hi = ((ci + 1) * step).min(npts);
-            bin_chunk(&ctx, lo..hi, nbuckets, p);
-        });
+        if let [p] = binned {
+            // One chunk: on this thread. (Handing it to the pool costs a wake-up, which on a
+            // loaded machine can cost more than a small batch's whole ingest.)
+            bin_chunk(&ctx, 0..npts, nbuckets, p);
+        } else {
+            binned.par_iter_mut().enumerate().for_each(|(ci, p)| {
+                let lo = (ci * step).min(npts);
+                let hi = ((ci + 1) * step).min(npts);
+                bin_chunk(&ctx, lo..hi, nbuckets, p);
+            });
+        }
         let binned = &scratch.binned[..chunks];
 
         // Pass 2, in parallel over buckets (each owns its cells' layers and accumulators):
@@ -609,13 +619,20 @@ impl RollingGrid {
         // cell, or split its batch points at height gaps. All sums are exact integers, so
         // neither the chunking nor the order of the samples changes a cell.
         let parts = split_buckets(layers, &mut scratch.acc);
-        let (fused, below) = parts
-            .into_par_iter()
-            .enumerate()
-            .map(|(bi, (mut lay, cells))| {
-                fuse_bucket(binned, bi, &mut lay, cells, k, min_mm, support)
-            })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        let fuse = |(bi, (mut lay, cells)): (usize, (ElevMut, &mut [Acc]))| {
+            fuse_bucket(binned, bi, &mut lay, cells, k, min_mm, support)
+        };
+        let add = |a: (u64, u64), b: (u64, u64)| (a.0 + b.0, a.1 + b.1);
+        let (fused, below) = if chunks == 1 {
+            // A batch too small to split into chunks is fused on this thread too.
+            parts.into_iter().enumerate().map(fuse).fold((0, 0), add)
+        } else {
+            parts
+                .into_par_iter()
+                .enumerate()
+                .map(fuse)
+                .reduce(|| (0, 0), add)
+        };
 
         let mut stats = IngestStats::default();
         for p in binned {
@@ -715,6 +732,10 @@ fn fuse_bucket(
     min_mm: f64,
     support: u32,
 ) -> (u64, u64) {
+    let count: usize = binned.iter().map(|p| p.buckets[bi].len()).sum();
+    if count < BUCKET_CELLS / SPARSE {
+        return fuse_sparse(binned, bi, lay, k, min_mm, support);
+    }
     let mask = (BUCKET_CELLS - 1) as u32;
     let samples = || binned.iter().flat_map(|p| &p.buckets[bi]);
     let mut touched: Vec<u32> = Vec::new();
@@ -762,23 +783,74 @@ fn fuse_bucket(
         }
         for (g, &l) in groups.iter_mut().zip(&flagged) {
             let l = l as usize;
-            let (kept, nbelow) = split_cell(g, k, min_mm);
+            let nbelow = split_and_merge(lay, l, g, k, min_mm);
             fused -= nbelow as u64;
             below += nbelow as u64;
-            // No point of a flagged cell was gated (its prior was unsupported), so the
-            // batch's statistics are exactly `kept` and `nbelow`.
-            let a = Acc {
-                hits: kept.hits,
-                below: nbelow,
-                sw: kept.sw,
-                swz: kept.swz,
-                swzz: kept.swzz,
-                zmin: kept.zmin,
-                zmax: kept.zmax,
-                ..Acc::default()
-            };
-            lay.merge(l, &a);
             cells[l] = Acc::default();
+        }
+    }
+    (fused, below)
+}
+
+/// Splits the batch points of cell `l` at height gaps and merges the result; returns the
+/// number of points counted below the surface (all others are fused).
+fn split_and_merge(lay: &mut ElevMut, l: usize, pts: &mut [Sample], k: f64, min_mm: f64) -> u32 {
+    let (kept, nbelow) = split_cell(pts, k, min_mm);
+    // No point of a split cell was gated (its prior was unsupported), so the batch's
+    // statistics are exactly `kept` and `nbelow`.
+    let a = Acc {
+        hits: kept.hits,
+        below: nbelow,
+        sw: kept.sw,
+        swz: kept.swz,
+        swzz: kept.swzz,
+        zmin: kept.zmin,
+        zmax: kept.zmax,
+        ..Acc::default()
+    };
+    lay.merge(l, &a);
+    nbelow
+}
+
+/// Pass 2 for a bucket with few samples for its cells (a small batch): the dense
+/// accumulators would cost a cache miss per touched cell, so the samples are sorted by
+/// cell instead and each cell's run is fused on the stack, by the same rules.
+fn fuse_sparse(
+    binned: &[Binned],
+    bi: usize,
+    lay: &mut ElevMut,
+    k: f64,
+    min_mm: f64,
+    support: u32,
+) -> (u64, u64) {
+    let mask = (BUCKET_CELLS - 1) as u32;
+    let mut v: Vec<Sample> = binned
+        .iter()
+        .flat_map(|p| p.buckets[bi].iter().copied())
+        .collect();
+    v.sort_unstable_by_key(|s| s.idx);
+    let (mut fused, mut below) = (0u64, 0u64);
+    for run in v.chunk_by_mut(|a, b| a.idx == b.idx) {
+        let l = (run[0].idx & mask) as usize;
+        let gate_fast = fast_threshold(prior_gate(lay, l, support), k, min_mm);
+        let mut a = Acc::default();
+        for s in run.iter() {
+            if s.z_mm < gate_fast && is_below(lay, l, support, s, k, min_mm) {
+                a.below += 1;
+                below += 1;
+                continue;
+            }
+            a.add(s.z_mm, s.w);
+            fused += 1;
+        }
+        let needs_split =
+            lay.hits[l] < support && a.hits >= 2 && (a.zmax as f64 - a.zmin as f64) > min_mm;
+        if needs_split {
+            let nbelow = split_and_merge(lay, l, run, k, min_mm);
+            fused -= nbelow as u64;
+            below += nbelow as u64;
+        } else {
+            lay.merge(l, &a);
         }
     }
     (fused, below)
