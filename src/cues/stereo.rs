@@ -514,7 +514,7 @@ pub fn stereo_reflections(
         // (With the shore kept whenever it was within its noise of the frame's level, or
         // the frame's level taken only within an absolute tolerance of 0.3 m, the
         // simulated fig4 pond, whose near bank is 0.3 m high, laid some runs'
-        // reflections on the bank: 189 dry cells called water against 150.)
+        // reflections on the bank: 189 dry cells called water against 153.)
         let level = match waterline_level.or(symmetry_level) {
             Some(l) if l < run.shore => l,
             _ => run.shore,
@@ -611,7 +611,8 @@ pub fn stereo_reflections(
     // does not.
     let mut level_points = 0;
     let mut span_cells = 0;
-    if let Some(l) = waterline_level.or(symmetry_level) {
+    // (A level at or above the camera has no crossings in front of it.)
+    if let Some(l) = waterline_level.or(symmetry_level).filter(|&l| l < o.z) {
         let crossing = |s: usize| {
             let p = pts[s];
             let t = (o.z - l) / (o.z - p.z);
