@@ -31,10 +31,15 @@
 //!   without noise, the median difference moved 0.03 m while `L` moved 0.4 m, where an
 //!   informative pairing moves it 0.8 m. The runs therefore take the waterline level when
 //!   there is one, and the symmetry level only without it;
-//! * the frame's level replaces the shore level of a run when the two differ by more than
-//!   the shore point's vertical noise (`gate_sigma·σ_v`: the shore is a bank above the
-//!   water, or poorly seen) and it is the same water: within `level_tolerance_m` of the
-//!   shore, or met by the run's own far shore within `gate_sigma` of that shore's noise;
+//! * the frame's level replaces the shore level of a run when it lies below it (water
+//!   stands at or below its shores: the shore is a bank above the water, or a point seen
+//!   a little up the bank); a frame level above the shore is not this run's water;
+//! * up a column with a confirmed run, once the frame has a level, every later point is
+//!   judged against that level alone: below it by more than its vertical noise, or below
+//!   it with its `level_window` neighbours below it on average by more than the noise of
+//!   their mean, it is a reflection whatever the run structure; the cells between
+//!   consecutive reflection crossings up a column get evidence too (one cloud row spans
+//!   more than a metre of water at 20 m);
 //! * with the intensity image and camera model ([`MirrorCheck`]), the intensities of the
 //!   reflected pixels must correlate (normalised cross-correlation ≥ `min_ncc`) with those
 //!   of the pixels where the mirrored points project; a run whose pixels have no texture
@@ -49,7 +54,7 @@ use super::EvidenceMap;
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::PointCloud;
-use crate::grid::RangeNoise;
+use crate::grid::{key_of, CellKey, RangeNoise};
 
 /// A single-channel image (row-major, `width × height`), e.g. the left camera's intensity.
 #[derive(Debug, Clone, PartialEq)]
@@ -122,14 +127,17 @@ pub struct StereoCueConfig {
     pub pair_radius_m: f64,
     /// Fewest pairs for a symmetry level.
     pub min_pairs: usize,
-    /// A run's shore level is replaced by the frame's level when within this (m), or when
-    /// the run's own far shore meets that level; a far shore more than this (and its
-    /// noise) below the near one is not taken for the water's edge.
+    /// A far shore more than this (and its noise) below the near one is not taken for the
+    /// water's edge (m).
     pub level_tolerance_m: f64,
     /// Fewest far shores for a waterline level.
     pub min_far_shores: usize,
     /// Smallest normalised cross-correlation that confirms a run (with an image).
     pub min_ncc: f64,
+    /// Up a column with confirmed water, a point below the level within its own noise is
+    /// a reflection when, with this many valid points either side of it, the weighted mean
+    /// lies below the level by more than the mean's noise (0: single points only).
+    pub level_window: usize,
 }
 
 impl Default for StereoCueConfig {
@@ -147,6 +155,7 @@ impl Default for StereoCueConfig {
             level_tolerance_m: 0.3,
             min_far_shores: 5,
             min_ncc: 0.5,
+            level_window: 2,
         }
     }
 }
@@ -196,19 +205,23 @@ pub struct StereoCues {
     pub runs: usize,
     pub rejected_geometry: usize,
     pub rejected_image: usize,
-    /// Points found to be reflections.
+    /// Points found to be reflections (in runs and below the known level).
     pub reflected_points: usize,
+    /// Of those, the points found against the frame's level alone, up a column that has
+    /// confirmed water, outside any run.
+    pub level_points: usize,
+    /// Cells strictly between consecutive reflection crossings up a column, counted once
+    /// per span.
+    pub span_cells: usize,
 }
 
 /// One candidate run: slots (bottom to top) and the shore level before it.
 struct Run {
     slots: Vec<usize>,
     shore: f64,
-    /// Vertical noise (σ) of the shore point the level came from.
-    shore_sigma: f64,
     /// The height of the terrain that ended the run (the far shore, where the reflection
     /// meets what it reflects), when terrain nearer than the run ended it.
-    far: Option<(f64, f64)>,
+    far: Option<f64>,
 }
 
 /// Finds reflections in an organized stereo cloud (rows top to bottom as in the image).
@@ -267,8 +280,6 @@ pub fn stereo_reflections(
             let mut run: Vec<usize> = Vec::new();
             let mut run_gap = false;
             let mut run_shore = 0.0;
-            let mut run_shore_sigma = 0.0;
-            let mut sigma_g = 0.0;
             let mut run_min_h = f64::INFINITY;
             // A run is a reflection when it follows a gap and the terrain seen after it, up
             // the column, is *nearer* than the run (by `gap_min_m` than its median distance:
@@ -277,7 +288,7 @@ pub fn stereo_reflections(
             // must wrap.
             let close = |run: &mut Vec<usize>,
                          gap: bool,
-                         shore: (f64, f64),
+                         shore: f64,
                          next: Option<(f64, f64, f64)>,
                          runs: &mut Vec<Run>,
                          rej: &mut usize| {
@@ -305,14 +316,12 @@ pub fn stereo_reflections(
                 if slots.len() >= cfg.min_run && gap && wraps {
                     runs.push(Run {
                         slots,
-                        shore: shore.0,
-                        shore_sigma: shore.1,
+                        shore,
                         // A far shore more than the tolerance (and its noise) below the
                         // near one is not this water's edge: more reflection that range
                         // noise pulled nearer than the run ended it.
                         far: next.and_then(|(_, z, sv)| {
-                            (z >= shore.0 - cfg.level_tolerance_m - cfg.gate_sigma * sv)
-                                .then_some((z, sv))
+                            (z >= shore - cfg.level_tolerance_m - cfg.gate_sigma * sv).then_some(z)
                         }),
                     });
                 } else {
@@ -353,7 +362,7 @@ pub fn stereo_reflections(
                     close(
                         &mut run,
                         run_gap,
-                        (run_shore, run_shore_sigma),
+                        run_shore,
                         Some((h, p.z, vertical)),
                         &mut runs,
                         &mut rejected_geometry,
@@ -363,7 +372,6 @@ pub fn stereo_reflections(
                     // A new run (also right after one that nearer terrain ended).
                     run_gap = h - h_g > cfg.gap_min_m || (invalid_since_ground > 0 && h > h_g);
                     run_shore = zg;
-                    run_shore_sigma = sigma_g;
                     run_min_h = h;
                     run.push(s);
                     continue;
@@ -371,14 +379,13 @@ pub fn stereo_reflections(
                 if p.z - zg <= cfg.above_gate_m {
                     z_g = Some(p.z);
                     h_g = h;
-                    sigma_g = vertical;
                     invalid_since_ground = 0;
                 }
             }
             close(
                 &mut run,
                 run_gap,
-                (run_shore, run_shore_sigma),
+                run_shore,
                 None,
                 &mut runs,
                 &mut rejected_geometry,
@@ -400,7 +407,7 @@ pub fn stereo_reflections(
     // camera is seen down to the water, and points there are near the level, where the
     // vertical part of the range error is smallest; the near bank may face away and
     // hide the water's edge. The median of the far shores, when there are enough.
-    let mut fars: Vec<f64> = runs.iter().filter_map(|r| r.far.map(|f| f.0)).collect();
+    let mut fars: Vec<f64> = runs.iter().filter_map(|r| r.far).collect();
     let far_shores = fars.len();
     let waterline_level = (far_shores >= cfg.min_far_shores.max(1)).then(|| {
         let m = fars.len() / 2;
@@ -485,20 +492,31 @@ pub fn stereo_reflections(
     let mut ev = EvidenceMap::new(resolution, z_ref);
     let mut corrected = cloud.clone();
     let (mut confirmed, mut rejected_image, mut reflected_points) = (0, 0, 0);
+    let mut reflected = vec![false; cloud.len()];
+    let mut water_from: Vec<Option<usize>> = vec![None; cols];
+    // Evidence where the ray to reflected point `s` crosses the level, and the mirrored
+    // point `m` (map frame) in place of the raw one.
+    let reflect_at =
+        |ev: &mut EvidenceMap, corrected: &mut PointCloud, s: usize, level: f64, m: Point3<f64>| {
+            let p = pts[s];
+            let t = (o.z - level) / (o.z - p.z);
+            let cx = o.x + (p.x - o.x) * t;
+            let cy = o.y + (p.y - o.y) * t;
+            ev.add_with_level(cx, cy, level, |e| e.reflect = e.reflect.saturating_add(1));
+            let q = to_frame * m;
+            corrected.xyz[s] = [q.x as f32, q.y as f32, q.z as f32];
+        };
     for run in &runs {
-        // The shore level stands unless the frame's level (the waterline, else symmetry)
-        // says it is measurably off (a bank, a poorly seen shore) and it is the same water:
-        // within the tolerance of the shore, or met by this run's own far shore.
+        // Water stands at or below its shores. The frame's level (the waterline, else
+        // symmetry) replaces the shore level when it lies below it, by any amount: the
+        // shore is a bank that hides the water's edge, or a point seen a little up the
+        // bank. A frame level above the shore cannot be this water's: the shore stands.
+        // (With the shore kept whenever it was within its noise of the frame's level, or
+        // the frame's level taken only within an absolute tolerance of 0.3 m, the
+        // simulated fig4 pond, whose near bank is 0.3 m high, laid some runs'
+        // reflections on the bank: 189 dry cells called water against 153.)
         let level = match waterline_level.or(symmetry_level) {
-            Some(l)
-                if (l - run.shore).abs() > cfg.gate_sigma * run.shore_sigma
-                    && ((l - run.shore).abs() <= cfg.level_tolerance_m
-                        || run
-                            .far
-                            .is_some_and(|(f, sf)| (f - l).abs() <= cfg.gate_sigma * sf)) =>
-            {
-                l
-            }
+            Some(l) if l < run.shore => l,
             _ => run.shore,
         };
         // A reflection lies below the water: points of the run that are not below the
@@ -508,12 +526,7 @@ pub fn stereo_reflections(
             .slots
             .iter()
             .copied()
-            .filter(|&s| {
-                let p = pts[s];
-                let range = (p - o).norm();
-                let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
-                p.z < level - cfg.gate_min_m.max(cfg.gate_sigma * vertical)
-            })
+            .filter(|&s| below_level(pts[s], o, level, cfg))
             .collect();
         if slots.len() < cfg.min_run {
             rejected_geometry += 1;
@@ -566,14 +579,94 @@ pub fn stereo_reflections(
         }
         confirmed += 1;
         for (&s, m) in slots.iter().zip(&mirrored) {
-            let p = pts[s];
-            let t = (o.z - level) / (o.z - p.z);
-            let cx = o.x + (p.x - o.x) * t;
-            let cy = o.y + (p.y - o.y) * t;
-            ev.add_with_level(cx, cy, level, |e| e.reflect = e.reflect.saturating_add(1));
-            let q = to_frame * m;
-            corrected.xyz[s] = [q.x as f32, q.y as f32, q.z as f32];
+            reflect_at(&mut ev, &mut corrected, s, level, *m);
+            reflected[s] = true;
             reflected_points += 1;
+        }
+        // The column's water starts at its nearest confirmed run (the walk goes up the
+        // column, bottom row first).
+        let (row, col) = (run.slots[0] / cols, run.slots[0] % cols);
+        water_from[col] = Some(water_from[col].map_or(row, |r: usize| r.max(row)));
+    }
+
+    // 4. Below the known level. Once a column has met confirmed water and the frame has a
+    // level, the points further up that column are judged against the level alone,
+    // whatever the run structure around them. Far out, where the rays graze the water and
+    // reflect the far bank and the grass a few decimetres above it, the virtual images lie
+    // within the gate of the local ground, their ranges need not wrap, and range noise
+    // scatters them past the far shore, so the runs miss them. A point is a reflection
+    // when it lies below the level by more than its vertical noise, or when it lies below
+    // the level and the `level_window` valid points either side of it in the column (with
+    // it) lie below the level on average by more than the noise of that weighted mean
+    // (`gate_sigma / √Σw`, `w = 1/σ_v²`): a virtual image 0.3 m deep at 22 m is within one
+    // point's 3σ_v, not within that of five. Only columns with a confirmed run take part:
+    // ground below the level elsewhere (the far side of a rise, a dry ditch) is not this
+    // water.
+    //
+    // Between two consecutive reflections up a column the level is crossed by every ray
+    // between theirs: at 20 m one cloud row spans more than a metre of water, which one
+    // crossing cell alone leaves unseen. Each cell strictly between the two crossings gets
+    // one reflection count. A point at or above the level between them (the surface
+    // itself, ground, an object) ends the span; a point below the level within its noise
+    // does not.
+    let mut level_points = 0;
+    let mut span_cells = 0;
+    // (A level at or above the camera has no crossings in front of it.)
+    if let Some(l) = waterline_level.or(symmetry_level).filter(|&l| l < o.z) {
+        let crossing = |s: usize| {
+            let p = pts[s];
+            let t = (o.z - l) / (o.z - p.z);
+            (o.x + (p.x - o.x) * t, o.y + (p.y - o.y) * t)
+        };
+        let per_column: Vec<(Vec<usize>, Vec<CellKey>)> = water_from
+            .par_iter()
+            .enumerate()
+            .map(|(c, from)| {
+                let (mut new, mut span) = (Vec::new(), Vec::new());
+                let Some(r0) = *from else {
+                    return (new, span);
+                };
+                let valid: Vec<usize> = (0..=r0)
+                    .rev()
+                    .map(|r| r * cols + c)
+                    .filter(|&s| cloud.is_valid(s))
+                    .collect();
+                let mut last: Option<(f64, f64)> = None;
+                for (i, &s) in valid.iter().enumerate() {
+                    let p = pts[s];
+                    let w = cfg.level_window;
+                    let window = &valid[i.saturating_sub(w)..(i + w + 1).min(valid.len())];
+                    let is_reflection = reflected[s]
+                        || below_level(p, o, l, cfg)
+                        || (w > 0 && p.z < l && mean_below_level(window, &pts, o, l, cfg));
+                    if is_reflection {
+                        if !reflected[s] {
+                            new.push(s);
+                        }
+                        let here = crossing(s);
+                        if let Some(prev) = last {
+                            span_cells_between(resolution, prev, here, &mut span);
+                        }
+                        last = Some(here);
+                    } else if p.z >= l {
+                        last = None;
+                    }
+                }
+                (new, span)
+            })
+            .collect();
+        for (new, span) in per_column {
+            for s in new {
+                let m = Point3::new(pts[s].x, pts[s].y, 2.0 * l - pts[s].z);
+                reflect_at(&mut ev, &mut corrected, s, l, m);
+                level_points += 1;
+                reflected_points += 1;
+            }
+            for k in span {
+                let (x, y) = crate::grid::centre_of(resolution, k);
+                ev.add_with_level(x, y, l, |e| e.reflect = e.reflect.saturating_add(1));
+                span_cells += 1;
+            }
         }
     }
     Ok(StereoCues {
@@ -584,10 +677,63 @@ pub fn stereo_reflections(
         waterline_level,
         far_shores,
         runs: confirmed,
+        level_points,
+        span_cells,
         rejected_geometry,
         rejected_image,
         reflected_points,
     })
+}
+
+/// Whether `p` lies below `level` by more than its noise: `max(gate_min_m, gate_sigma·σ_v)`,
+/// `σ_v` the vertical part of the range error along the ray from `o`.
+fn below_level(p: Point3<f64>, o: Point3<f64>, level: f64, cfg: &StereoCueConfig) -> bool {
+    p.z < o.z && p.z < level - gate_of(p, o, cfg)
+}
+
+/// `max(gate_min_m, gate_sigma·σ_v)` of a point seen from `o`.
+fn gate_of(p: Point3<f64>, o: Point3<f64>, cfg: &StereoCueConfig) -> f64 {
+    let range = (p - o).norm();
+    let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
+    cfg.gate_min_m.max(cfg.gate_sigma * vertical)
+}
+
+/// Whether the points `window` lie below `level` on average, weighted by `1/σ_v²`, by more
+/// than `max(gate_min_m, gate_sigma·σ)` with `σ = 1/√Σw` the noise of that mean.
+fn mean_below_level(
+    window: &[usize],
+    pts: &[Point3<f64>],
+    o: Point3<f64>,
+    level: f64,
+    cfg: &StereoCueConfig,
+) -> bool {
+    let (mut sw, mut swd) = (0.0, 0.0);
+    for &t in window {
+        let q = pts[t];
+        let range = (q - o).norm();
+        let sv = cfg.noise.sigma(range) * ((o.z - q.z).abs() / range.max(1e-9));
+        let w = 1.0 / (sv * sv).max(1e-12);
+        sw += w;
+        swd += w * (level - q.z);
+    }
+    sw > 0.0 && swd / sw > cfg.gate_min_m.max(cfg.gate_sigma / sw.sqrt())
+}
+
+/// The cells the segment `a`–`b` passes through, strictly between the cells of its ends,
+/// in order from `a`.
+fn span_cells_between(res: f64, a: (f64, f64), b: (f64, f64), out: &mut Vec<CellKey>) {
+    let (ka, kb) = (key_of(res, a.0, a.1), key_of(res, b.0, b.1));
+    let len = (b.0 - a.0).hypot(b.1 - a.1);
+    let n = (len / (0.25 * res)).ceil() as usize;
+    let mut prev = ka;
+    for i in 1..n {
+        let f = i as f64 / n as f64;
+        let k = key_of(res, a.0 + (b.0 - a.0) * f, a.1 + (b.1 - a.1) * f);
+        if k != prev && k != ka && k != kb {
+            out.push(k);
+        }
+        prev = k;
+    }
 }
 
 /// Normalised cross-correlation; `None` with fewer than 3 samples or no texture.
