@@ -243,7 +243,8 @@ pub(crate) fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
 #[inline]
 fn floor_i64(v: f64) -> i64 {
     let t = v as i64;
-    t - ((t as f64) > v) as i64
+    // Saturating: `as` saturates below −2⁶³, where the correction must not overflow.
+    t.saturating_sub(((t as f64) > v) as i64)
 }
 
 /// [`super::quantize_weight`] bit for bit, with the clamp before the conversion so the cast
@@ -491,8 +492,14 @@ impl Ctx<'_> {
         let wx = r[0][0] * xd + r[0][1] * yd + r[0][2] * zd + self.t[0];
         let wy = r[1][0] * xd + r[1][1] * yd + r[1][2] * zd + self.t[1];
         let wz = r[2][0] * xd + r[2][1] * yd + r[2][2] * zd + self.t[2];
-        let dx = cell_coord(wx, self.inv_res, self.res) - self.origin.0;
-        let dy = cell_coord(wy, self.inv_res, self.res) - self.origin.1;
+        // A finite point far beyond any window (1e30 m) has a cell coordinate near i64::MAX:
+        // the offset from the window overflows, and such a point is outside.
+        let (Some(dx), Some(dy)) = (
+            cell_coord(wx, self.inv_res, self.res).checked_sub(self.origin.0),
+            cell_coord(wy, self.inv_res, self.res).checked_sub(self.origin.1),
+        ) else {
+            return Classified::Outside;
+        };
         if dx < 0 || dx >= self.n || dy < 0 || dy >= self.n {
             return Classified::Outside;
         }
