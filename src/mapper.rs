@@ -374,7 +374,7 @@ pub struct StageTimes {
     pub lidar: f64,
     /// Stereo reflections and the ingest of the (corrected) cloud.
     pub stereo: f64,
-    /// Image labels (not built yet: always 0).
+    /// Image labels: classification, projection and votes (0 when none is configured).
     pub labels: f64,
     /// The window's hazard map, published as the snapshot.
     pub water: f64,
