@@ -528,11 +528,23 @@ pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {
 /// Writes `map.ply`, `terrain.ply`, `water.ply` and `map.png` into `dir` (created if needed).
 pub fn write_map_files(dir: &Path, map: &HazardMap) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    write_map_ply(&dir.join("map.ply"), map)?;
-    write_terrain_ply(&dir.join("terrain.ply"), map)?;
-    write_water_ply(&dir.join("water.ply"), map)?;
-    write_map_png(&dir.join("map.png"), map)?;
-    Ok(())
+    // The files are independent: written side by side (each atomically), the first error
+    // in this order reported.
+    let ((map_ply, water_ply), (terrain_ply, png)) = rayon::join(
+        || {
+            (
+                write_map_ply(&dir.join("map.ply"), map),
+                write_water_ply(&dir.join("water.ply"), map),
+            )
+        },
+        || {
+            rayon::join(
+                || write_terrain_ply(&dir.join("terrain.ply"), map),
+                || write_map_png(&dir.join("map.png"), map),
+            )
+        },
+    );
+    map_ply.and(terrain_ply).and(water_ply).and(png)
 }
 
 /// Summary of a [`MapCell`] slice used by reports.
