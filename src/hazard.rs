@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cues::BuildKeyHasher;
 use crate::error::Result;
-use crate::grid::{CellKey, CellStats, Fusion, TileMap};
+use crate::grid::{centre_of, CellKey, CellStats, Fusion, TileMap};
 use crate::water::{find_bodies_among, HazardConfig, Vehicle, WaterBody};
 
 /// Cell-keyed maps of the hazard pass: every observed cell goes through them each frame.
@@ -93,32 +93,44 @@ pub struct MapCell {
     pub below: u32,
 }
 
-impl MapCell {
-    /// The record of a tile-map cell with the given surface, water and class.
-    #[allow(clippy::too_many_arguments)]
-    fn of(
-        tiles: &TileMap,
-        key: CellKey,
-        c: &crate::grid::CellStats,
-        z: f64,
-        water: f32,
-        depth: f32,
-        class: Class,
-        hazard: Hazard,
-    ) -> Self {
-        let (x, y) = tiles.centre_of(key);
-        MapCell {
+/// What a map record keeps of an observed cell, whatever its class.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    key: CellKey,
+    /// [`CellStats::elevation_std_m`], NaN without an elevation.
+    elevation_std: f64,
+    hits: u32,
+    below: u32,
+    /// Water probability.
+    water: f32,
+}
+
+impl Seen {
+    fn of(key: CellKey, c: &CellStats, water: f32) -> Self {
+        Seen {
             key,
+            elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
+            hits: c.hits,
+            below: c.below,
+            water,
+        }
+    }
+
+    /// The record of the cell at resolution `res` with the given surface and class.
+    fn record(self, res: f64, z: f64, depth: f32, class: Class, hazard: Hazard) -> MapCell {
+        let (x, y) = centre_of(res, self.key);
+        MapCell {
+            key: self.key,
             x,
             y,
             z,
-            elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
-            water,
+            elevation_std: self.elevation_std,
+            water: self.water,
             depth,
             class,
             hazard,
-            hits: c.hits,
-            below: c.below,
+            hits: self.hits,
+            below: self.below,
         }
     }
 }
@@ -237,6 +249,88 @@ fn terrain_hazard(
     }
 }
 
+/// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
+/// slope tests.
+fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<(f64, f64)> {
+    let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
+    Some((c.mean_mm().map(|m| z_ref + m * 1e-3)?, sz))
+}
+
+/// Surface z and depth of the water cells of `bodies`.
+fn water_surface(bodies: &[WaterBody], res: f64) -> CellMap<(f64, f32)> {
+    let mut water: CellMap<(f64, f32)> = CellMap::default();
+    for b in bodies {
+        let s = b.surface.evaluator();
+        for (&k, &d) in b.cells.iter().zip(&b.cell_depth_m) {
+            let (x, y) = centre_of(res, k);
+            water.insert(k, (s.at(x, y), d));
+        }
+    }
+    water
+}
+
+/// The class, hazard and surface of an observed cell given the water and dry cells
+/// around it (module `water`, "Hazards").
+struct CellRule<'a> {
+    res: f64,
+    z_ref: f64,
+    fording_depth_m: f64,
+    max_step_m: f64,
+    max_grad: f64,
+    water: &'a CellMap<(f64, f32)>,
+    dry: &'a DryCells,
+}
+
+impl<'a> CellRule<'a> {
+    fn new(
+        cfg: &HazardConfig,
+        res: f64,
+        z_ref: f64,
+        water: &'a CellMap<(f64, f32)>,
+        dry: &'a DryCells,
+    ) -> Self {
+        let v = &cfg.vehicle;
+        CellRule {
+            res,
+            z_ref,
+            fording_depth_m: v.fording_depth_m,
+            max_step_m: v.max_step_m,
+            max_grad: v.max_slope_deg.to_radians().tan(),
+            water,
+            dry,
+        }
+    }
+
+    /// The record of the observed cell `c`: water (from its body), dry terrain, or, seen
+    /// through water evidence only and not water, at its water level (`level_mm`, read
+    /// only then); `None` without any of these. (`dry` holds no water cell, so the order
+    /// of the first two tests does not matter.)
+    #[inline]
+    fn record(&self, c: Seen, level_mm: impl FnOnce() -> Option<f64>) -> Option<MapCell> {
+        if let Some((z, sz)) = self.dry.get(c.key) {
+            let (class, hazard) = terrain_hazard(
+                self.dry,
+                c.key,
+                (z, sz),
+                self.res,
+                self.max_step_m,
+                self.max_grad,
+            );
+            return Some(c.record(self.res, z, 0.0, class, hazard));
+        }
+        if let Some(&(z, depth)) = self.water.get(&c.key) {
+            let hazard = if depth.is_finite() && depth as f64 <= self.fording_depth_m {
+                Hazard::ShallowWater
+            } else {
+                Hazard::DeepWater
+            };
+            return Some(c.record(self.res, z, depth, Class::Water, hazard));
+        }
+        let z = level_mm().map(|mm| self.z_ref + mm * 1e-3)?;
+        Some(c.record(self.res, z, 0.0, Class::Unknown, Hazard::Free))
+    }
+}
+
 impl HazardMap {
     /// The geometry-only map of a tile map: every cell with fused points is ground, free.
     /// (Water, vegetation and obstacles come from the later stages of the pipeline.)
@@ -246,12 +340,9 @@ impl HazardMap {
             .observed()
             .filter_map(|(key, c)| {
                 let z = tiles.elevation(&c)?;
-                Some(MapCell::of(
-                    tiles,
-                    key,
-                    &c,
+                Some(Seen::of(key, &c, 0.0).record(
+                    tiles.resolution(),
                     z,
-                    0.0,
                     0.0,
                     Class::Ground,
                     Hazard::Free,
@@ -326,66 +417,21 @@ impl HazardMap {
     ) -> Result<Self> {
         let bodies = find_bodies_among(tiles, &observed, cfg, previous)?;
         let res = tiles.resolution();
-        // Water cells: surface z and depth from their body.
-        let mut water: CellMap<(f64, f32)> = CellMap::default();
-        for b in &bodies {
-            let s = b.surface.evaluator();
-            for (&k, &d) in b.cells.iter().zip(&b.cell_depth_m) {
-                let (x, y) = tiles.centre_of(k);
-                water.insert(k, (s.at(x, y), d));
-            }
-        }
+        let water = water_surface(&bodies, res);
         // Dry terrain for the step and slope tests.
         let dry = DryCells::new(
             observed
                 .iter()
                 .filter(|(k, _)| !water.contains_key(k))
-                .filter_map(|&(k, c)| {
-                    let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
-                    Some((k, (tiles.elevation(&c)?, sz)))
-                })
+                .filter_map(|&(k, c)| Some((k, dry_terrain(&c, tiles.z_ref())?)))
                 .collect(),
         );
-        let v = &cfg.vehicle;
-        let max_grad = v.max_slope_deg.to_radians().tan();
+        let rule = CellRule::new(cfg, res, tiles.z_ref(), &water, &dry);
         let cells = observed
             .iter()
-            .filter_map(|&(key, c)| {
+            .filter_map(|(key, c)| {
                 let p = c.ev.water_probability(&cfg.fusion) as f32;
-                if let Some(&(z, depth)) = water.get(&key) {
-                    let hazard = if depth.is_finite() && depth as f64 <= v.fording_depth_m {
-                        Hazard::ShallowWater
-                    } else {
-                        Hazard::DeepWater
-                    };
-                    return Some(MapCell::of(
-                        tiles,
-                        key,
-                        &c,
-                        z,
-                        p,
-                        depth,
-                        Class::Water,
-                        hazard,
-                    ));
-                }
-                let Some((z, sz)) = dry.get(key) else {
-                    // Observed through water evidence only, not water: its level, if any.
-                    let z = c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3)?;
-                    return Some(MapCell::of(
-                        tiles,
-                        key,
-                        &c,
-                        z,
-                        p,
-                        0.0,
-                        Class::Unknown,
-                        Hazard::Free,
-                    ));
-                };
-                let (class, hazard) =
-                    terrain_hazard(&dry, key, (z, sz), res, v.max_step_m, max_grad);
-                Some(MapCell::of(tiles, key, &c, z, p, 0.0, class, hazard))
+                rule.record(Seen::of(*key, c, p), || c.ev.level_mm())
             })
             .collect();
         Ok(HazardMap {
