@@ -10,6 +10,10 @@ use crate::error::Result;
 use crate::grid::{centre_of, CellKey, CellStats, Fusion, TileMap};
 use crate::water::{find_bodies_among, HazardConfig, Vehicle, WaterBody};
 
+mod window;
+
+pub(crate) use window::WindowScratch;
+
 /// Cell-keyed maps of the hazard pass: every observed cell goes through them each frame.
 type CellMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
 
