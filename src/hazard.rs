@@ -208,15 +208,39 @@ impl DryCells {
             DryCells::Sparse(m) => m.get(&k).copied(),
         }
     }
+
+    /// The dry 3 × 3 neighbourhood of `k`: three slices of the dense array inside it.
+    #[inline]
+    fn neighbourhood(&self, k: CellKey) -> Neighbourhood {
+        if let DryCells::Dense {
+            lo,
+            width,
+            height,
+            cells,
+        } = self
+        {
+            let (x, y) = (k.x - lo.x, k.y - lo.y);
+            if x >= 1 && y >= 1 && x < width - 1 && y < height - 1 {
+                let w = (y * width + x) as usize;
+                let row = |r: usize| &cells[r - 1..r + 2];
+                let (a, b, c) = (row(w - *width as usize), row(w), row(w + *width as usize));
+                return [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+            }
+        }
+        std::array::from_fn(|j| {
+            let (dx, dy) = (j as i64 % 3 - 1, j as i64 / 3 - 1);
+            self.get(CellKey::new(k.x + dx, k.y + dy))
+                .unwrap_or((f64::NAN, 0.0))
+        })
+    }
 }
 
+/// The dry 3 × 3 neighbourhood of a cell (itself included), row by row from its lower-left
+/// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
+type Neighbourhood = [(f64, f64); 9];
+
 /// Class and hazard of a dry cell at `key` with elevation `z` ± `sz` from its dry
-/// 8-neighbours: the upper side of a step higher than `max_step` is an obstacle (class and
-/// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
-/// the 3 × 3 neighbourhood) is a hazard on ground. Only what the elevations show beyond
-/// their noise counts: each difference to a neighbour is shrunk towards zero by two
-/// standard deviations of that difference, so far cells seen by a few noisy stereo points
-/// do not turn into obstacles.
+/// 8-neighbours (see [`hazard_of`]).
 fn terrain_hazard(
     dry: &DryCells,
     key: CellKey,
@@ -225,21 +249,42 @@ fn terrain_hazard(
     max_step: f64,
     max_grad: f64,
 ) -> (Class, Hazard) {
+    hazard_of(&dry.neighbourhood(key), (z, sz), res, max_step, max_grad)
+}
+
+/// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
+/// `nb`: the upper side of a step higher than `max_step` is an obstacle (class and
+/// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
+/// the 3 × 3 neighbourhood) is a hazard on ground. Only what the elevations show beyond
+/// their noise counts: each difference to a neighbour is shrunk towards zero by two
+/// standard deviations of that difference, so far cells seen by a few noisy stereo points
+/// do not turn into obstacles.
+#[inline]
+fn hazard_of(
+    nb: &Neighbourhood,
+    (z, sz): (f64, f64),
+    res: f64,
+    max_step: f64,
+    max_grad: f64,
+) -> (Class, Hazard) {
+    // The margins apart from the sums below, so that they vectorise.
+    let margin: [f64; 9] = std::array::from_fn(|j| {
+        let sn = nb[j].1;
+        2.0 * (sz * sz + sn * sn).sqrt()
+    });
     let (mut step, mut gx, mut gy, mut wx, mut wy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-    for dy in -1i64..=1 {
-        for dx in -1i64..=1 {
-            let Some((zn, sn)) = dry.get(CellKey::new(key.x + dx, key.y + dy)) else {
-                continue;
-            };
-            let d = zn - z;
-            let margin = 2.0 * (sz * sz + sn * sn).sqrt();
-            let d = d.signum() * (d.abs() - margin).max(0.0);
-            step = step.max(-d);
-            gx += d * dx as f64;
-            wx += (dx * dx) as f64;
-            gy += d * dy as f64;
-            wy += (dy * dy) as f64;
+    for (j, (&(zn, _), &margin)) in nb.iter().zip(&margin).enumerate() {
+        if zn.is_nan() {
+            continue;
         }
+        let (dx, dy) = (j as i64 % 3 - 1, j as i64 / 3 - 1);
+        let d = zn - z;
+        let d = d.signum() * (d.abs() - margin).max(0.0);
+        step = step.max(-d);
+        gx += d * dx as f64;
+        wx += (dx * dx) as f64;
+        gy += d * dy as f64;
+        wy += (dy * dy) as f64;
     }
     if step > max_step {
         return (Class::Obstacle, Hazard::Obstacle);
@@ -492,6 +537,19 @@ mod tests {
             }
         }
         assert_eq!(sparse.get(CellKey::new(1_000_000, -5)), Some((1.0, 2.0)));
+        // The neighbourhoods too, inside the dense array and at its edges.
+        let bits = |nb: Neighbourhood| nb.map(|(z, s)| (z.to_bits(), s.to_bits()));
+        for x in -10..16 {
+            for y in 0..16 {
+                let k = CellKey::new(x, y);
+                let want: Neighbourhood = std::array::from_fn(|j| {
+                    let d = CellKey::new(x + j as i64 % 3 - 1, y + j as i64 / 3 - 1);
+                    truth.get(&d).copied().unwrap_or((f64::NAN, 0.0))
+                });
+                assert_eq!(bits(dense.neighbourhood(k)), bits(want));
+                assert_eq!(bits(sparse.neighbourhood(k)), bits(want));
+            }
+        }
         assert_eq!(DryCells::new(Vec::new()).get(CellKey::new(0, 0)), None);
     }
 

@@ -87,9 +87,11 @@ impl HazardMap {
         } = scratch;
         seen.clear();
         seeds.clear();
-        dry.clear();
+        // Every cell of the window is written below.
         dry.resize(n * n, (f64::NAN, 0.0));
         grid.for_each_by_tile(|key, i| {
+            let d = &mut dry[at(key)];
+            *d = (f64::NAN, 0.0);
             if l.is_empty_at(i) {
                 return;
             }
@@ -107,7 +109,7 @@ impl HazardMap {
                 seeds.push(key);
             }
             if let Some(t) = dry_terrain(&c, z_ref) {
-                dry[at(key)] = t;
+                *d = t;
             }
             seen.push((Seen::of(key, &c, p as f32), i as u32));
         });
