@@ -7,8 +7,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::cues::BuildKeyHasher;
 use crate::error::Result;
-use crate::grid::{CellKey, CellStats, Fusion, TileMap};
+use crate::grid::{centre_of, CellKey, CellStats, Fusion, TileMap};
 use crate::water::{find_bodies_among, HazardConfig, Vehicle, WaterBody};
+
+mod window;
+
+pub(crate) use window::WindowScratch;
 
 /// Cell-keyed maps of the hazard pass: every observed cell goes through them each frame.
 type CellMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
@@ -93,32 +97,44 @@ pub struct MapCell {
     pub below: u32,
 }
 
-impl MapCell {
-    /// The record of a tile-map cell with the given surface, water and class.
-    #[allow(clippy::too_many_arguments)]
-    fn of(
-        tiles: &TileMap,
-        key: CellKey,
-        c: &crate::grid::CellStats,
-        z: f64,
-        water: f32,
-        depth: f32,
-        class: Class,
-        hazard: Hazard,
-    ) -> Self {
-        let (x, y) = tiles.centre_of(key);
-        MapCell {
+/// What a map record keeps of an observed cell, whatever its class.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    key: CellKey,
+    /// [`CellStats::elevation_std_m`], NaN without an elevation.
+    elevation_std: f64,
+    hits: u32,
+    below: u32,
+    /// Water probability.
+    water: f32,
+}
+
+impl Seen {
+    fn of(key: CellKey, c: &CellStats, water: f32) -> Self {
+        Seen {
             key,
+            elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
+            hits: c.hits,
+            below: c.below,
+            water,
+        }
+    }
+
+    /// The record of the cell at resolution `res` with the given surface and class.
+    fn record(self, res: f64, z: f64, depth: f32, class: Class, hazard: Hazard) -> MapCell {
+        let (x, y) = centre_of(res, self.key);
+        MapCell {
+            key: self.key,
             x,
             y,
             z,
-            elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
-            water,
+            elevation_std: self.elevation_std,
+            water: self.water,
             depth,
             class,
             hazard,
-            hits: c.hits,
-            below: c.below,
+            hits: self.hits,
+            below: self.below,
         }
     }
 }
@@ -192,15 +208,39 @@ impl DryCells {
             DryCells::Sparse(m) => m.get(&k).copied(),
         }
     }
+
+    /// The dry 3 × 3 neighbourhood of `k`: three slices of the dense array inside it.
+    #[inline]
+    fn neighbourhood(&self, k: CellKey) -> Neighbourhood {
+        if let DryCells::Dense {
+            lo,
+            width,
+            height,
+            cells,
+        } = self
+        {
+            let (x, y) = (k.x - lo.x, k.y - lo.y);
+            if x >= 1 && y >= 1 && x < width - 1 && y < height - 1 {
+                let w = (y * width + x) as usize;
+                let row = |r: usize| &cells[r - 1..r + 2];
+                let (a, b, c) = (row(w - *width as usize), row(w), row(w + *width as usize));
+                return [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+            }
+        }
+        std::array::from_fn(|j| {
+            let (dx, dy) = (j as i64 % 3 - 1, j as i64 / 3 - 1);
+            self.get(CellKey::new(k.x + dx, k.y + dy))
+                .unwrap_or((f64::NAN, 0.0))
+        })
+    }
 }
 
+/// The dry 3 × 3 neighbourhood of a cell (itself included), row by row from its lower-left
+/// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
+type Neighbourhood = [(f64, f64); 9];
+
 /// Class and hazard of a dry cell at `key` with elevation `z` ± `sz` from its dry
-/// 8-neighbours: the upper side of a step higher than `max_step` is an obstacle (class and
-/// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
-/// the 3 × 3 neighbourhood) is a hazard on ground. Only what the elevations show beyond
-/// their noise counts: each difference to a neighbour is shrunk towards zero by two
-/// standard deviations of that difference, so far cells seen by a few noisy stereo points
-/// do not turn into obstacles.
+/// 8-neighbours (see [`hazard_of`]).
 fn terrain_hazard(
     dry: &DryCells,
     key: CellKey,
@@ -209,21 +249,42 @@ fn terrain_hazard(
     max_step: f64,
     max_grad: f64,
 ) -> (Class, Hazard) {
+    hazard_of(&dry.neighbourhood(key), (z, sz), res, max_step, max_grad)
+}
+
+/// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
+/// `nb`: the upper side of a step higher than `max_step` is an obstacle (class and
+/// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
+/// the 3 × 3 neighbourhood) is a hazard on ground. Only what the elevations show beyond
+/// their noise counts: each difference to a neighbour is shrunk towards zero by two
+/// standard deviations of that difference, so far cells seen by a few noisy stereo points
+/// do not turn into obstacles.
+#[inline]
+fn hazard_of(
+    nb: &Neighbourhood,
+    (z, sz): (f64, f64),
+    res: f64,
+    max_step: f64,
+    max_grad: f64,
+) -> (Class, Hazard) {
+    // The margins apart from the sums below, so that they vectorise.
+    let margin: [f64; 9] = std::array::from_fn(|j| {
+        let sn = nb[j].1;
+        2.0 * (sz * sz + sn * sn).sqrt()
+    });
     let (mut step, mut gx, mut gy, mut wx, mut wy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-    for dy in -1i64..=1 {
-        for dx in -1i64..=1 {
-            let Some((zn, sn)) = dry.get(CellKey::new(key.x + dx, key.y + dy)) else {
-                continue;
-            };
-            let d = zn - z;
-            let margin = 2.0 * (sz * sz + sn * sn).sqrt();
-            let d = d.signum() * (d.abs() - margin).max(0.0);
-            step = step.max(-d);
-            gx += d * dx as f64;
-            wx += (dx * dx) as f64;
-            gy += d * dy as f64;
-            wy += (dy * dy) as f64;
+    for (j, (&(zn, _), &margin)) in nb.iter().zip(&margin).enumerate() {
+        if zn.is_nan() {
+            continue;
         }
+        let (dx, dy) = (j as i64 % 3 - 1, j as i64 / 3 - 1);
+        let d = zn - z;
+        let d = d.signum() * (d.abs() - margin).max(0.0);
+        step = step.max(-d);
+        gx += d * dx as f64;
+        wx += (dx * dx) as f64;
+        gy += d * dy as f64;
+        wy += (dy * dy) as f64;
     }
     if step > max_step {
         return (Class::Obstacle, Hazard::Obstacle);
@@ -237,6 +298,88 @@ fn terrain_hazard(
     }
 }
 
+/// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
+/// slope tests.
+fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<(f64, f64)> {
+    let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
+    Some((c.mean_mm().map(|m| z_ref + m * 1e-3)?, sz))
+}
+
+/// Surface z and depth of the water cells of `bodies`.
+fn water_surface(bodies: &[WaterBody], res: f64) -> CellMap<(f64, f32)> {
+    let mut water: CellMap<(f64, f32)> = CellMap::default();
+    for b in bodies {
+        let s = b.surface.evaluator();
+        for (&k, &d) in b.cells.iter().zip(&b.cell_depth_m) {
+            let (x, y) = centre_of(res, k);
+            water.insert(k, (s.at(x, y), d));
+        }
+    }
+    water
+}
+
+/// The class, hazard and surface of an observed cell given the water and dry cells
+/// around it (module `water`, "Hazards").
+struct CellRule<'a> {
+    res: f64,
+    z_ref: f64,
+    fording_depth_m: f64,
+    max_step_m: f64,
+    max_grad: f64,
+    water: &'a CellMap<(f64, f32)>,
+    dry: &'a DryCells,
+}
+
+impl<'a> CellRule<'a> {
+    fn new(
+        cfg: &HazardConfig,
+        res: f64,
+        z_ref: f64,
+        water: &'a CellMap<(f64, f32)>,
+        dry: &'a DryCells,
+    ) -> Self {
+        let v = &cfg.vehicle;
+        CellRule {
+            res,
+            z_ref,
+            fording_depth_m: v.fording_depth_m,
+            max_step_m: v.max_step_m,
+            max_grad: v.max_slope_deg.to_radians().tan(),
+            water,
+            dry,
+        }
+    }
+
+    /// The record of the observed cell `c`: water (from its body), dry terrain, or, seen
+    /// through water evidence only and not water, at its water level (`level_mm`, read
+    /// only then); `None` without any of these. (`dry` holds no water cell, so the order
+    /// of the first two tests does not matter.)
+    #[inline]
+    fn record(&self, c: Seen, level_mm: impl FnOnce() -> Option<f64>) -> Option<MapCell> {
+        if let Some((z, sz)) = self.dry.get(c.key) {
+            let (class, hazard) = terrain_hazard(
+                self.dry,
+                c.key,
+                (z, sz),
+                self.res,
+                self.max_step_m,
+                self.max_grad,
+            );
+            return Some(c.record(self.res, z, 0.0, class, hazard));
+        }
+        if let Some(&(z, depth)) = self.water.get(&c.key) {
+            let hazard = if depth.is_finite() && depth as f64 <= self.fording_depth_m {
+                Hazard::ShallowWater
+            } else {
+                Hazard::DeepWater
+            };
+            return Some(c.record(self.res, z, depth, Class::Water, hazard));
+        }
+        let z = level_mm().map(|mm| self.z_ref + mm * 1e-3)?;
+        Some(c.record(self.res, z, 0.0, Class::Unknown, Hazard::Free))
+    }
+}
+
 impl HazardMap {
     /// The geometry-only map of a tile map: every cell with fused points is ground, free.
     /// (Water, vegetation and obstacles come from the later stages of the pipeline.)
@@ -246,12 +389,9 @@ impl HazardMap {
             .observed()
             .filter_map(|(key, c)| {
                 let z = tiles.elevation(&c)?;
-                Some(MapCell::of(
-                    tiles,
-                    key,
-                    &c,
+                Some(Seen::of(key, &c, 0.0).record(
+                    tiles.resolution(),
                     z,
-                    0.0,
                     0.0,
                     Class::Ground,
                     Hazard::Free,
@@ -326,66 +466,21 @@ impl HazardMap {
     ) -> Result<Self> {
         let bodies = find_bodies_among(tiles, &observed, cfg, previous)?;
         let res = tiles.resolution();
-        // Water cells: surface z and depth from their body.
-        let mut water: CellMap<(f64, f32)> = CellMap::default();
-        for b in &bodies {
-            let s = b.surface.evaluator();
-            for (&k, &d) in b.cells.iter().zip(&b.cell_depth_m) {
-                let (x, y) = tiles.centre_of(k);
-                water.insert(k, (s.at(x, y), d));
-            }
-        }
+        let water = water_surface(&bodies, res);
         // Dry terrain for the step and slope tests.
         let dry = DryCells::new(
             observed
                 .iter()
                 .filter(|(k, _)| !water.contains_key(k))
-                .filter_map(|&(k, c)| {
-                    let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
-                    Some((k, (tiles.elevation(&c)?, sz)))
-                })
+                .filter_map(|&(k, c)| Some((k, dry_terrain(&c, tiles.z_ref())?)))
                 .collect(),
         );
-        let v = &cfg.vehicle;
-        let max_grad = v.max_slope_deg.to_radians().tan();
+        let rule = CellRule::new(cfg, res, tiles.z_ref(), &water, &dry);
         let cells = observed
             .iter()
-            .filter_map(|&(key, c)| {
+            .filter_map(|(key, c)| {
                 let p = c.ev.water_probability(&cfg.fusion) as f32;
-                if let Some(&(z, depth)) = water.get(&key) {
-                    let hazard = if depth.is_finite() && depth as f64 <= v.fording_depth_m {
-                        Hazard::ShallowWater
-                    } else {
-                        Hazard::DeepWater
-                    };
-                    return Some(MapCell::of(
-                        tiles,
-                        key,
-                        &c,
-                        z,
-                        p,
-                        depth,
-                        Class::Water,
-                        hazard,
-                    ));
-                }
-                let Some((z, sz)) = dry.get(key) else {
-                    // Observed through water evidence only, not water: its level, if any.
-                    let z = c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3)?;
-                    return Some(MapCell::of(
-                        tiles,
-                        key,
-                        &c,
-                        z,
-                        p,
-                        0.0,
-                        Class::Unknown,
-                        Hazard::Free,
-                    ));
-                };
-                let (class, hazard) =
-                    terrain_hazard(&dry, key, (z, sz), res, v.max_step_m, max_grad);
-                Some(MapCell::of(tiles, key, &c, z, p, 0.0, class, hazard))
+                rule.record(Seen::of(*key, c, p), || c.ev.level_mm())
             })
             .collect();
         Ok(HazardMap {
@@ -442,6 +537,19 @@ mod tests {
             }
         }
         assert_eq!(sparse.get(CellKey::new(1_000_000, -5)), Some((1.0, 2.0)));
+        // The neighbourhoods too, inside the dense array and at its edges.
+        let bits = |nb: Neighbourhood| nb.map(|(z, s)| (z.to_bits(), s.to_bits()));
+        for x in -10..16 {
+            for y in 0..16 {
+                let k = CellKey::new(x, y);
+                let want: Neighbourhood = std::array::from_fn(|j| {
+                    let d = CellKey::new(x + j as i64 % 3 - 1, y + j as i64 / 3 - 1);
+                    truth.get(&d).copied().unwrap_or((f64::NAN, 0.0))
+                });
+                assert_eq!(bits(dense.neighbourhood(k)), bits(want));
+                assert_eq!(bits(sparse.neighbourhood(k)), bits(want));
+            }
+        }
         assert_eq!(DryCells::new(Vec::new()).get(CellKey::new(0, 0)), None);
     }
 

@@ -461,10 +461,11 @@ impl MapSnapshots {
         }
     }
 
-    fn publish(&self, map: Arc<HazardMap>) {
+    /// Publishes `map`; returns the map it replaces.
+    fn publish(&self, map: Arc<HazardMap>) -> Arc<HazardMap> {
         match self.latest.lock() {
-            Ok(mut g) => *g = map,
-            Err(p) => *p.into_inner() = map,
+            Ok(mut g) => std::mem::replace(&mut *g, map),
+            Err(p) => std::mem::replace(&mut *p.into_inner(), map),
         }
     }
 }
@@ -481,6 +482,8 @@ pub struct Mapper {
     snapshots: MapSnapshots,
     /// Whether `update` publishes the window's hazard map (stage 5).
     publish: bool,
+    /// Buffers of the water stage, kept between frames.
+    scratch: crate::hazard::WindowScratch,
     frames: u64,
 }
 
@@ -520,6 +523,7 @@ impl Mapper {
                 latest: Arc::new(Mutex::new(empty)),
             },
             publish: true,
+            scratch: Default::default(),
             frames: 0,
         })
     }
@@ -644,7 +648,11 @@ impl Mapper {
             let map = Arc::new(self.window_map()?);
             rep.snapshot_cells = map.cells.len();
             rep.snapshot_water_cells = map.class_counts()[crate::hazard::Class::Water as usize];
-            self.snapshots.publish(map);
+            // The map this one replaces is storage for the next, once no other thread
+            // holds it (a published map is never changed).
+            if let Ok(old) = Arc::try_unwrap(self.snapshots.publish(map)) {
+                self.scratch.recycle(old);
+            }
             times.water = t.elapsed().as_secs_f64();
         }
 
@@ -655,24 +663,19 @@ impl Mapper {
         Ok(rep)
     }
 
-    /// The hazard map of the current window. Water bodies keep the ids of the previous
-    /// snapshot's bodies they grew from.
-    fn window_map(&self) -> Result<HazardMap> {
-        let geometry = TileMap::new(self.cfg.grid.resolution, self.cfg.grid.z_ref)?;
-        // In the order a tile map holds them: a snapshot lists its cells as the map of the
-        // same cells built offline does.
-        let cells: Vec<_> = self
-            .grid
-            .iter()
-            .flat_map(|g| g.observed_by_tile())
-            .collect();
+    /// The hazard map of the current window, its cells in the order a tile map holds them
+    /// (a snapshot lists its cells as the map of the same cells built offline does). Water
+    /// bodies keep the ids of the previous snapshot's bodies they grew from.
+    fn window_map(&mut self) -> Result<HazardMap> {
         let previous = self.snapshots.latest();
-        HazardMap::from_cells_after(
-            &geometry,
-            cells,
-            &self.cfg.hazard_config(),
-            &previous.bodies,
-        )
+        let cfg = self.cfg.hazard_config();
+        match &self.grid {
+            Some(g) => HazardMap::from_window_after(g, &cfg, &previous.bodies, &mut self.scratch),
+            None => {
+                let geometry = TileMap::new(self.cfg.grid.resolution, self.cfg.grid.z_ref)?;
+                HazardMap::from_cells_after(&geometry, Vec::new(), &cfg, &previous.bodies)
+            }
+        }
     }
 
     /// The hazard map of a tile map under this mapper's fusion, water and vehicle settings.

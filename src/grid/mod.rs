@@ -373,6 +373,35 @@ impl RollingGrid {
     /// tile, row by row within a tile): the window's cells listed as a tile map of them would
     /// list them, without building one.
     pub fn observed_by_tile(&self) -> impl Iterator<Item = (CellKey, CellStats)> + '_ {
+        self.tile_rows().flat_map(move |(y, xs)| {
+            xs.filter_map(move |x| {
+                let k = CellKey::new(x, y);
+                let i = self.index(k)?;
+                (!self.layers.is_empty_at(i)).then(|| (k, self.layers.get(i)))
+            })
+        })
+    }
+
+    /// Calls `f` with the key and buffer index of every in-window cell, observed or not, in
+    /// the order of [`RollingGrid::observed_by_tile`].
+    pub(crate) fn for_each_by_tile(&self, mut f: impl FnMut(CellKey, usize)) {
+        let n = self.n as i64;
+        for (y, xs) in self.tile_rows() {
+            let row = (y.rem_euclid(n) * n) as usize;
+            let mut bx = xs.start.rem_euclid(n) as usize;
+            for x in xs {
+                f(CellKey::new(x, y), row + bx);
+                bx += 1;
+                if bx == self.n {
+                    bx = 0;
+                }
+            }
+        }
+    }
+
+    /// The window's rows clipped to each tile, as `(y, x range)`, tile by tile as
+    /// [`TileMap::observed`] lists cells.
+    fn tile_rows(&self) -> impl Iterator<Item = (i64, std::ops::Range<i64>)> {
         let t = tiles::TILE_CELLS;
         let n = self.n as i64;
         let (x0, y0) = (self.origin.x, self.origin.y);
@@ -381,13 +410,8 @@ impl RollingGrid {
         (x0.div_euclid(t)..=(x1 - 1).div_euclid(t))
             .flat_map(move |tx| ty.clone().map(move |ty| (tx, ty)))
             .flat_map(move |(tx, ty)| {
-                ((ty * t).max(y0)..(ty * t + t).min(y1)).flat_map(move |y| {
-                    ((tx * t).max(x0)..(tx * t + t).min(x1)).filter_map(move |x| {
-                        let k = CellKey::new(x, y);
-                        let i = self.index(k)?;
-                        (!self.layers.is_empty_at(i)).then(|| (k, self.layers.get(i)))
-                    })
-                })
+                let xs = (tx * t).max(x0)..(tx * t + t).min(x1);
+                ((ty * t).max(y0)..(ty * t + t).min(y1)).map(move |y| (y, xs.clone()))
             })
     }
 

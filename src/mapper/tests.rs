@@ -350,3 +350,33 @@ fn configs_round_trip_through_toml_and_cue_lists() {
     // An empty file is the default config.
     assert_eq!(load_str("e.toml", "").unwrap(), MapperConfig::default());
 }
+
+#[test]
+fn snapshots_are_the_generic_maps_of_the_window() {
+    // The water stage reads the window's layers directly; every frame, its snapshot is the
+    // map the generic path makes of the window's cells (in tile order, with the previous
+    // snapshot's bodies), bit for bit. Bodies come and go (the sim's pond).
+    let same = |a: &HazardMap, b: &HazardMap| format!("{a:?}") == format!("{b:?}");
+    let mut m = Mapper::new(MapperConfig::default()).unwrap();
+    let cfg = m.config().hazard_config();
+    let mut bodies = 0;
+    let mut held: Option<(Arc<HazardMap>, HazardMap)> = None;
+    for (i, f) in sim().frames.iter().enumerate() {
+        let previous = m.hazard_map();
+        m.update(f).unwrap();
+        let g = m.grid().unwrap();
+        let tiles = TileMap::for_grid(g);
+        let cells = g.observed_by_tile().collect();
+        let want = HazardMap::from_cells_after(&tiles, cells, &cfg, &previous.bodies).unwrap();
+        let got = m.hazard_map();
+        assert!(same(&got, &want), "frame {i}");
+        bodies += got.bodies.len();
+        // A snapshot someone holds is never reused for a later map.
+        if i == 2 {
+            held = Some((Arc::clone(&got), (*got).clone()));
+        }
+    }
+    let (held, copy) = held.unwrap();
+    assert!(same(&held, &copy));
+    eprintln!("{bodies} bodies over the frames");
+}

@@ -121,7 +121,7 @@ use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::grid::{CellKey, CellStats, Fusion, TileMap};
+use crate::grid::{centre_of, CellKey, CellStats, Fusion, TileMap};
 
 pub use surface::{ShoreSample, Surface, SurfaceModel};
 
@@ -430,7 +430,7 @@ fn add(k: CellKey, (dx, dy): (i64, i64)) -> CellKey {
 
 /// What the water stage reads of a cell.
 #[derive(Debug, Clone, Copy)]
-struct Info {
+pub(crate) struct Info {
     p: f64,
     elevation: Option<f64>,
     /// Standard deviation of the elevation estimate (m).
@@ -439,12 +439,60 @@ struct Info {
     depth: Option<f64>,
 }
 
-/// Connected components with hysteresis over `p`, deterministic (sorted keys).
-fn components(info: &BTreeMap<CellKey, Info>, cfg: &WaterConfig) -> Vec<Vec<CellKey>> {
+impl Info {
+    /// The info of an observed cell `c` whose water probability is `p`, in a map of
+    /// reference height `z_ref`.
+    pub(crate) fn of(c: &CellStats, p: f64, z_ref: f64) -> Info {
+        Info {
+            p,
+            elevation: c.mean_mm().map(|m| z_ref + m * 1e-3),
+            std: c.elevation_std_m().filter(|s| s.is_finite()),
+            level: c.ev.level_mm().map(|mm| z_ref + mm * 1e-3),
+            depth: c.ev.depth_m(),
+        }
+    }
+}
+
+/// Whether a cell of water probability `p` seeds a body (a NaN probability does, as it
+/// always has: it is not below `p_high`).
+pub(crate) fn seeds_body(p: f64, cfg: &WaterConfig) -> bool {
+    p >= cfg.p_high || p.is_nan()
+}
+
+/// The cells the body search reads: the [`Info`] of observed cells by key. A tile map's
+/// cells are an ordered map of them; the mapper's window reads them from its layers.
+pub(crate) trait CellInfos {
+    /// The info of the cell `k`, if it was observed.
+    fn get(&self, k: CellKey) -> Option<Info>;
+
+    /// Calls `f` for every observed cell of column `x` with a row in `ys`, by increasing
+    /// row.
+    fn column(&self, x: i64, ys: std::ops::Range<i64>, f: impl FnMut(CellKey, &Info));
+}
+
+impl CellInfos for BTreeMap<CellKey, Info> {
+    fn get(&self, k: CellKey) -> Option<Info> {
+        BTreeMap::get(self, &k).copied()
+    }
+
+    fn column(&self, x: i64, ys: std::ops::Range<i64>, mut f: impl FnMut(CellKey, &Info)) {
+        for (&k, i) in self.range(CellKey::new(x, ys.start)..CellKey::new(x, ys.end)) {
+            f(k, i);
+        }
+    }
+}
+
+/// Connected components with hysteresis over `p`, grown from `seeds` (every cell that
+/// seeds a body, in increasing key order): deterministic.
+fn components(
+    cells: &impl CellInfos,
+    seeds: impl IntoIterator<Item = CellKey>,
+    cfg: &WaterConfig,
+) -> Vec<Vec<CellKey>> {
     let mut seen: BTreeSet<CellKey> = BTreeSet::new();
     let mut out = Vec::new();
-    for (&k, i) in info {
-        if i.p < cfg.p_high || seen.contains(&k) {
+    for k in seeds {
+        if seen.contains(&k) {
             continue;
         }
         let mut body = vec![k];
@@ -454,8 +502,8 @@ fn components(info: &BTreeMap<CellKey, Info>, cfg: &WaterConfig) -> Vec<Vec<Cell
             for d in N8 {
                 let n = add(c, d);
                 if !seen.contains(&n)
-                    && info
-                        .get(&n)
+                    && cells
+                        .get(n)
                         .is_some_and(|i| i.p >= cfg.p_low || i.depth.is_some())
                 {
                     seen.insert(n);
@@ -518,32 +566,39 @@ pub(crate) fn find_bodies_among(
         .iter()
         .zip(p)
         .filter(|((k, _), _)| near.contains(&block(*k)))
-        .map(|(&(k, c), p)| {
-            (
-                k,
-                Info {
-                    p,
-                    elevation: tiles.elevation(&c),
-                    std: c.elevation_std_m().filter(|s| s.is_finite()),
-                    level: c.ev.level_mm().map(|mm| tiles.z_ref() + mm * 1e-3),
-                    depth: c.ev.depth_m(),
-                },
-            )
-        })
+        .map(|(&(k, c), p)| (k, Info::of(&c, p, tiles.z_ref())))
         .collect();
+    let seeds = info
+        .iter()
+        .filter(|(_, i)| seeds_body(i.p, &cfg.water))
+        .map(|(&k, _)| k);
+    Ok(bodies_from(&info, seeds, res, &cfg.water, previous))
+}
+
+/// The water bodies of `cells` at resolution `res`, grown from `seeds` (every observed
+/// cell that [seeds a body](seeds_body), in increasing key order), with ids after the
+/// `previous` bodies. Reads only cells within 2n + 1 of a cell a body can grow over, n =
+/// ⌈shore_radius / resolution⌉ (see [`find_bodies_among`]).
+pub(crate) fn bodies_from(
+    cells: &impl CellInfos,
+    seeds: impl IntoIterator<Item = CellKey>,
+    res: f64,
+    cfg: &WaterConfig,
+    previous: &[WaterBody],
+) -> Vec<WaterBody> {
     let cell_area = res * res;
-    let comps: Vec<Vec<CellKey>> = components(&info, &cfg.water)
+    let comps: Vec<Vec<CellKey>> = components(cells, seeds, cfg)
         .into_iter()
-        .filter(|b| b.len() as f64 * cell_area >= cfg.water.min_body_area_m2)
+        .filter(|b| b.len() as f64 * cell_area >= cfg.min_body_area_m2)
         .collect();
     let ids = assign_ids(&comps, previous);
     let mut bodies = Vec::with_capacity(comps.len());
-    for (cells, id) in comps.into_iter().zip(ids) {
-        if let Some(b) = body_of(id, cells, &info, tiles, &cfg.water) {
+    for (body, id) in comps.into_iter().zip(ids) {
+        if let Some(b) = body_of(id, body, cells, res, cfg) {
             bodies.push(b);
         }
     }
-    Ok(bodies)
+    bodies
 }
 
 /// Ids for new components given the previous bodies (module documentation, "Ids").
@@ -599,11 +654,10 @@ fn assign_ids(comps: &[Vec<CellKey>], previous: &[WaterBody]) -> Vec<u32> {
 fn body_of(
     id: u32,
     cells: Vec<CellKey>,
-    info: &BTreeMap<CellKey, Info>,
-    tiles: &TileMap,
+    info: &impl CellInfos,
+    res: f64,
     cfg: &WaterConfig,
 ) -> Option<WaterBody> {
-    let res = tiles.resolution();
     let set: BTreeSet<CellKey> = cells.iter().copied().collect();
     // Shore: observed dry cells with an elevation, 4-adjacent to the body.
     let mut shore_keys: BTreeSet<CellKey> = BTreeSet::new();
@@ -612,7 +666,7 @@ fn body_of(
             let n = add(k, d);
             if !set.contains(&n)
                 && info
-                    .get(&n)
+                    .get(n)
                     .is_some_and(|i| i.elevation.is_some() && i.depth.is_none())
             {
                 shore_keys.insert(n);
@@ -625,7 +679,11 @@ fn body_of(
     let reliable: Vec<CellKey> = shore_keys
         .iter()
         .copied()
-        .filter(|n| info[n].std.is_some_and(|s| s <= cfg.shore_max_std_m))
+        .filter(|&n| {
+            info.get(n)
+                .and_then(|i| i.std)
+                .is_some_and(|s| s <= cfg.shore_max_std_m)
+        })
         .collect();
     let few_reliable = reliable.len() < cfg.min_shore_samples.max(1);
     let shore_keys: Vec<CellKey> = if few_reliable {
@@ -634,14 +692,14 @@ fn body_of(
         reliable
     };
     let sample = |k: CellKey, z: f64| {
-        let (x, y) = tiles.centre_of(k);
+        let (x, y) = centre_of(res, k);
         ShoreSample { x, y, z }
     };
     let shore: Vec<ShoreSample> = shore_keys
         .iter()
-        .map(|&k| sample(k, info[&k].elevation.unwrap_or(f64::NAN)))
+        .map(|&k| sample(k, info.get(k).and_then(|i| i.elevation).unwrap_or(f64::NAN)))
         .collect();
-    let ground = ground_near(&set, &shore_keys, info, tiles, cfg);
+    let ground = ground_near(&set, &shore_keys, info, res, cfg);
     let kept = surface::reject_spilling(
         &shore,
         &surface::reject_occluders(&shore, &ground, cfg),
@@ -656,7 +714,7 @@ fn body_of(
     } else {
         let levels: Vec<(CellKey, f64)> = cells
             .iter()
-            .filter_map(|&k| info[&k].level.map(|z| (k, z)))
+            .filter_map(|&k| info.get(k).and_then(|i| i.level).map(|z| (k, z)))
             .collect();
         if !levels.is_empty() {
             (
@@ -673,7 +731,7 @@ fn body_of(
         } else {
             let own: Vec<(CellKey, f64)> = cells
                 .iter()
-                .filter_map(|&k| info[&k].elevation.map(|z| (k, z)))
+                .filter_map(|&k| info.get(k).and_then(|i| i.elevation).map(|z| (k, z)))
                 .collect();
             (
                 own.iter().map(|&(k, z)| sample(k, z)).collect(),
@@ -698,7 +756,7 @@ fn body_of(
     let fit = if few_reliable && source == SurfaceSource::Shore {
         let sigma: Vec<f64> = keys
             .iter()
-            .map(|k| info[k].std.unwrap_or(f64::INFINITY))
+            .map(|&k| info.get(k).and_then(|i| i.std).unwrap_or(f64::INFINITY))
             .collect();
         surface::weighted_level(&samples, &sigma)?
     } else {
@@ -706,7 +764,11 @@ fn body_of(
     };
     let cell_depth_m: Vec<f32> = cells
         .iter()
-        .map(|k| info[k].depth.map_or(f32::NAN, |d| d as f32))
+        .map(|&k| {
+            info.get(k)
+                .and_then(|i| i.depth)
+                .map_or(f32::NAN, |d| d as f32)
+        })
         .collect();
     let known: Vec<f64> = cell_depth_m
         .iter()
@@ -750,11 +812,11 @@ fn body_of(
 fn ground_near(
     body: &BTreeSet<CellKey>,
     shore: &[CellKey],
-    info: &BTreeMap<CellKey, Info>,
-    tiles: &TileMap,
+    info: &impl CellInfos,
+    res: f64,
     cfg: &WaterConfig,
 ) -> Vec<surface::ShoreSample> {
-    let n = cfg.shore_radius_cells(tiles.resolution());
+    let n = cfg.shore_radius_cells(res);
     let blocks: BTreeSet<(i64, i64)> = shore
         .iter()
         .flat_map(|k| {
@@ -766,15 +828,14 @@ fn ground_near(
     let mut out = Vec::new();
     for (bx, by) in blocks {
         for x in bx * n..(bx + 1) * n {
-            let rows = info.range(CellKey { x, y: by * n }..CellKey { x, y: (by + 1) * n });
-            for (&k, i) in rows {
-                let Some(z) = i.elevation else { continue };
+            info.column(x, by * n..(by + 1) * n, |k, i| {
+                let Some(z) = i.elevation else { return };
                 let reliable = i.std.is_some_and(|s| s <= cfg.shore_max_std_m);
                 if reliable && i.p < cfg.p_low && !body.contains(&k) && !shore.contains(&k) {
-                    let (x, y) = tiles.centre_of(k);
+                    let (x, y) = centre_of(res, k);
                     out.push(surface::ShoreSample { x, y, z });
                 }
-            }
+            });
         }
     }
     out
