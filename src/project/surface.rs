@@ -28,6 +28,25 @@ pub struct GridSurface {
     origin: CellKey,
     /// Elevations (map frame, metres) row-major from the window's lower-left key; NaN = none.
     z: Vec<f32>,
+    /// Summary of each `BLOCK` × `BLOCK` block of cells, row-major, `nb` blocks per side.
+    blocks: Vec<Block>,
+    nb: usize,
+}
+
+/// Cells per side of a [`Block`].
+const BLOCK: usize = 8;
+
+/// What the march needs to know of a block of cells to cross it in one step: a ray above
+/// its highest cell hits nothing in a block without holes, and a ray in a hole (or before
+/// any observed cell) changes nothing while it crosses a block of holes.
+#[derive(Debug, Clone, Copy)]
+struct Block {
+    /// Highest observed elevation (−∞ if none).
+    top: f32,
+    /// Some cell is unobserved.
+    holes: bool,
+    /// Every cell is unobserved.
+    void: bool,
 }
 
 impl GridSurface {
@@ -50,11 +69,37 @@ impl GridSurface {
                 z[(k.y - o.y) as usize * n + (k.x - o.x) as usize] = (z_ref + m * 1e-3) as f32;
             }
         }
+        Self::with_blocks(n, grid.resolution(), o, z)
+    }
+
+    fn with_blocks(n: usize, resolution: f64, origin: CellKey, z: Vec<f32>) -> Self {
+        let nb = n.div_ceil(BLOCK);
+        let empty = Block {
+            top: f32::NEG_INFINITY,
+            holes: false,
+            void: true,
+        };
+        let mut blocks = vec![empty; nb * nb];
+        for (j, row) in z.chunks(n.max(1)).enumerate() {
+            let brow = &mut blocks[j / BLOCK * nb..];
+            for (b, cells) in brow.iter_mut().zip(row.chunks(BLOCK)) {
+                for &v in cells {
+                    if v.is_nan() {
+                        b.holes = true;
+                    } else {
+                        b.void = false;
+                        b.top = b.top.max(v);
+                    }
+                }
+            }
+        }
         GridSurface {
             n,
-            resolution: grid.resolution(),
-            origin: o,
+            resolution,
+            origin,
             z,
+            blocks,
+            nb,
         }
     }
 
@@ -69,12 +114,7 @@ impl GridSurface {
                 ),
             ));
         }
-        Ok(GridSurface {
-            n,
-            resolution,
-            origin,
-            z,
-        })
+        Ok(Self::with_blocks(n, resolution, origin, z))
     }
 
     pub fn size(&self) -> usize {
@@ -92,10 +132,16 @@ impl GridSurface {
     /// Raster index of the cell under `(x, y)`, if inside the window.
     #[inline]
     pub fn index_of(&self, x: f64, y: f64) -> Option<usize> {
+        self.cell_of(x, y).map(|(i, j)| j * self.n + i)
+    }
+
+    /// Column and row of the cell under `(x, y)`, if inside the window.
+    #[inline]
+    fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
         let i = (x / self.resolution).floor() as i64 - self.origin.x;
         let j = (y / self.resolution).floor() as i64 - self.origin.y;
         let n = self.n as i64;
-        (i >= 0 && j >= 0 && i < n && j < n).then(|| j as usize * self.n + i as usize)
+        (i >= 0 && j >= 0 && i < n && j < n).then_some((i as usize, j as usize))
     }
 
     /// Elevation of the cell under `(x, y)` (NaN: unobserved or outside).
@@ -135,16 +181,41 @@ impl GridSurface {
         // Where the ray entered the current hole (after an observed rim), if it is in one.
         let mut entry: Option<f64> = None;
         let mut was_inside = false;
-        for s in 1..=steps {
+        // The block the ray was last found to dip below the top of: no skipping there.
+        let mut low = usize::MAX;
+        let mut s = 0;
+        while s < steps {
+            s += 1;
             let t = s as f64 * dt;
-            let p = origin + dir * t;
-            let Some(i) = self.index_of(p.x, p.y) else {
+            let p = sample(origin, dir, dt, s);
+            let Some((ci, cj)) = self.cell_of(p.x, p.y) else {
                 if was_inside {
                     break;
                 }
                 continue;
             };
             was_inside = true;
+            let i = cj * self.n + ci;
+            // Take the block's remaining samples at once where they would change nothing but
+            // `level`: no holes and the ray above the top (the ray's height is monotonic, so
+            // above it at both ends is above it throughout), not leaving a hole; or all
+            // holes, the ray in one or not yet past any observed cell.
+            let b = cj / BLOCK * self.nb + ci / BLOCK;
+            let block = self.blocks[b];
+            let clear = entry.is_none() && !block.holes && p.z > block.top as f64;
+            let void = block.void && (entry.is_some() || level.is_nan());
+            if b != low && (clear || void) {
+                let (last, j) = self.block_end(origin, dir, dt, (s, i), steps);
+                let q = sample(origin, dir, dt, last);
+                if void || q.z > block.top as f64 {
+                    if clear {
+                        level = self.z[j] as f64;
+                    }
+                    s = last;
+                    continue;
+                }
+                low = b;
+            }
             let z = self.z[i] as f64;
             if z.is_nan() {
                 if level.is_finite() && entry.is_none() {
@@ -178,6 +249,56 @@ impl GridSurface {
             _ => None,
         }
     }
+
+    /// The last sample (≤ `steps`) of the march in the block of sample `first` = (step,
+    /// cell), and its cell. A sample's cell is monotonic in the step along both axes, so a
+    /// block's samples are consecutive: the step where the ray leaves the block, checked
+    /// by sampling either side.
+    fn block_end(
+        &self,
+        origin: &Point3<f64>,
+        dir: &Vector3<f64>,
+        dt: f64,
+        first: (usize, usize),
+        steps: usize,
+    ) -> (usize, usize) {
+        let (s, i) = first;
+        let (bi, bj) = (i % self.n / BLOCK, i / self.n / BLOCK);
+        let exit = |o: f64, d: f64, b: usize, key: i64| {
+            let side = if d > 0.0 { b + 1 } else { b };
+            let edge = (key + (side * BLOCK) as i64) as f64 * self.resolution;
+            if d == 0.0 {
+                f64::INFINITY
+            } else {
+                (edge - o) / d
+            }
+        };
+        let t =
+            exit(origin.x, dir.x, bi, self.origin.x).min(exit(origin.y, dir.y, bj, self.origin.y));
+        let in_block = |k: usize| {
+            let p = sample(origin, dir, dt, k);
+            self.cell_of(p.x, p.y)
+                .filter(|&(ci, cj)| ci / BLOCK == bi && cj / BLOCK == bj)
+                .map(|(ci, cj)| cj * self.n + ci)
+        };
+        let mut k = ((t / dt).floor() as usize).clamp(s, steps);
+        let mut cell = in_block(k);
+        while cell.is_none() && k > s {
+            k -= 1;
+            cell = in_block(k);
+        }
+        while let Some(next) = (k < steps).then(|| in_block(k + 1)).flatten() {
+            k += 1;
+            cell = Some(next);
+        }
+        (k, cell.unwrap_or(i))
+    }
+}
+
+/// Sample `k` of a march in steps of `dt` (computed the same way wherever it is taken).
+#[inline]
+fn sample(origin: &Point3<f64>, dir: &Vector3<f64>, dt: f64, k: usize) -> Point3<f64> {
+    origin + dir * (k as f64 * dt)
 }
 
 #[cfg(test)]
