@@ -183,6 +183,8 @@ impl GridSurface {
         let mut was_inside = false;
         // The block the ray was last found to dip below the top of: no skipping there.
         let mut low = usize::MAX;
+        // Magnitude of the heights and times compared, for the rounding margin.
+        let scale = 1.0 + origin.z.abs() + dir.z.abs() * (steps as f64 * dt);
         let mut s = 0;
         while s < steps {
             s += 1;
@@ -196,25 +198,31 @@ impl GridSurface {
             };
             was_inside = true;
             let i = cj * self.n + ci;
-            // Take the block's remaining samples at once where they would change nothing but
-            // `level`: no holes and the ray above the top (the ray's height is monotonic, so
-            // above it at both ends is above it throughout), not leaving a hole; or all
-            // holes, the ray in one or not yet past any observed cell.
+            // Take the block's remaining samples at once when the ray stays above its top
+            // (its height is monotonic: above at both ends is above throughout) by more than
+            // rounding: then no sample hits, nor crosses a rim level (at most the top) out of
+            // a hole, and what they leave is the last observed sample's level and, if holes
+            // follow it, a hole entered after it.
             let b = cj / BLOCK * self.nb + ci / BLOCK;
             let block = self.blocks[b];
-            let clear = entry.is_none() && !block.holes && p.z > block.top as f64;
-            let void = block.void && (entry.is_some() || level.is_nan());
-            if b != low && (clear || void) {
+            let top = block.top as f64;
+            let above = |z: f64| block.void || z > top + 1e-9 * (scale + top.abs());
+            if b != low && above(p.z) {
                 let (last, j) = self.block_end(origin, dir, dt, (s, i), steps);
-                let q = sample(origin, dir, dt, last);
-                if void || q.z > block.top as f64 {
-                    if clear {
-                        level = self.z[j] as f64;
+                if !above(sample(origin, dir, dt, last).z) {
+                    low = b;
+                } else {
+                    match self.last_observed(origin, dir, dt, (s, i), (last, j), &block) {
+                        Some((k, c)) => {
+                            level = self.z[c] as f64;
+                            entry = (k < last).then(|| (k + 1) as f64 * dt - dt);
+                        }
+                        None if level.is_finite() && entry.is_none() => entry = Some(t - dt),
+                        None => {}
                     }
                     s = last;
                     continue;
                 }
-                low = b;
             }
             let z = self.z[i] as f64;
             if z.is_nan() {
@@ -292,6 +300,33 @@ impl GridSurface {
             cell = Some(next);
         }
         (k, cell.unwrap_or(i))
+    }
+
+    /// The last sample from `first` to `last` (step, cell; both in `block`) that falls
+    /// on an observed cell, and that cell.
+    fn last_observed(
+        &self,
+        origin: &Point3<f64>,
+        dir: &Vector3<f64>,
+        dt: f64,
+        first: (usize, usize),
+        last: (usize, usize),
+        block: &Block,
+    ) -> Option<(usize, usize)> {
+        if block.void {
+            return None;
+        }
+        if !block.holes || !self.z[last.1].is_nan() {
+            return Some(last);
+        }
+        (first.0 + 1..last.0)
+            .rev()
+            .filter_map(|k| {
+                let p = sample(origin, dir, dt, k);
+                self.index_of(p.x, p.y).map(|c| (k, c))
+            })
+            .chain(std::iter::once(first))
+            .find(|&(_, c)| !self.z[c].is_nan())
     }
 }
 
