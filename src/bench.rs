@@ -447,10 +447,17 @@ mod tests {
             ..BenchOptions::default()
         };
         let r = run(&opts).unwrap();
+        // The default scene has a colour camera: its labels are part of the full frame.
+        assert!(
+            r.frame_ms_method.contains("colour labels"),
+            "{}",
+            r.frame_ms_method
+        );
         for s in [
             "ingest_lidar",
             "cue_lidar",
             "classify_640x480",
+            "labels_colour",
             "export_map (whole map)",
         ] {
             let v = r.stages_ms[s];
