@@ -173,6 +173,13 @@ pub(crate) mod testutil {
         pub fn uniform(&mut self) -> f64 {
             (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
         }
+        /// Uniform in [a, b).
+        pub fn range(&mut self, a: f64, b: f64) -> f64 {
+            a + (b - a) * self.uniform()
+        }
+        pub fn chance(&mut self, p: f64) -> bool {
+            self.range(0.0, 1.0) < p
+        }
         pub fn normal(&mut self) -> f64 {
             let u1 = self.uniform().max(1e-300);
             let u2 = self.uniform();

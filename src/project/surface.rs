@@ -509,25 +509,8 @@ mod tests {
         }
     }
 
-    /// splitmix64: the random terrain and rays of one proptest case from its seed.
-    struct Rng(u64);
-
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            z ^ (z >> 31)
-        }
-        /// Uniform in [a, b).
-        fn range(&mut self, a: f64, b: f64) -> f64 {
-            a + (b - a) * (self.next() >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn chance(&mut self, p: f64) -> bool {
-            self.range(0.0, 1.0) < p
-        }
-    }
+    /// The random terrain and rays of one proptest case from its seed (splitmix64).
+    use crate::cues::testutil::TestRng as Rng;
 
     /// Bits of a cast's result, so that equal means identical (also for −0 and NaN).
     fn bits(r: Option<(Point3<f64>, usize, bool)>) -> Option<([u64; 3], usize, bool)> {
@@ -582,21 +565,21 @@ mod tests {
                     y0 + rng.range(-0.2, 1.2) * w,
                     base + rng.range(-1.0, 4.0),
                 );
-                let az = match rng.next() % 8 {
+                let az = match rng.next_u64() % 8 {
                     0 => 0.0,
                     1 => std::f64::consts::FRAC_PI_2,
                     2 => std::f64::consts::PI,
                     3 => -std::f64::consts::FRAC_PI_2,
                     _ => rng.range(-3.2, 3.2),
                 };
-                let dip = match rng.next() % 6 {
+                let dip = match rng.next_u64() % 6 {
                     0 => 0.0,
                     1 => rng.range(-0.02, 0.02),
                     2 => rng.range(-1.5, 1.5),
                     _ => rng.range(-0.4, 0.1),
                 };
                 let d = Vector3::new(az.cos(), az.sin(), dip.tan()).normalize();
-                let range = match rng.next() % 4 {
+                let range = match rng.next_u64() % 4 {
                     0 => rng.range(0.0, 1.0),
                     _ => rng.range(0.0, 1.5 * w + 1.0),
                 };
