@@ -239,19 +239,6 @@ impl DryCells {
 /// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
 type Neighbourhood = [(f64, f64); 9];
 
-/// Class and hazard of a dry cell at `key` with elevation `z` ± `sz` from its dry
-/// 8-neighbours (see [`hazard_of`]).
-fn terrain_hazard(
-    dry: &DryCells,
-    key: CellKey,
-    (z, sz): (f64, f64),
-    res: f64,
-    max_step: f64,
-    max_grad: f64,
-) -> (Class, Hazard) {
-    hazard_of(&dry.neighbourhood(key), (z, sz), res, max_step, max_grad)
-}
-
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
 /// `nb`: the upper side of a step higher than `max_step` is an obstacle (class and
 /// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
@@ -260,7 +247,7 @@ fn terrain_hazard(
 /// standard deviations of that difference, so far cells seen by a few noisy stereo points
 /// do not turn into obstacles.
 #[inline]
-fn hazard_of(
+fn terrain_hazard(
     nb: &Neighbourhood,
     (z, sz): (f64, f64),
     res: f64,
@@ -358,8 +345,7 @@ impl<'a> CellRule<'a> {
     fn record(&self, c: Seen, level_mm: impl FnOnce() -> Option<f64>) -> Option<MapCell> {
         if let Some((z, sz)) = self.dry.get(c.key) {
             let (class, hazard) = terrain_hazard(
-                self.dry,
-                c.key,
+                &self.dry.neighbourhood(c.key),
                 (z, sz),
                 self.res,
                 self.max_step_m,
