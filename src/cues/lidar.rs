@@ -20,7 +20,10 @@
 //! * a return more than `below_gate_m` **below** the level is corrected for refraction and
 //!   the speed of light ([`crate::optics::LidarWaterModel::correct_bottom_return`]); if the
 //!   corrected depth is one the optics say this sensor can see at that lookahead, it is a
-//!   bottom return (a depth sample for the corrected point's cell); otherwise it cannot
+//!   bottom return (a depth sample for the corrected point's cell, with its gain
+//!   d(depth)/d(level), so that the water stage can move the depth onto the water surface
+//!   it finds: the level here is the last ground the scan line walked, which on a bank
+//!   that falls to the water is the bank, not the water); otherwise it cannot
 //!   come from the bottom and is a specular return from beyond the water: the cell where
 //!   its ray crosses the level gets reflection evidence and the point, mirrored about the
 //!   level, is put back where the object is.
@@ -377,9 +380,14 @@ impl LidarCueModel {
                     y,
                     level,
                     depth,
+                    gain,
                 } => {
                     stats.bottom += 1;
-                    ev.add_with_level(x, y, level, |e| e.add_depth(depth));
+                    let mm = ev.level_mm(level);
+                    ev.add_with_level(x, y, level, |e| match mm {
+                        Some(mm) => e.add_bottom_return(depth, mm, gain),
+                        None => e.add_depth(depth),
+                    });
                     corrected.xyz[slot] = [f32::NAN; 3];
                 }
                 Event::Specular {
@@ -464,6 +472,12 @@ impl LidarCueModel {
                             y: q.y,
                             level,
                             depth,
+                            gain: crate::optics::bottom_depth_gain(
+                                o,
+                                p,
+                                self.optics.config().n_water,
+                            )
+                            .unwrap_or(0.0),
                         });
                     } else if level - p.z < cfg.specular_min_depth_m {
                         out.push(Event::Unexplained);
@@ -556,6 +570,8 @@ enum Event {
         y: f64,
         level: f64,
         depth: f64,
+        /// d(depth)/d(level): how the depth would move against another level.
+        gain: f64,
     },
     Specular {
         slot: usize,

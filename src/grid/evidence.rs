@@ -77,18 +77,25 @@ pub struct Evidence {
     /// `reflect` and bottom-return events: count and exact sum.
     pub level_n: u32,
     pub level_sum_mm: i64,
-    /// Refraction-corrected bottom returns: count, Σ depth (mm), Σ depth² (mm²).
-    /// Depths are clamped to 0..=65535 mm.
+    /// Refraction-corrected bottom returns: count and Σ depth (mm) below the level each
+    /// was corrected against. Depths are clamped to 0..=65535 mm.
     pub depth_n: u32,
     pub depth_sum_mm: u32,
-    pub depth_sq_mm2: u64,
+    /// How those depths move with the level: Σ gain (thousandths) and Σ gain · level
+    /// (thousandths × mm relative to `z_ref`), where a return's gain is d(depth)/d(level)
+    /// ([`crate::optics::bottom_depth_gain`]). With them [`Self::depth_at_m`] gives the
+    /// mean depth below any level, exactly as if every return had been corrected against
+    /// it: the cue corrects against the local ground it walked, the water stage knows the
+    /// water's surface.
+    pub depth_gain_sum: u32,
+    pub depth_gain_level_sum: i64,
 }
 
 /// Number of `u16` event counts in [`Evidence`] (see [`Evidence::counts`]).
 pub const EVIDENCE_COUNTS: usize = 11;
 
 /// Bytes of evidence storage per cell in the window's structure-of-arrays layers.
-pub const EVIDENCE_BYTES_PER_CELL: usize = EVIDENCE_COUNTS * 2 + 4 + 8 + 4 + 4 + 8;
+pub const EVIDENCE_BYTES_PER_CELL: usize = EVIDENCE_COUNTS * 2 + 4 + 8 + 4 + 4 + 4 + 8;
 
 impl Evidence {
     #[inline]
@@ -114,7 +121,10 @@ impl Evidence {
         self.level_sum_mm = self.level_sum_mm.saturating_add(o.level_sum_mm);
         self.depth_n = self.depth_n.saturating_add(o.depth_n);
         self.depth_sum_mm = self.depth_sum_mm.saturating_add(o.depth_sum_mm);
-        self.depth_sq_mm2 = self.depth_sq_mm2.saturating_add(o.depth_sq_mm2);
+        self.depth_gain_sum = self.depth_gain_sum.saturating_add(o.depth_gain_sum);
+        self.depth_gain_level_sum = self
+            .depth_gain_level_sum
+            .saturating_add(o.depth_gain_level_sum);
     }
 
     /// The `u16` event counts in storage order: noret, diag_ret, reflect, dark, lit,
@@ -161,13 +171,26 @@ impl Evidence {
         self.level_sum_mm = self.level_sum_mm.saturating_add(level_mm as i64);
     }
 
-    /// Records one corrected bottom-return depth (metres; clamped to 0..=65.535 m).
+    /// Records one depth that does not depend on the water level (metres; clamped to
+    /// 0..=65.535 m): a sounding, or a test's known depth.
     #[inline]
     pub fn add_depth(&mut self, depth_m: f64) {
         let mm = (depth_m * 1000.0).round().clamp(0.0, 65535.0) as u32;
         self.depth_n = self.depth_n.saturating_add(1);
         self.depth_sum_mm = self.depth_sum_mm.saturating_add(mm);
-        self.depth_sq_mm2 = self.depth_sq_mm2.saturating_add(mm as u64 * mm as u64);
+    }
+
+    /// Records one refraction-corrected bottom return: its depth below the level it was
+    /// corrected against (`level_mm`, relative to `z_ref`), and its gain d(depth)/d(level)
+    /// ([`crate::optics::bottom_depth_gain`]; clamped to 0..=10⁶).
+    #[inline]
+    pub fn add_bottom_return(&mut self, depth_m: f64, level_mm: i32, gain: f64) {
+        self.add_depth(depth_m);
+        let g = (gain * 1000.0).round().clamp(0.0, 1e9) as u32;
+        self.depth_gain_sum = self.depth_gain_sum.saturating_add(g);
+        self.depth_gain_level_sum = self
+            .depth_gain_level_sum
+            .saturating_add(g as i64 * level_mm as i64);
     }
 
     /// Mean water level, mm relative to the grid's `z_ref`.
@@ -175,16 +198,19 @@ impl Evidence {
         (self.level_n > 0).then(|| self.level_sum_mm as f64 / self.level_n as f64)
     }
 
-    /// Mean bottom-return depth, metres.
+    /// Mean bottom-return depth below the levels the returns were corrected against,
+    /// metres.
     pub fn depth_m(&self) -> Option<f64> {
         (self.depth_n > 0).then(|| self.depth_sum_mm as f64 / self.depth_n as f64 * 1e-3)
     }
 
-    /// Standard deviation of the bottom-return depths, metres.
-    pub fn depth_std_m(&self) -> Option<f64> {
-        let m = self.depth_sum_mm as f64 / self.depth_n as f64;
+    /// Mean bottom-return depth below the level `level_mm` (relative to `z_ref`), metres:
+    /// each return's depth moved by its gain times the change of level. Not clamped.
+    pub fn depth_at_m(&self, level_mm: f64) -> Option<f64> {
         (self.depth_n > 0).then(|| {
-            ((self.depth_sq_mm2 as f64 / self.depth_n as f64 - m * m).max(0.0)).sqrt() * 1e-3
+            let shift = self.depth_gain_sum as f64 * 1e-3 * level_mm
+                - self.depth_gain_level_sum as f64 * 1e-3;
+            (self.depth_sum_mm as f64 + shift) / self.depth_n as f64 * 1e-3
         })
     }
 
@@ -394,7 +420,7 @@ mod tests {
             prop::array::uniform11(any::<u16>()),
             0u32..1000,
             -1_000_000i64..1_000_000,
-            prop::collection::vec(0.0f64..3.0, 0..5),
+            prop::collection::vec((0.0f64..3.0, -5000i32..5000, 0.0f64..20.0), 0..5),
         )
             .prop_map(|(c, ln, ls, depths)| {
                 let mut e = Evidence {
@@ -403,8 +429,8 @@ mod tests {
                     ..Evidence::default()
                 };
                 e.set_counts(c);
-                for d in depths {
-                    e.add_depth(d);
+                for (d, level, gain) in depths {
+                    e.add_bottom_return(d, level, gain);
                 }
                 e
             })
@@ -456,8 +482,8 @@ mod tests {
 
     #[test]
     fn storage_per_cell() {
-        assert_eq!(EVIDENCE_BYTES_PER_CELL, 50);
-        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 56 + 50);
+        assert_eq!(EVIDENCE_BYTES_PER_CELL, 54);
+        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 56 + 54);
         let mut e = Evidence::default();
         let c: [u16; EVIDENCE_COUNTS] = std::array::from_fn(|i| i as u16 + 1);
         e.set_counts(c);
@@ -536,10 +562,26 @@ mod tests {
             e.add_depth(d);
         }
         assert!((e.depth_m().unwrap() - 0.2).abs() < 1e-12);
-        assert!((e.depth_std_m().unwrap() - (0.02f64 / 3.0).sqrt()).abs() < 1e-9);
+        // Level-independent depths stay where they are whatever the level.
+        assert!((e.depth_at_m(-300.0).unwrap() - 0.2).abs() < 1e-12);
         e.add_depth(-1.0);
         assert_eq!(e.depth_n, 4);
         assert_eq!(e.depth_sum_mm, 600);
+        assert_eq!(Evidence::default().depth_at_m(0.0), None);
+    }
+
+    #[test]
+    fn bottom_returns_move_with_the_level_by_their_gain() {
+        let mut e = Evidence::default();
+        // 0.50 m below a level of +200 mm with gain 2, 0.30 m below −100 mm with gain 1.
+        e.add_bottom_return(0.50, 200, 2.0);
+        e.add_bottom_return(0.30, -100, 1.0);
+        // At each one's own level the mean of the two moved depths.
+        assert!((e.depth_at_m(200.0).unwrap() - (0.50 + (0.30 + 0.30)) / 2.0).abs() < 1e-9);
+        assert!((e.depth_at_m(-100.0).unwrap() - ((0.50 - 0.60) + 0.30) / 2.0).abs() < 1e-9);
+        // At level 0: (0.5 − 0.4 + 0.3 + 0.1) / 2.
+        assert!((e.depth_at_m(0.0).unwrap() - 0.25).abs() < 1e-9);
+        assert!((e.depth_m().unwrap() - 0.40).abs() < 1e-12);
     }
 
     #[test]

@@ -137,9 +137,9 @@ pub(crate) struct Layers {
     pub ev_counts: Vec<[u16; EVIDENCE_COUNTS]>,
     pub ev_level_n: Vec<u32>,
     pub ev_level_sum: Vec<i64>,
-    /// Evidence: depth count, Σ depth mm.
-    pub ev_depth: Vec<[u32; 2]>,
-    pub ev_depth_sq: Vec<u64>,
+    /// Evidence: depth count, Σ depth mm, Σ gain; Σ gain · level.
+    pub ev_depth: Vec<[u32; 3]>,
+    pub ev_depth_gain_level: Vec<i64>,
 }
 
 impl Layers {
@@ -156,8 +156,8 @@ impl Layers {
             ev_counts: vec![[0; EVIDENCE_COUNTS]; n],
             ev_level_n: vec![0; n],
             ev_level_sum: vec![0; n],
-            ev_depth: vec![[0; 2]; n],
-            ev_depth_sq: vec![0; n],
+            ev_depth: vec![[0; 3]; n],
+            ev_depth_gain_level: vec![0; n],
         }
     }
 
@@ -172,7 +172,8 @@ impl Layers {
             level_sum_mm: self.ev_level_sum[i],
             depth_n: d[0],
             depth_sum_mm: d[1],
-            depth_sq_mm2: self.ev_depth_sq[i],
+            depth_gain_sum: d[2],
+            depth_gain_level_sum: self.ev_depth_gain_level[i],
             ..Evidence::default()
         };
         e.set_counts(self.ev_counts[i]);
@@ -184,8 +185,8 @@ impl Layers {
         self.ev_counts[i] = e.counts();
         self.ev_level_n[i] = e.level_n;
         self.ev_level_sum[i] = e.level_sum_mm;
-        self.ev_depth[i] = [e.depth_n, e.depth_sum_mm];
-        self.ev_depth_sq[i] = e.depth_sq_mm2;
+        self.ev_depth[i] = [e.depth_n, e.depth_sum_mm, e.depth_gain_sum];
+        self.ev_depth_gain_level[i] = e.depth_gain_level_sum;
     }
 
     #[inline]
@@ -193,8 +194,8 @@ impl Layers {
         self.ev_counts[i] == [0; EVIDENCE_COUNTS]
             && self.ev_level_n[i] == 0
             && self.ev_level_sum[i] == 0
-            && self.ev_depth[i] == [0; 2]
-            && self.ev_depth_sq[i] == 0
+            && self.ev_depth[i] == [0; 3]
+            && self.ev_depth_gain_level[i] == 0
     }
 
     #[inline]

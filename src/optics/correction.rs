@@ -79,6 +79,30 @@ pub fn correct_bottom_return(
     Ok(surface + t * l_water)
 }
 
+/// How the depth of a corrected bottom return changes with the water level assumed:
+/// d(depth)/d(level) for the beam from `sensor_origin` through `raw_point`.
+///
+/// With the beam's incidence cos θᵢ = −u_z and cos θₜ from Snell, the corrected depth below a
+/// level L is `depth(L) = cos θₜ·(r − (z_s − L)/cos θᵢ)/n`: linear in L, with slope
+/// `cos θₜ/(n·cos θᵢ)` (1/n straight down, growing without bound toward grazing). A depth
+/// measured against a provisional level L₀ is therefore exactly
+/// `depth(L) = depth(L₀) + gain·(L − L₀)` against any other level the beam still crosses
+/// before its range ends. `None` for a beam that does not descend.
+pub fn bottom_depth_gain(
+    sensor_origin: Point3<f64>,
+    raw_point: Point3<f64>,
+    n_water: f64,
+) -> Option<f64> {
+    let v = raw_point - sensor_origin;
+    let range = v.norm();
+    let cos_i = -v.z / range;
+    if !(range > 0.0 && cos_i > 0.0 && n_water >= 1.0) {
+        return None;
+    }
+    let cos_t = (1.0 - (1.0 - cos_i * cos_i) / (n_water * n_water)).sqrt();
+    Some(cos_t / (n_water * cos_i))
+}
+
 /// The inverse of [`correct_bottom_return`]: where a lidar at `sensor_origin` reports a true
 /// point `bottom` under the water surface at `water_level_z` (found by Fermat's principle).
 /// Points at or above the water level are returned unchanged.
@@ -182,6 +206,28 @@ mod tests {
         );
     }
 
+    #[test]
+    fn depth_gain_is_one_over_n_straight_down_and_grows_toward_grazing() {
+        let s = Point3::new(0.0, 0.0, 1.0);
+        let down = bottom_depth_gain(s, Point3::new(0.0, 0.0, -1.0), 1.33).unwrap();
+        assert!((down - 1.0 / 1.33).abs() < 1e-12);
+        // 1.2 m down over 10 m: cos θᵢ = 1.2/√101.44, sin θₜ = sin θᵢ/1.33.
+        let oblique = bottom_depth_gain(s, Point3::new(10.0, 0.0, -0.2), 1.33).unwrap();
+        let cos_i = 1.2 / 101.44f64.sqrt();
+        let sin_t = (1.0 - cos_i * cos_i).sqrt() / 1.33;
+        let expected = (1.0 - sin_t * sin_t).sqrt() / (1.33 * cos_i);
+        assert!(
+            (oblique - expected).abs() < 1e-12,
+            "{oblique} vs {expected}"
+        );
+        assert!(
+            oblique > 5.0 * down,
+            "grazing beams must amplify level errors: {oblique}"
+        );
+        assert!(bottom_depth_gain(s, Point3::new(3.0, 0.0, 1.0), 1.33).is_none());
+        assert!(bottom_depth_gain(s, s, 1.33).is_none());
+    }
+
     proptest! {
         #[test]
         fn correction_inverts_the_forward_model(
@@ -195,6 +241,27 @@ mod tests {
             let back = correct_bottom_return(s, raw, level, n).unwrap();
             prop_assert!((back - bottom).norm() < 1e-8 * (1.0 + (bottom - s).norm()),
                 "{bottom:?} -> {raw:?} -> {back:?}");
+        }
+
+        /// The depth of one raw return against two different levels differs by exactly the
+        /// gain times the difference of the levels (the water stage relies on this to move
+        /// a cue's depth onto the body's surface).
+        #[test]
+        fn depth_is_linear_in_the_level_with_the_gain(
+            h in 0.3f64..3.0, bx in 0.5f64..20.0, by in -5.0f64..5.0, depth in 0.01f64..2.0,
+            level in -2.0f64..2.0, shift in -0.25f64..0.25, n in 1.0f64..1.6,
+        ) {
+            let s = Point3::new(0.0, 0.0, level + h);
+            let raw = apparent_bottom_point(s, Point3::new(bx, by, level - depth), level, n)
+                .unwrap();
+            let other = level + shift;
+            // Only levels the beam crosses before its range ends, below the sensor.
+            prop_assume!(other < s.z && other > raw.z);
+            let d0 = level - correct_bottom_return(s, raw, level, n).unwrap().z;
+            let d1 = other - correct_bottom_return(s, raw, other, n).unwrap().z;
+            let g = bottom_depth_gain(s, raw, n).unwrap();
+            prop_assert!((d1 - (d0 + g * shift)).abs() < 1e-9 * (1.0 + g),
+                "{d0} {d1} {g} {shift}");
         }
     }
 }

@@ -27,7 +27,7 @@ mod lidar;
 mod plot;
 
 pub use absorption::{absorption_per_m, ice_absorption_per_m, loss_distance_m, AbsorptionTable};
-pub use correction::{apparent_bottom_point, correct_bottom_return};
+pub use correction::{apparent_bottom_point, bottom_depth_gain, correct_bottom_return};
 pub use fresnel::{brewster_angle, fresnel, snell, Fresnel};
 pub use lidar::{
     Attenuation, LidarModelConfig, LidarModelReport, LidarModelRow, LidarWaterModel, PathGeometry,
