@@ -27,11 +27,22 @@ use crate::error::{Error, Result};
 /// Anything that labels one RGB colour.
 pub trait PixelClassifier: Sync {
     fn classify_pixel(&self, rgb: [u8; 3]) -> Label;
+
+    /// True when the label depends on the colour only through R + G + B and min(R, G, B)
+    /// (brightness and saturation): a lookup table is then compiled from one evaluation
+    /// per (sum, min) pair, 766 × 256, instead of one per bin (2^24 at 8 bits).
+    fn by_sum_and_min(&self) -> bool {
+        false
+    }
 }
 
 impl PixelClassifier for super::color::RuleClassifier {
     fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
         super::color::RuleClassifier::classify_pixel(self, rgb)
+    }
+
+    fn by_sum_and_min(&self) -> bool {
+        true
     }
 }
 

@@ -32,11 +32,28 @@ impl ColorLut {
         let shift = 8 - bits as u32;
         // Centre of a bin of width 2^shift: q·2^shift + (2^shift − 1)/2, rounded down.
         let centre = |q: usize| ((q << shift) + ((1usize << shift) - 1) / 2) as u8;
+        // The label of every (sum, min) pair, when that is all the label depends on.
+        let by_sum_min: Option<Vec<Label>> = c.by_sum_and_min().then(|| {
+            (0..766 * 256)
+                .into_par_iter()
+                .map(|k| {
+                    colour_of_sum_min(k / 256, k % 256)
+                        .map_or(Label::Other, |p| c.classify_pixel(p))
+                })
+                .collect()
+        });
         let mut table = vec![Label::Other; n * n * n];
         table.par_chunks_mut(n).enumerate().for_each(|(rg, out)| {
-            let (r, g) = (rg / n, rg % n);
+            let (r, g) = (centre(rg / n), centre(rg % n));
             for (b, o) in out.iter_mut().enumerate() {
-                *o = c.classify_pixel([centre(r), centre(g), centre(b)]);
+                let p = [r, g, centre(b)];
+                *o = match &by_sum_min {
+                    Some(t) => {
+                        let sum = p[0] as usize + p[1] as usize + p[2] as usize;
+                        t[sum * 256 + p[0].min(p[1]).min(p[2]) as usize]
+                    }
+                    None => c.classify_pixel(p),
+                };
             }
         });
         Ok(ColorLut { bits, table })
@@ -103,6 +120,16 @@ impl PixelClassifier for ColorLut {
     }
 }
 
+/// A colour with channel sum `sum` and smallest channel `min`, if there is one.
+fn colour_of_sum_min(sum: usize, min: usize) -> Option<[u8; 3]> {
+    let rest = sum.checked_sub(min)?;
+    if rest < 2 * min || rest > 510 {
+        return None;
+    }
+    let g = (rest - min).min(255);
+    Some([min as u8, g as u8, (rest - g) as u8])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -118,8 +145,37 @@ mod tests {
         assert!(l.classify_into(&[0; 5], &mut [Label::Other; 2]).is_err());
     }
 
+    /// A classifier that says it depends on sum and min only compiles to the same table as
+    /// one evaluated at every bin.
+    #[test]
+    fn sum_min_compile_is_the_full_compile() {
+        struct Full(RuleClassifier);
+        impl PixelClassifier for Full {
+            fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
+                self.0.classify_pixel(rgb)
+            }
+        }
+        let r = RuleClassifier::default();
+        for bits in [1, 4, 6] {
+            assert_eq!(
+                ColorLut::compile(&r, bits).unwrap(),
+                ColorLut::compile(&Full(r.clone()), bits).unwrap()
+            );
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Every (sum, min) pair a colour has is found, with a colour that has it.
+        #[test]
+        fn colour_of_sum_min_finds_a_colour(p in any::<[u8; 3]>()) {
+            let sum = p.iter().map(|&v| v as usize).sum::<usize>();
+            let min = *p.iter().min().unwrap() as usize;
+            let q = colour_of_sum_min(sum, min).unwrap();
+            prop_assert_eq!(q.iter().map(|&v| v as usize).sum::<usize>(), sum);
+            prop_assert_eq!(*q.iter().min().unwrap() as usize, min);
+        }
+
         /// An 8-bit table is the classifier itself; a coarser one agrees at bin centres.
         #[test]
         fn lut_agrees_with_source(p in any::<[u8; 3]>(), bits in 1u8..=7) {
