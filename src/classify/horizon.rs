@@ -6,7 +6,6 @@
 //! the map frame (full distortion model, any resolution).
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use rayon::prelude::*;
 
 use super::{Label, LabelImage};
 use crate::error::{Error, Result};
@@ -15,14 +14,10 @@ use crate::geom::{pose_is_finite, Pose};
 
 /// Unit rays of every pixel in the map frame (row-major); `None` where undistortion fails.
 pub fn pixel_rays_in_map(camera: &CameraModel, cam_to_map: &Pose) -> Vec<Option<Vector3<f64>>> {
-    let (w, h) = (camera.width, camera.height);
-    (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            camera
-                .pixel_ray((i % w) as f64, (i / w) as f64)
-                .map(|r| cam_to_map.rotation * r)
-        })
+    camera
+        .pixel_rays()
+        .into_iter()
+        .map(|r| r.map(|r| cam_to_map.rotation * r))
         .collect()
 }
 

@@ -6,6 +6,7 @@
 //! (0, 0) is the centre of the top-left pixel, as in OpenCV and ROS.
 
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 
@@ -101,17 +102,30 @@ impl CameraModel {
     /// Inverse of [`Self::distort`], by Newton iteration; `None` where it does not converge
     /// (far outside the calibrated field of view).
     pub fn undistort(&self, xd: f64, yd: f64) -> Option<[f64; 2]> {
+        self.undistort_within(xd, yd, self.fold_radius())
+    }
+
+    /// The plumb_bob model's fold radius ([`plumb_bob_fold_radius`]); infinite for the others.
+    fn fold_radius(&self) -> f64 {
+        match self.distortion {
+            Distortion::PlumbBob([k1, k2, _, _, k3]) => plumb_bob_fold_radius(k1, k2, k3),
+            _ => f64::INFINITY,
+        }
+    }
+
+    /// [`Self::undistort`] with the fold radius given, so that a whole image pays for it once.
+    fn undistort_within(&self, xd: f64, yd: f64, r_max: f64) -> Option<[f64; 2]> {
         if !(xd.is_finite() && yd.is_finite()) {
             return None;
         }
         match self.distortion {
-            Distortion::None => Some([xd, yd]),
+            // ROS drivers of undistorted cameras publish plumb_bob with zero coefficients.
+            Distortion::None | Distortion::PlumbBob([0.0, 0.0, 0.0, 0.0, 0.0]) => Some([xd, yd]),
             Distortion::PlumbBob([k1, k2, _, _, k3]) => {
                 // Strong barrel distortion folds the image: r·(1 + k1 r² + k2 r⁴ + k3 r⁶)
                 // rises to a maximum at `r_max` and falls beyond it, so a distorted point has
                 // a second preimage outside the lens's valid field. Start from the inverse of
                 // the radial part on its rising branch and keep only solutions on it.
-                let r_max = plumb_bob_fold_radius(k1, k2, k3);
                 let radial = |r: f64| {
                     let s = r * r;
                     r * (1.0 + s * (k1 + s * (k2 + s * k3)))
@@ -218,8 +232,23 @@ impl CameraModel {
 
     /// Unit ray (optical frame) through pixel (u, v); `None` where undistortion fails.
     pub fn pixel_ray(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
-        let [a, b] = self.undistort((u - self.cx) / self.fx, (v - self.cy) / self.fy)?;
+        self.pixel_ray_within(u, v, self.fold_radius())
+    }
+
+    fn pixel_ray_within(&self, u: f64, v: f64, r_max: f64) -> Option<Vector3<f64>> {
+        let [a, b] =
+            self.undistort_within((u - self.cx) / self.fx, (v - self.cy) / self.fy, r_max)?;
         Some(Vector3::new(a, b, 1.0).normalize())
+    }
+
+    /// [`Self::pixel_ray`] of every pixel, row-major (rows in parallel; the same rays
+    /// whatever the thread count).
+    pub fn pixel_rays(&self) -> Vec<Option<Vector3<f64>>> {
+        let (w, r_max) = (self.width.max(1), self.fold_radius());
+        (0..self.width * self.height)
+            .into_par_iter()
+            .map(|i| self.pixel_ray_within((i % w) as f64, (i / w) as f64, r_max))
+            .collect()
     }
 }
 
@@ -321,6 +350,31 @@ mod tests {
     fn rejects_bad_intrinsics() {
         assert!(CameraModel::new(1, 1, [0.0, 1.0, 0.0, 0.0], Distortion::None, "c").is_err());
         assert!(CameraModel::new(1, 1, [1.0, 1.0, f64::NAN, 0.0], Distortion::None, "c").is_err());
+    }
+
+    #[test]
+    fn pixel_rays_are_the_pixel_ray_of_every_pixel() {
+        for d in [
+            Distortion::PlumbBob([-0.3, 0.1, 0.001, -0.002, 0.0]),
+            Distortion::PlumbBob([0.0; 5]),
+            Distortion::Equidistant([0.1, -0.01, 0.0, 0.0]),
+        ] {
+            let c = CameraModel::new(33, 17, [20.0, 21.0, 16.0, 8.0], d, "cam").unwrap();
+            let rays = c.pixel_rays();
+            assert_eq!(rays.len(), 33 * 17);
+            for (i, r) in rays.iter().enumerate() {
+                assert_eq!(
+                    *r,
+                    c.pixel_ray((i % 33) as f64, (i / 33) as f64),
+                    "{d:?} {i}"
+                );
+            }
+        }
+        // A zero plumb_bob (what ROS publishes for an undistorted camera) is no distortion.
+        let (z, n) = (cam(Distortion::PlumbBob([0.0; 5])), cam(Distortion::None));
+        for (u, v) in [(0.0, 0.0), (319.5, 239.5), (639.0, 13.0), (-2000.0, 9000.0)] {
+            assert_eq!(z.pixel_ray(u, v), n.pixel_ray(u, v));
+        }
     }
 
     #[test]

@@ -170,14 +170,9 @@ struct RayCache {
 
 impl RayCache {
     fn new(camera: &CameraModel) -> Self {
-        let w = camera.width.max(1);
-        let rays = (0..camera.width * camera.height)
-            .into_par_iter()
-            .map(|i| camera.pixel_ray((i % w) as f64, (i / w) as f64))
-            .collect();
         RayCache {
             camera: camera.clone(),
-            rays,
+            rays: camera.pixel_rays(),
         }
     }
 }

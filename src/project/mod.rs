@@ -308,11 +308,7 @@ impl Projector {
         if !(cfg.max_range.is_finite() && cfg.max_range > 0.0) || cfg.stride == 0 {
             return Err(Error::invalid("projection config", format!("{cfg:?}")));
         }
-        let w = camera.width;
-        let rays = (0..camera.width * camera.height)
-            .into_par_iter()
-            .map(|i| camera.pixel_ray((i % w) as f64, (i / w) as f64))
-            .collect();
+        let rays = camera.pixel_rays();
         Ok(Projector { camera, rays, cfg })
     }
 
