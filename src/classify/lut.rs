@@ -159,7 +159,7 @@ mod tests {
         for bits in [1, 4, 6] {
             assert_eq!(
                 ColorLut::compile(&r, bits).unwrap(),
-                ColorLut::compile(&Full(r.clone()), bits).unwrap()
+                ColorLut::compile(&Full(r), bits).unwrap()
             );
         }
     }
