@@ -561,8 +561,8 @@ impl RollingGrid {
 #[inline]
 pub fn key_of(resolution: f64, x: f64, y: f64) -> CellKey {
     CellKey::new(
-        (x / resolution).floor() as i64,
-        (y / resolution).floor() as i64,
+        crate::geom::floor_i64(x / resolution),
+        crate::geom::floor_i64(y / resolution),
     )
 }
 

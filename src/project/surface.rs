@@ -18,6 +18,7 @@
 use nalgebra::{Point3, Vector3};
 
 use crate::error::{Error, Result};
+use crate::geom::floor_i64;
 use crate::grid::{CellKey, RollingGrid};
 
 /// Dense elevation snapshot of a [`RollingGrid`] window. See the module documentation.
@@ -138,8 +139,8 @@ impl GridSurface {
     /// Column and row of the cell under `(x, y)`, if inside the window.
     #[inline]
     fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let i = (x / self.resolution).floor() as i64 - self.origin.x;
-        let j = (y / self.resolution).floor() as i64 - self.origin.y;
+        let i = floor_i64(x / self.resolution) - self.origin.x;
+        let j = floor_i64(y / self.resolution) - self.origin.y;
         let n = self.n as i64;
         (i >= 0 && j >= 0 && i < n && j < n).then_some((i as usize, j as usize))
     }
