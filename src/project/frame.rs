@@ -166,6 +166,8 @@ enum Cue {
 struct RayCache {
     camera: CameraModel,
     rays: Vec<Option<Vector3<f64>>>,
+    /// The rays rotated into the map frame by the current frame's pose (reused buffer).
+    in_map: Vec<Option<Vector3<f64>>>,
 }
 
 impl RayCache {
@@ -173,6 +175,7 @@ impl RayCache {
         RayCache {
             camera: camera.clone(),
             rays: camera.pixel_rays(),
+            in_map: Vec::new(),
         }
     }
 }
@@ -340,11 +343,15 @@ impl FrameLabels {
         {
             self.caches[slot] = Some(RayCache::new(camera));
         }
-        let rays = &self.caches[slot].as_ref().expect("just set").rays;
-        let map_rays: Vec<Option<Vector3<f64>>> = rays
-            .iter()
-            .map(|r| r.map(|r| cam_to_map.rotation * r))
-            .collect();
+        let cache = self.caches[slot].as_mut().expect("just set");
+        cache.in_map.clear();
+        cache.in_map.extend(
+            cache
+                .rays
+                .iter()
+                .map(|r| r.map(|r| cam_to_map.rotation * r)),
+        );
+        let map_rays = &cache.in_map;
         let (w, h) = (camera.width, camera.height);
         let labels = match cue {
             Cue::Colour => {
@@ -357,11 +364,11 @@ impl FrameLabels {
                 };
                 let mut l = LabelImage::filled(w, h, Label::Other);
                 lut.classify_into(px.as_flattened(), &mut l.data)?;
-                apply_horizon(&mut l, &map_rays);
+                apply_horizon(&mut l, map_rays);
                 l
             }
             Cue::Swir => {
-                let g = ground_geometry(camera, &map_rays, cam_to_map.translation.z, ground_z);
+                let g = ground_geometry(camera, map_rays, cam_to_map.translation.z, ground_z);
                 classify_swir(
                     &mono_of(img),
                     &g,
@@ -371,7 +378,7 @@ impl FrameLabels {
             }
             Cue::Mwir => {
                 let m = self.cfg.mwir.as_ref().expect("configured");
-                let g = ground_geometry(camera, &map_rays, cam_to_map.translation.z, ground_z);
+                let g = ground_geometry(camera, map_rays, cam_to_map.translation.z, ground_z);
                 classify_mwir(&mono_of(img), &g, m.hour, &m.classifier)?
             }
         };
