@@ -560,9 +560,11 @@ impl RollingGrid {
 /// The key of the cell containing `(x, y)` at `resolution`.
 #[inline]
 pub fn key_of(resolution: f64, x: f64, y: f64) -> CellKey {
+    // f64::floor, not geom::floor_i64: inlined into the AVX2 ingest it vectorises to
+    // vroundpd, and floor_i64 there cost 15 % of ingest.
     CellKey::new(
-        crate::geom::floor_i64(x / resolution),
-        crate::geom::floor_i64(y / resolution),
+        (x / resolution).floor() as i64,
+        (y / resolution).floor() as i64,
     )
 }
 
