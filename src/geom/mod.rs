@@ -21,7 +21,6 @@ pub fn pose_xyz_rpy(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> 
     )
 }
 
-/// True when every component of the pose is finite and the rotation is a unit quaternion.
 /// `v.floor() as i64`, bit for bit (NaN → 0, saturating), without a call: the x86-64
 /// baseline has no rounding instruction, and `f64::floor` there is a software routine that
 /// showed as 4 % of a full-frame build in the label ray march. (Inside a function built
@@ -32,6 +31,7 @@ pub fn floor_i64(v: f64) -> i64 {
     t.saturating_sub((v < t as f64) as i64)
 }
 
+/// True when every component of the pose is finite and the rotation is a unit quaternion.
 pub fn pose_is_finite(p: &Pose) -> bool {
     let q = p.rotation.coords;
     p.translation.vector.iter().all(|v| v.is_finite())
