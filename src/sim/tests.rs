@@ -181,6 +181,43 @@ fn load_reports_the_file_and_line() {
 }
 
 #[test]
+fn the_ground_goes_on_past_the_terrain_edge() {
+    let w = world(0.5);
+    // The terrain spans x −5..35 and y −30..30. Rays from 1.5 m that meet the ground 20 m
+    // past the x = −5 edge, 7 m past the y = −30 edge, and past the (−5, −30) corner (the
+    // corner's own triangles) hit the edge height carried outward, as terrain.
+    for (o, to) in [
+        ([0.0, 0.0], [-25.0, 0.0]),
+        ([0.0, -25.0], [0.0, -37.0]),
+        ([0.0, -25.0], [-12.0, -37.0]),
+        ([0.0, 0.0], [-400.0, 7.0]),
+    ] {
+        let z = w.terrain.height(to[0], to[1]);
+        let o = Point3::new(o[0], o[1], w.terrain.height(o[0], o[1]) + 1.5);
+        let target = Point3::new(to[0], to[1], z);
+        let d = (target - o).normalize();
+        let h = w
+            .cast_solid(&o, &d, 2000.0)
+            .unwrap_or_else(|| panic!("{to:?}: no hit"));
+        assert!(
+            matches!(h.surface, Surface::Solid { tri } if w.is_terrain(tri)),
+            "{to:?}"
+        );
+        assert!(
+            (h.point - target).norm() < 0.02 * (target - o).norm(),
+            "{to:?}: {:?}",
+            h.point
+        );
+        assert!(
+            (h.point.z - z).abs() < 1e-3,
+            "{to:?}: z {} vs {z}",
+            h.point.z
+        );
+        assert!(w.water_at(h.point.x, h.point.y).is_none());
+    }
+}
+
+#[test]
 fn flat_ground_range_is_height_over_sine_of_elevation() {
     let w = world(0.5);
     let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();

@@ -188,6 +188,58 @@ fn rim(rho: f64, flat: f64) -> f64 {
     }
 }
 
+/// How far the terrain's apron reaches beyond its edges (metres): farther than any sensor
+/// of a scene sees the ground.
+const APRON_M: f64 = 1000.0;
+
+/// Extends the terrain mesh beyond its edges by [`APRON_M`], each edge vertex's height
+/// carried straight outward (and each corner's diagonally), which is the surface
+/// [`Terrain::height`] gives outside (clamped to the edge). Without it the world ended at
+/// the terrain's edge: a lidar beam or camera ray past it met nothing, and the no-return
+/// cue and the sky-below-the-horizon rule saw water there (on `puddles`, 53 m² of water
+/// bodies outside the terrain; on `stream_slope`, 28.5 m²). The apron is terrain (its
+/// material comes from position) but never water: water bodies lie inside the terrain.
+fn apron(vertices: &mut Vec<[f64; 3]>, triangles: &mut Vec<[u32; 3]>, t: &Terrain) {
+    let (nx, ny) = (t.nx, t.ny);
+    let v = |i: usize, j: usize| j * nx + i;
+    // The boundary counter-clockwise seen from above, one run per edge with both corners,
+    // and each edge's outward direction.
+    let edges: [(Vec<usize>, [f64; 2]); 4] = [
+        ((0..nx).map(|i| v(i, 0)).collect(), [0.0, -1.0]),
+        ((0..ny).map(|j| v(nx - 1, j)).collect(), [1.0, 0.0]),
+        ((0..nx).rev().map(|i| v(i, ny - 1)).collect(), [0.0, 1.0]),
+        ((0..ny).rev().map(|j| v(0, j)).collect(), [-1.0, 0.0]),
+    ];
+    let mut push = |vertices: &mut Vec<[f64; 3]>, k: usize, d: [f64; 2]| {
+        let [x, y, z] = vertices[k];
+        vertices.push([x + APRON_M * d[0], y + APRON_M * d[1], z]);
+        (vertices.len() - 1) as u32
+    };
+    // Outer copies of each edge's vertices, in order.
+    let outer: Vec<Vec<u32>> = edges
+        .iter()
+        .map(|(run, d)| run.iter().map(|&k| push(vertices, k, *d)).collect())
+        .collect();
+    for ((run, _), out) in edges.iter().zip(&outer) {
+        for w in 0..run.len() - 1 {
+            let (a, b) = (run[w] as u32, run[w + 1] as u32);
+            let (ao, bo) = (out[w], out[w + 1]);
+            triangles.push([a, ao, bo]);
+            triangles.push([a, bo, b]);
+        }
+    }
+    // Corner e: where edge e ends and edge e + 1 begins.
+    for e in 0..4 {
+        let n = (e + 1) % 4;
+        let c = *edges[e].0.last().expect("an edge has two vertices");
+        let (d1, d2) = (edges[e].1, edges[n].1);
+        let diag = push(vertices, c, [d1[0] + d2[0], d1[1] + d2[1]]);
+        let (o1, o2) = (*outer[e].last().expect("same length"), outer[n][0]);
+        triangles.push([c as u32, o1, diag]);
+        triangles.push([c as u32, diag, o2]);
+    }
+}
+
 impl World {
     /// Builds the world of a validated scene.
     pub fn build(scene: &Scene) -> Result<World> {
@@ -250,6 +302,7 @@ impl World {
                 triangles.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
             }
         }
+        apron(&mut vertices, &mut triangles, &terrain);
         let terrain_triangles = triangles.len();
         let mut tri_material = vec![usize::MAX; terrain_triangles];
         let mut footprints = Vec::new();
