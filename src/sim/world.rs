@@ -210,7 +210,7 @@ fn apron(vertices: &mut Vec<[f64; 3]>, triangles: &mut Vec<[u32; 3]>, t: &Terrai
         ((0..nx).rev().map(|i| v(i, ny - 1)).collect(), [0.0, 1.0]),
         ((0..ny).rev().map(|j| v(0, j)).collect(), [-1.0, 0.0]),
     ];
-    let mut push = |vertices: &mut Vec<[f64; 3]>, k: usize, d: [f64; 2]| {
+    let push = |vertices: &mut Vec<[f64; 3]>, k: usize, d: [f64; 2]| {
         let [x, y, z] = vertices[k];
         vertices.push([x + APRON_M * d[0], y + APRON_M * d[1], z]);
         (vertices.len() - 1) as u32
