@@ -15,7 +15,7 @@
 //! Only configured sensors run code; a configured sensor missing from the frame (or without
 //! camera info or pose) is skipped and counted in the report.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Point3, Vector3, Vector4};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -255,6 +255,87 @@ fn ground_geometry(
     }
 }
 
+/// One sampled pixel's hit on the map.
+#[derive(Debug, Clone, Copy)]
+struct Hit {
+    p: Point3<f64>,
+    /// Labelled water.
+    wet: bool,
+    /// The water level its vote gives: the hit's height, or for water placed over a hole,
+    /// see [`tighten_hole_levels`].
+    level: f64,
+    /// For water placed where its ray drops to a hole's rim level: the ray's height at the
+    /// end of the hole. The water under the pixel lies between that and the hit.
+    floor: Option<f64>,
+}
+
+impl Hit {
+    fn at(p: Point3<f64>, wet: bool) -> Self {
+        Hit {
+            p,
+            wet,
+            level: p.z,
+            floor: None,
+        }
+    }
+}
+
+/// Image neighbourhood (sampled pixels either side) over which water placed over holes
+/// shares the tightest bound on its level.
+const HOLE_LEVEL_WINDOW: usize = 8;
+
+/// A water pixel whose ray crosses a hole (unobserved cells) is placed where the ray drops
+/// to the lower of the hole's two rims: water lies at or below both, so that height is an
+/// upper bound of the level, and the ray's height where the hole ends is a lower one. Where
+/// the near rim is a bank top, the bound is decimetres above the water: on the simulated
+/// stream, the level samples of the water seen along the channel stood 15 to 28 cm above
+/// it. Every ray across the same water bounds the same level, so each such pixel's level is
+/// the lowest upper bound among the hole-placed water pixels within [`HOLE_LEVEL_WINDOW`]
+/// sampled pixels of it in the image (what is near in the image is one water surface; a
+/// stream's level varies along it), but never below its own lower bound. The vote stays
+/// where it is: only the level it gives changes.
+fn tighten_hole_levels(per_row: &mut [(Vec<Option<Hit>>, [u64; 3])], nc: usize) {
+    let nr = per_row.len();
+    let upper: Vec<f64> = per_row
+        .iter()
+        .flat_map(|(hits, _)| {
+            hits.iter().map(|h| match h {
+                Some(h @ Hit { floor: Some(_), .. }) => h.p.z,
+                _ => f64::INFINITY,
+            })
+        })
+        .collect();
+    if upper.iter().all(|b| b.is_infinite()) {
+        return;
+    }
+    // The window minimum, over columns, then rows.
+    let k = HOLE_LEVEL_WINDOW;
+    let across: Vec<f64> = (0..nr * nc)
+        .map(|i| {
+            let (r, c) = (i / nc, i % nc);
+            upper[r * nc + c.saturating_sub(k)..r * nc + (c + k + 1).min(nc)]
+                .iter()
+                .fold(f64::INFINITY, |a, &b| a.min(b))
+        })
+        .collect();
+    for (r, (hits, _)) in per_row.iter_mut().enumerate() {
+        for (c, h) in hits.iter_mut().enumerate() {
+            let Some(Hit {
+                floor: Some(floor),
+                level,
+                ..
+            }) = h
+            else {
+                continue;
+            };
+            let low = (r.saturating_sub(k)..(r + k + 1).min(nr))
+                .map(|rr| across[rr * nc + c])
+                .fold(f64::INFINITY, f64::min);
+            *level = low.max(*floor).min(*level);
+        }
+    }
+}
+
 impl FrameLabels {
     pub fn new(cfg: FrameLabelConfig) -> Result<Self> {
         cfg.validate()?;
@@ -394,9 +475,9 @@ impl FrameLabels {
         let stereo_range = self.cfg.stereo_max_range.min(max_range);
         let (cols, rows): (Vec<usize>, Vec<usize>) =
             ((0..w).step_by(s).collect(), (0..h).step_by(s).collect());
-        // Per sampled pixel: its hit and whether it is water (`None`: no vote).
-        type Hit = Option<(Point3<f64>, bool)>;
-        let per_row: Vec<(Vec<Hit>, [u64; 3])> = rows
+        // Per sampled pixel: its hit, whether it is water (`None`: no vote), and the water
+        // level it gives (see `tighten_hole_levels`).
+        let mut per_row: Vec<(Vec<Option<Hit>>, [u64; 3])> = rows
             .par_iter()
             .map(|&y| {
                 let mut n = [0u64; 3]; // via point, via ray, no hit
@@ -415,20 +496,27 @@ impl FrameLabels {
                                 let p = c.point_in_map(e);
                                 if (p - origin).norm() <= stereo_range {
                                     n[0] += 1;
-                                    return Some((p, water));
+                                    return Some(Hit::at(p, water));
                                 }
                             }
                         }
-                        match map_rays[i]
-                            .and_then(|d| surface.cast_marking_holes(&origin, &d, max_range))
-                        {
+                        let cast = map_rays[i].and_then(|d| {
+                            surface
+                                .cast_through_holes(&origin, &d, max_range)
+                                .map(|h| (d, h))
+                        });
+                        match cast {
                             // Only water is placed where the ray crosses a hole's rim level:
                             // whatever else a pixel there shows (a bank the map has not
                             // seen, terrain reflected in the water) is not at that level,
                             // and its vote would land on the water.
-                            Some((p, _, over_hole)) if water || !over_hole => {
+                            Some((d, (p, _, hole))) if water || hole.is_none() => {
                                 n[1] += 1;
-                                Some((p, water))
+                                let floor = hole.map(|t| origin.z + d.z * t);
+                                Some(Hit {
+                                    floor,
+                                    ..Hit::at(p, water)
+                                })
                             }
                             _ => {
                                 n[2] += 1;
@@ -440,6 +528,7 @@ impl FrameLabels {
                 (hits, n)
             })
             .collect();
+        tighten_hole_levels(&mut per_row, cols.len());
         // Each sampled pixel stands for the quad spanned by its hit and those of its right,
         // lower and diagonal neighbours: when all four agree and the quad is no larger than
         // `QUAD_MAX_M` (larger ones straddle an occlusion edge), every cell under the quad
@@ -454,31 +543,32 @@ impl FrameLabels {
                 let row = &per_row[r].0;
                 let next = per_row.get(r + 1).map(|n| &n.0);
                 for c in 0..cols.len() {
-                    let Some((p00, wet)) = row[c] else { continue };
+                    let Some(h00) = row[c] else { continue };
+                    let wet = h00.wet;
                     let quad = next.and_then(|nx| {
-                        let q = [
-                            row.get(c + 1)?.as_ref()?,
-                            nx[c].as_ref()?,
-                            nx.get(c + 1)?.as_ref()?,
-                        ];
+                        let q = [*row.get(c + 1)?.as_ref()?, nx[c]?, (*nx.get(c + 1)?)?];
                         q.iter()
-                            .all(|(_, w2)| *w2 == wet)
-                            .then_some([p00, q[0].0, q[1].0, q[2].0])
+                            .all(|h| h.wet == wet)
+                            .then_some([h00, q[0], q[1], q[2]])
                     });
                     let quad = quad.filter(|q| {
                         [(0, 1), (0, 2), (1, 3), (2, 3)]
                             .iter()
-                            .all(|&(a, b)| (q[a] - q[b]).norm() <= QUAD_MAX_M)
+                            .all(|&(a, b)| (q[a].p - q[b].p).norm() <= QUAD_MAX_M)
                     });
                     match quad {
                         None => {
-                            if let Some(j) = surface.index_of(p00.x, p00.y) {
-                                out.push((j as u32, wet, p00.z as f32));
+                            if let Some(j) = surface.index_of(h00.p.x, h00.p.y) {
+                                out.push((j as u32, wet, h00.level as f32));
                             }
                         }
-                        Some([a, b, cc, d]) => {
+                        Some(q) => {
+                            // Each point carries its level in its fourth coordinate, so that
+                            // the levels are interpolated with the points.
+                            let [a, b, cc, d] =
+                                q.map(|h| Vector4::new(h.p.x, h.p.y, h.p.z, h.level));
                             // a = (x, y), b = (x + s, y), cc = (x, y + s), d = (x + s, y + s).
-                            let span = |u: Point3<f64>, v: Point3<f64>| (u - v).xy().norm();
+                            let span = |u: Vector4<f64>, v: Vector4<f64>| (u - v).xy().norm();
                             let nu = ((span(a, b).max(span(cc, d)) / half).ceil() as usize).max(1);
                             let nv = ((span(a, cc).max(span(b, d)) / half).ceil() as usize).max(1);
                             for iv in 0..nv {
@@ -487,7 +577,7 @@ impl FrameLabels {
                                 for iu in 0..nu {
                                     let p = l + (rr - l) * (iu as f64 / nu as f64);
                                     if let Some(j) = surface.index_of(p.x, p.y) {
-                                        out.push((j as u32, wet, p.z as f32));
+                                        out.push((j as u32, wet, p.w as f32));
                                     }
                                 }
                             }

@@ -171,6 +171,19 @@ impl GridSurface {
         dir: &Vector3<f64>,
         max_range: f64,
     ) -> Option<(Point3<f64>, usize, bool)> {
+        self.cast_through_holes(origin, dir, max_range)
+            .map(|(p, i, hole)| (p, i, hole.is_some()))
+    }
+
+    /// [`GridSurface::cast_marking_holes`], with the distance along the ray of the last
+    /// sample still in the hole (`Some`) when the hit is at a hole's rim level: water in
+    /// the hole lies at or below that level, so anywhere from the hit to there.
+    pub fn cast_through_holes(
+        &self,
+        origin: &Point3<f64>,
+        dir: &Vector3<f64>,
+        max_range: f64,
+    ) -> Option<(Point3<f64>, usize, Option<f64>)> {
         let horiz = dir.xy().norm();
         if horiz.is_nan() || horiz <= 1e-9 || !origin.coords.iter().all(|v| v.is_finite()) {
             return None;
@@ -238,11 +251,12 @@ impl GridSurface {
                 let tl = (l - origin.z) / dir.z;
                 if dir.z < 0.0 && tl >= t0 && tl <= t {
                     let q = origin + dir * tl;
-                    return Some((q, self.index_of(q.x, q.y).unwrap_or(i), true));
+                    let end = (t - dt).max(tl);
+                    return Some((q, self.index_of(q.x, q.y).unwrap_or(i), Some(end)));
                 }
             }
             if p.z <= z {
-                return Some((p, i, false));
+                return Some((p, i, None));
             }
             level = z;
         }
@@ -253,7 +267,11 @@ impl GridSurface {
                 let tl = (level - origin.z) / dir.z;
                 let q = origin + dir * tl;
                 let i = self.index_of(q.x, q.y)?;
-                (tl >= t0 && tl <= max_range && self.z[i].is_nan()).then_some((q, i, true))
+                (tl >= t0 && tl <= max_range && self.z[i].is_nan()).then_some((
+                    q,
+                    i,
+                    Some(max_range),
+                ))
             }
             _ => None,
         }
@@ -410,6 +428,11 @@ mod tests {
         assert!(s.cast_marking_holes(&o, &d, 50.0).unwrap().2);
         let d2 = Vector3::new(3.0, 0.0, -1.5).normalize();
         assert!(!s.cast_marking_holes(&o, &d2, 50.0).unwrap().2);
+        // The hole goes on to the far rim at x = 8: its last sample is within a step of it.
+        let end = s.cast_through_holes(&o, &d, 50.0).unwrap().2.unwrap();
+        let e = o + d * end;
+        assert!((7.9..8.0).contains(&e.x), "{e}");
+        assert_eq!(s.cast_through_holes(&o, &d2, 50.0).unwrap().2, None);
         // A far rim lower than the near one sets the level: far bank at −0.3 m, aimed at
         // (7, −0.3): the hit is there, not where the ray passes z = 0 (x = 6).
         let (_, s3) =
@@ -424,6 +447,8 @@ mod tests {
         let (_, s4) = grid_of(|x, _| (x < 4.0).then_some(0.0));
         let (p4, _) = s4.cast(&o, &d, 50.0).unwrap();
         assert!((p4.x - 6.0).abs() < 1e-6 && p4.z.abs() < 1e-9, "{p4}");
+        // ... and the water may lie anywhere down the ray within range.
+        assert_eq!(s4.cast_through_holes(&o, &d, 50.0).unwrap().2, Some(50.0));
         // A ray that starts above a hole with no rim behind it passes on.
         let (_, s2) = grid_of(|x, _| (x >= 8.0).then_some(0.0));
         let (p2, _) = s2.cast(&o, &d, 50.0).unwrap();

@@ -239,3 +239,77 @@ fn cached_horizon_equals_the_classifier_horizon() {
     assert_eq!(bits(&g1.range), bits(&g2.range));
     assert_eq!(bits(&g1.lookahead), bits(&g2.lookahead));
 }
+
+/// Sampled pixels on an `nr` × `nc` grid: hole-placed water (upper bound `level`, lower
+/// bound `floor`), other water, or no hit.
+fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<Hit>>, [u64; 3])> {
+    (0..nr)
+        .map(|r| {
+            let hits = (0..nc)
+                .map(|c| {
+                    let (kind, upper, floor) = cells[r * nc + c];
+                    let p = Point3::new(c as f64, r as f64, upper);
+                    match kind % 3 {
+                        0 => Some(Hit {
+                            floor: Some(floor),
+                            ..Hit::at(p, true)
+                        }),
+                        1 => Some(Hit::at(p, true)),
+                        _ => None,
+                    }
+                })
+                .collect();
+            (hits, [0; 3])
+        })
+        .collect()
+}
+
+proptest::proptest! {
+    /// Tightening gives each hole-placed pixel the lowest upper bound of its window, its
+    /// own floor permitting, as a direct search of the window finds it: never higher than
+    /// it was, never below its floor. Other pixels keep their level, and no hit moves.
+    /// When every pixel bounds one water level `l` (floor ≤ l ≤ upper), no level goes
+    /// below `l`; otherwise (another hole's water in the window) a floor may bind.
+    #[test]
+    fn hole_levels_tighten_towards_the_level_all_bounds_admit(
+        nr in 1usize..24,
+        nc in 1usize..24,
+        l in -2.0f64..2.0,
+        one_level in proptest::bool::ANY,
+        cells in proptest::collection::vec((0u8..3, 0.0f64..1.0, 0.0f64..1.0), 24 * 24),
+    ) {
+        let cells: Vec<(u8, f64, f64)> = cells
+            .iter()
+            .map(|&(k, a, b)| (k, l + a, if one_level { l - b } else { l + a - b }))
+            .collect();
+        let before = hole_rows(nr, nc, &cells);
+        let mut after = before.clone();
+        tighten_hole_levels(&mut after, nc);
+        let k = HOLE_LEVEL_WINDOW as i64;
+        for r in 0..nr {
+            for c in 0..nc {
+                let (b, a) = (before[r].0[c], after[r].0[c]);
+                let (Some(b), Some(a)) = (b, a) else {
+                    proptest::prop_assert!(b.is_none() && a.is_none());
+                    continue;
+                };
+                let Some(floor) = b.floor else {
+                    proptest::prop_assert_eq!(a.level, b.level);
+                    continue;
+                };
+                let mut low = f64::INFINITY;
+                for rr in (r as i64 - k).max(0)..(r as i64 + k + 1).min(nr as i64) {
+                    for cc in (c as i64 - k).max(0)..(c as i64 + k + 1).min(nc as i64) {
+                        if let Some(h) = before[rr as usize].0[cc as usize].filter(|h| h.floor.is_some()) {
+                            low = low.min(h.p.z);
+                        }
+                    }
+                }
+                proptest::prop_assert_eq!(a.level, low.max(floor));
+                proptest::prop_assert!(a.level <= b.level && a.level >= floor);
+                proptest::prop_assert!(!one_level || a.level >= l);
+                proptest::prop_assert_eq!(a.p, b.p);
+            }
+        }
+    }
+}
