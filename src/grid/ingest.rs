@@ -271,6 +271,7 @@ pub(crate) struct Scratch {
 
 /// The elevation layers of one bucket's cells (indices local to the bucket).
 struct ElevMut<'a> {
+    occupied: &'a mut [bool],
     hits: &'a mut [u32],
     below: &'a mut [u32],
     sw: &'a mut [u64],
@@ -291,6 +292,7 @@ impl ElevMut<'_> {
         self.swzz[i] += a.swzz;
         self.zmin[i] = self.zmin[i].min(a.zmin);
         self.zmax[i] = self.zmax[i].max(a.zmax);
+        self.occupied[i] |= a.hits != 0 || a.below != 0;
     }
 }
 
@@ -309,11 +311,13 @@ fn split_buckets<'a>(
         .zip(layers.swzz.chunks_mut(b))
         .zip(layers.zmin.chunks_mut(b))
         .zip(layers.zmax.chunks_mut(b))
+        .zip(layers.occupied.chunks_mut(b))
         .zip(acc.chunks_mut(b))
         .map(
-            |(((((((hits, below), sw), swz), swzz), zmin), zmax), acc)| {
+            |((((((((hits, below), sw), swz), swzz), zmin), zmax), occupied), acc)| {
                 (
                     ElevMut {
+                        occupied,
                         hits,
                         below,
                         sw,

@@ -126,6 +126,10 @@ impl CellSink for DiscardSink {
 /// Structure-of-arrays storage of [`CellStats`].
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Layers {
+    /// Whether the cell holds anything (`!CellStats::is_empty`), kept by every writer: the
+    /// water stage asks it of every cell of the window every frame, and one byte a cell is
+    /// read far faster than the dozen layers it stands for.
+    occupied: Vec<bool>,
     pub hits: Vec<u32>,
     pub below: Vec<u32>,
     pub sw: Vec<u64>,
@@ -146,6 +150,7 @@ impl Layers {
     fn new(n: usize) -> Self {
         let e = CellStats::default();
         Layers {
+            occupied: vec![false; n],
             hits: vec![e.hits; n],
             below: vec![e.below; n],
             sw: vec![e.sw; n],
@@ -161,8 +166,9 @@ impl Layers {
         }
     }
 
-    /// Bytes of layer storage per cell: 56 for the elevation statistics, the rest evidence.
-    pub const BYTES_PER_CELL: usize = 4 + 4 + 8 + 16 + 16 + 4 + 4 + EVIDENCE_BYTES_PER_CELL;
+    /// Bytes of layer storage per cell: 1 for occupancy, 56 for the elevation statistics,
+    /// the rest evidence.
+    pub const BYTES_PER_CELL: usize = 1 + 4 + 4 + 8 + 16 + 16 + 4 + 4 + EVIDENCE_BYTES_PER_CELL;
 
     #[inline]
     pub fn get_ev(&self, i: usize) -> Evidence {
@@ -182,20 +188,12 @@ impl Layers {
 
     #[inline]
     pub fn set_ev(&mut self, i: usize, e: &Evidence) {
+        self.occupied[i] = self.hits[i] != 0 || self.below[i] != 0 || !e.is_empty();
         self.ev_counts[i] = e.counts();
         self.ev_level_n[i] = e.level_n;
         self.ev_level_sum[i] = e.level_sum_mm;
         self.ev_depth[i] = [e.depth_n, e.depth_sum_mm, e.depth_gain_sum];
         self.ev_depth_gain_level[i] = e.depth_gain_level_sum;
-    }
-
-    #[inline]
-    fn ev_is_empty_at(&self, i: usize) -> bool {
-        self.ev_counts[i] == [0; EVIDENCE_COUNTS]
-            && self.ev_level_n[i] == 0
-            && self.ev_level_sum[i] == 0
-            && self.ev_depth[i] == [0; 3]
-            && self.ev_depth_gain_level[i] == 0
     }
 
     #[inline]
@@ -233,6 +231,7 @@ impl Layers {
         self.swzz[i] += c.swzz;
         self.zmin[i] = self.zmin[i].min(c.zmin);
         self.zmax[i] = self.zmax[i].max(c.zmax);
+        self.occupied[i] |= c.hits != 0 || c.below != 0;
         if !c.ev.is_empty() {
             self.merge_ev_at(i, &c.ev);
         }
@@ -247,7 +246,7 @@ impl Layers {
 
     #[inline]
     pub fn is_empty_at(&self, i: usize) -> bool {
-        self.hits[i] == 0 && self.below[i] == 0 && self.ev_is_empty_at(i)
+        !self.occupied[i]
     }
 }
 

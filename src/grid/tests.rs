@@ -354,6 +354,36 @@ proptest! {
         }
     }
 
+    /// The occupancy layer the water stage reads says exactly which cells hold something,
+    /// through ingest, evidence of every kind (empty evidence included) and moves.
+    #[test]
+    fn occupancy_follows_every_writer(
+        pts in arb_points(0..300),
+        evidence in prop::collection::vec((-40i64..40, -40i64..40, 0u8..4), 0..40),
+        moves in prop::collection::vec((-40i64..40, -40i64..40), 0..4),
+    ) {
+        let mut g = grid(64);
+        let mut sink = DiscardSink;
+        g.ingest(&PointCloud::unorganized(pts), &RangeNoise::LIDAR).unwrap();
+        for (i, &(x, y, kind)) in evidence.iter().enumerate() {
+            let mut e = Evidence::default();
+            match kind {
+                0 => {}
+                1 => e.add_level(-120),
+                2 => e.noret = 1,
+                _ => e.add_bottom_return(0.2, 30, 1.5),
+            }
+            let o = g.origin();
+            g.add_evidence(CellKey::new(o.x + 32 + x, o.y + 32 + y), &e);
+            if let Some(&(dx, dy)) = moves.get(i) {
+                g.move_origin(CellKey::new(o.x + dx, o.y + dy), &mut sink);
+            }
+        }
+        for i in 0..64 * 64 {
+            prop_assert_eq!(g.layers.is_empty_at(i), g.layers.get(i).is_empty(), "cell {}", i);
+        }
+    }
+
     #[test]
     fn a_cell_is_never_visible_at_two_positions(
         moves in prop::collection::vec((-100i64..100, -100i64..100), 1..8),
