@@ -196,6 +196,20 @@ impl Layers {
         self.ev_depth_gain_level[i] = e.depth_gain_level_sum;
     }
 
+    /// The elevation statistics of cell `i` only (no evidence, no extremes): all that
+    /// [`CellStats::mean_mm`] and [`CellStats::elevation_std_m`] read.
+    #[inline]
+    pub fn elevation_stats(&self, i: usize) -> CellStats {
+        CellStats {
+            hits: self.hits[i],
+            below: self.below[i],
+            sw: self.sw[i],
+            swz: self.swz[i],
+            swzz: self.swzz[i],
+            ..CellStats::default()
+        }
+    }
+
     #[inline]
     pub fn get(&self, i: usize) -> CellStats {
         CellStats {
@@ -367,6 +381,26 @@ impl RollingGrid {
                 (!self.layers.is_empty_at(i)).then(|| (k, self.layers.get(i)))
             })
         })
+    }
+
+    /// Calls `f` with the raster index (row-major from the window's lower-left cell) and
+    /// the buffer index of every in-window cell that holds data, in key order as
+    /// [`RollingGrid::observed`] lists them, reading only the occupancy layer to skip the
+    /// rest.
+    pub(crate) fn for_each_observed_in_rows(&self, mut f: impl FnMut(usize, usize)) {
+        let n = self.n;
+        let bx0 = self.origin.x.rem_euclid(n as i64) as usize;
+        let by0 = self.origin.y.rem_euclid(n as i64) as usize;
+        for dy in 0..n {
+            let row = (by0 + dy) % n * n;
+            // The row's cells in the buffer: from bx0 to the end, then from 0 (it wraps).
+            let (right, left) = (row + bx0..row + n, row..row + bx0);
+            for (dx, i) in right.chain(left).enumerate() {
+                if !self.layers.is_empty_at(i) {
+                    f(dy * n + dx, i);
+                }
+            }
+        }
     }
 
     /// Every in-window cell that holds data, in the order of [`TileMap::observed`] (tile by

@@ -355,7 +355,8 @@ proptest! {
     }
 
     /// The occupancy layer the water stage reads says exactly which cells hold something,
-    /// through ingest, evidence of every kind (empty evidence included) and moves.
+    /// through ingest, evidence of every kind (empty evidence included) and moves; the
+    /// row scan built on it finds what `observed` finds.
     #[test]
     fn occupancy_follows_every_writer(
         pts in arb_points(0..300),
@@ -382,6 +383,15 @@ proptest! {
         for i in 0..64 * 64 {
             prop_assert_eq!(g.layers.is_empty_at(i), g.layers.get(i).is_empty(), "cell {}", i);
         }
+        // The row scan lists the cells `observed` lists, in its order, at their indices.
+        let o = g.origin();
+        let mut scanned = Vec::new();
+        g.for_each_observed_in_rows(|j, i| {
+            let k = CellKey::new(o.x + (j % 64) as i64, o.y + (j / 64) as i64);
+            scanned.push((k, i, g.layers.get(i)));
+        });
+        let listed: Vec<_> = g.observed().map(|(k, c)| (k, g.index(k).unwrap(), c)).collect();
+        prop_assert_eq!(scanned, listed);
     }
 
     #[test]

@@ -87,29 +87,20 @@ impl HazardMap {
         } = scratch;
         seen.clear();
         seeds.clear();
-        // Every cell of the window is written below.
+        // No dry terrain but where an observed cell has some (a sequential fill).
+        dry.clear();
         dry.resize(n * n, (f64::NAN, 0.0));
         grid.for_each_by_tile(|key, i| {
-            let d = &mut dry[at(key)];
-            *d = (f64::NAN, 0.0);
             if l.is_empty_at(i) {
                 return;
             }
-            // The elevation statistics only: all that the elevation and its σ read.
-            let c = CellStats {
-                hits: l.hits[i],
-                below: l.below[i],
-                sw: l.sw[i],
-                swz: l.swz[i],
-                swzz: l.swzz[i],
-                ..CellStats::default()
-            };
+            let c = l.elevation_stats(i);
             let p = l.get_ev(i).water_probability(&cfg.fusion);
             if seeds_body(p, &cfg.water) {
                 seeds.push(key);
             }
             if let Some(t) = dry_terrain(&c, z_ref) {
-                *d = t;
+                dry[at(key)] = t;
             }
             seen.push((Seen::of(key, &c, p as f32), i as u32));
         });

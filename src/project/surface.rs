@@ -64,12 +64,13 @@ impl GridSurface {
         let o = grid.origin();
         let z_ref = grid.config().z_ref;
         let mut z = vec![f32::NAN; n * n];
-        for (k, c) in grid.observed() {
-            let Some(m) = c.mean_mm() else { continue };
+        grid.for_each_observed_in_rows(|j, i| {
+            let c = grid.layers.elevation_stats(i);
+            let Some(m) = c.mean_mm() else { return };
             if c.elevation_std_m().is_some_and(|sd| sd <= max_std_m) {
-                z[(k.y - o.y) as usize * n + (k.x - o.x) as usize] = (z_ref + m * 1e-3) as f32;
+                z[j] = (z_ref + m * 1e-3) as f32;
             }
-        }
+        });
         Self::with_blocks(n, grid.resolution(), o, z)
     }
 
