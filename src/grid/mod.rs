@@ -213,14 +213,10 @@ impl Layers {
     #[inline]
     pub fn get(&self, i: usize) -> CellStats {
         CellStats {
-            hits: self.hits[i],
-            below: self.below[i],
-            sw: self.sw[i],
-            swz: self.swz[i],
-            swzz: self.swzz[i],
             zmin: self.zmin[i],
             zmax: self.zmax[i],
             ev: self.get_ev(i),
+            ..self.elevation_stats(i)
         }
     }
 

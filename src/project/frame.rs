@@ -9,8 +9,10 @@
 //! tally the frame's pixels per cell in a dense raster over the window, and add **one vote
 //! per cell and frame** — the majority of its pixels, water or not — to the cell's
 //! [`Evidence`] (`colour_water`/`colour_dry`, `swir_dark`/`swir_lit`,
-//! `mwir_water`/`mwir_dry`), with the mean height of the water pixels' hit points as a water
-//! level sample. Sky and unknown pixels do not vote; a tie is no vote.
+//! `mwir_water`/`mwir_dry`), with the mean of the water pixels' levels as a water level
+//! sample: a hit's height, or for water placed over a hole in the map, the tightest bound on
+//! the level among its neighbours in the image (`tighten_hole_levels`). Sky and unknown
+//! pixels do not vote; a tie is no vote.
 //!
 //! Only configured sensors run code; a configured sensor missing from the frame (or without
 //! camera info or pose) is skipped and counted in the report.
