@@ -1,4 +1,4 @@
-//! Cost of the image-label ray march ([`GridSurface::cast_marking_holes`]) per frame: the
+//! Cost of the image-label ray march ([`GridSurface::cast_through_holes`]) per frame: the
 //! 160 × 120 rays of a 320 × 240 camera at stride 2, 1.6 m up and pitched 12° down, over a
 //! 40 m window of rolling ground at 0.1 m observed densely to 10 m and on lidar rings (every
 //! 4th cell row of range) beyond, with an unobserved 8 m pond 15 m ahead.
@@ -65,7 +65,7 @@ fn bench(c: &mut Criterion) {
     g.bench_function("cast_160x120_rays", |b| {
         b.iter(|| {
             rays.iter()
-                .filter_map(|d| s.cast_marking_holes(&o, d, 40.0))
+                .filter_map(|d| s.cast_through_holes(&o, d, 40.0))
                 .count()
         })
     });

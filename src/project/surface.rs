@@ -159,26 +159,15 @@ impl GridSurface {
         dir: &Vector3<f64>,
         max_range: f64,
     ) -> Option<(Point3<f64>, usize)> {
-        self.cast_marking_holes(origin, dir, max_range)
+        self.cast_through_holes(origin, dir, max_range)
             .map(|(p, i, _)| (p, i))
     }
 
     /// [`GridSurface::cast`], also saying whether the hit is where the ray crosses a
-    /// hole's rim level (`true`: no observed surface was met there; the hit is where water
-    /// in the hole would be) rather than observed terrain.
-    pub fn cast_marking_holes(
-        &self,
-        origin: &Point3<f64>,
-        dir: &Vector3<f64>,
-        max_range: f64,
-    ) -> Option<(Point3<f64>, usize, bool)> {
-        self.cast_through_holes(origin, dir, max_range)
-            .map(|(p, i, hole)| (p, i, hole.is_some()))
-    }
-
-    /// [`GridSurface::cast_marking_holes`], with the distance along the ray of the last
-    /// sample still in the hole (`Some`) when the hit is at a hole's rim level: water in
-    /// the hole lies at or below that level, so anywhere from the hit to there.
+    /// hole's rim level (`Some`: no observed surface was met there; the hit is where water
+    /// in the hole would be) rather than observed terrain, and then the distance along the
+    /// ray of the last sample still in the hole: water in the hole lies at or below the
+    /// hit's level, so anywhere from the hit to there.
     pub fn cast_through_holes(
         &self,
         origin: &Point3<f64>,
@@ -426,9 +415,9 @@ mod tests {
         assert!((p.x - 6.0).abs() < 1e-6 && p.z.abs() < 1e-9, "{p}");
         assert_eq!(Some(i), s.index_of(p.x, p.y));
         // That hit is a hole crossing; one on the ground before the hole is not.
-        assert!(s.cast_marking_holes(&o, &d, 50.0).unwrap().2);
+        assert!(s.cast_through_holes(&o, &d, 50.0).unwrap().2.is_some());
         let d2 = Vector3::new(3.0, 0.0, -1.5).normalize();
-        assert!(!s.cast_marking_holes(&o, &d2, 50.0).unwrap().2);
+        assert!(s.cast_through_holes(&o, &d2, 50.0).unwrap().2.is_none());
         // The hole goes on to the far rim at x = 8: its last sample is within a step of it.
         let end = s.cast_through_holes(&o, &d, 50.0).unwrap().2.unwrap();
         let e = o + d * end;
@@ -479,7 +468,7 @@ mod tests {
     }
 
     /// The ray march as first written, one sample at a time: the reference the block
-    /// skipping of [`GridSurface::cast_marking_holes`] must match bit for bit.
+    /// skipping of [`GridSurface::cast_through_holes`] must match bit for bit.
     fn reference_cast(
         s: &GridSurface,
         origin: &Point3<f64>,
@@ -611,7 +600,10 @@ mod tests {
                     _ => rng.range(0.0, 1.5 * w + 1.0),
                 };
                 prop_assert_eq!(
-                    bits(s.cast_marking_holes(&o, &d, range)),
+                    bits(
+                        s.cast_through_holes(&o, &d, range)
+                            .map(|(p, i, end)| (p, i, end.is_some()))
+                    ),
                     bits(reference_cast(&s, &o, &d, range)),
                     "ray from {} along {} for {} m", o, d, range
                 );
