@@ -369,34 +369,29 @@ impl RollingGrid {
     /// Every in-window cell that holds data, in key order (row by row from the window's
     /// lower-left corner): deterministic.
     pub fn observed(&self) -> impl Iterator<Item = (CellKey, CellStats)> + '_ {
-        let n = self.n as i64;
-        (0..n).flat_map(move |dy| {
-            (0..n).filter_map(move |dx| {
-                let k = CellKey::new(self.origin.x + dx, self.origin.y + dy);
-                let i = self.index(k)?;
-                (!self.layers.is_empty_at(i)).then(|| (k, self.layers.get(i)))
-            })
+        let (n, o) = (self.n, self.origin);
+        self.observed_indices().map(move |(j, i)| {
+            let k = CellKey::new(o.x + (j % n) as i64, o.y + (j / n) as i64);
+            (k, self.layers.get(i))
         })
     }
 
-    /// Calls `f` with the raster index (row-major from the window's lower-left cell) and
-    /// the buffer index of every in-window cell that holds data, in key order as
-    /// [`RollingGrid::observed`] lists them, reading only the occupancy layer to skip the
-    /// rest.
-    pub(crate) fn for_each_observed_in_rows(&self, mut f: impl FnMut(usize, usize)) {
+    /// The raster index (row-major from the window's lower-left cell) and the buffer index
+    /// of every in-window cell that holds data, in the order of [`RollingGrid::observed`]:
+    /// the buffer walked row by row, reading only the occupancy layer to skip the rest.
+    pub(crate) fn observed_indices(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         let n = self.n;
         let bx0 = self.origin.x.rem_euclid(n as i64) as usize;
         let by0 = self.origin.y.rem_euclid(n as i64) as usize;
-        for dy in 0..n {
+        (0..n).flat_map(move |dy| {
             let row = (by0 + dy) % n * n;
             // The row's cells in the buffer: from bx0 to the end, then from 0 (it wraps).
-            let (right, left) = (row + bx0..row + n, row..row + bx0);
-            for (dx, i) in right.chain(left).enumerate() {
-                if !self.layers.is_empty_at(i) {
-                    f(dy * n + dx, i);
-                }
-            }
-        }
+            (row + bx0..row + n)
+                .chain(row..row + bx0)
+                .enumerate()
+                .filter(move |&(_, i)| !self.layers.is_empty_at(i))
+                .map(move |(dx, i)| (dy * n + dx, i))
+        })
     }
 
     /// Every in-window cell that holds data, in the order of [`TileMap::observed`] (tile by

@@ -64,7 +64,7 @@ impl GridSurface {
         let o = grid.origin();
         let z_ref = grid.config().z_ref;
         let mut z = vec![f32::NAN; n * n];
-        grid.for_each_observed_in_rows(|j, i| {
+        grid.observed_indices().for_each(|(j, i)| {
             let c = grid.layers.elevation_stats(i);
             let Some(m) = c.mean_mm() else { return };
             if c.elevation_std_m().is_some_and(|sd| sd <= max_std_m) {
