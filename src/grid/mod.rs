@@ -20,6 +20,7 @@ pub use evidence::{CueLogOdds, Evidence, Fusion, EVIDENCE_BYTES_PER_CELL, EVIDEN
 pub use ingest::{IngestStats, RangeNoise};
 pub use tiles::{TileMap, TILE_CELLS};
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
@@ -407,26 +408,45 @@ impl RollingGrid {
         })
     }
 
-    /// Calls `f` with the key and buffer index of every in-window cell, observed or not, in
-    /// the order of [`RollingGrid::observed_by_tile`].
-    pub(crate) fn for_each_by_tile(&self, mut f: impl FnMut(CellKey, usize)) {
+    /// Runs `f` over every in-window cell, observed or not, with its key and buffer index,
+    /// in the order of [`RollingGrid::observed_by_tile`]: tiles in parallel, each with its
+    /// own accumulator, returned in tile order (the same whatever the thread count).
+    pub(crate) fn map_by_tile<T: Default + Send>(
+        &self,
+        f: impl Fn(CellKey, usize, &mut T) + Sync,
+    ) -> Vec<T> {
         let n = self.n as i64;
-        for (y, xs) in self.tile_rows() {
-            let row = (y.rem_euclid(n) * n) as usize;
-            let mut bx = xs.start.rem_euclid(n) as usize;
-            for x in xs {
-                f(CellKey::new(x, y), row + bx);
-                bx += 1;
-                if bx == self.n {
-                    bx = 0;
+        let tiles: Vec<_> = self.tile_ranges().collect();
+        tiles
+            .into_par_iter()
+            .map(|(xs, ys)| {
+                let mut acc = T::default();
+                for y in ys {
+                    let row = (y.rem_euclid(n) * n) as usize;
+                    let mut bx = xs.start.rem_euclid(n) as usize;
+                    for x in xs.clone() {
+                        f(CellKey::new(x, y), row + bx, &mut acc);
+                        bx += 1;
+                        if bx == self.n {
+                            bx = 0;
+                        }
+                    }
                 }
-            }
-        }
+                acc
+            })
+            .collect()
     }
 
     /// The window's rows clipped to each tile, as `(y, x range)`, tile by tile as
     /// [`TileMap::observed`] lists cells.
     fn tile_rows(&self) -> impl Iterator<Item = (i64, std::ops::Range<i64>)> {
+        self.tile_ranges()
+            .flat_map(|(xs, ys)| ys.map(move |y| (y, xs.clone())))
+    }
+
+    /// The window clipped to each tile, as `(x range, y range)`, in the order of
+    /// [`TileMap::observed`].
+    fn tile_ranges(&self) -> impl Iterator<Item = (std::ops::Range<i64>, std::ops::Range<i64>)> {
         let t = tiles::TILE_CELLS;
         let n = self.n as i64;
         let (x0, y0) = (self.origin.x, self.origin.y);
@@ -434,9 +454,11 @@ impl RollingGrid {
         let ty = y0.div_euclid(t)..=(y1 - 1).div_euclid(t);
         (x0.div_euclid(t)..=(x1 - 1).div_euclid(t))
             .flat_map(move |tx| ty.clone().map(move |ty| (tx, ty)))
-            .flat_map(move |(tx, ty)| {
-                let xs = (tx * t).max(x0)..(tx * t + t).min(x1);
-                ((ty * t).max(y0)..(ty * t + t).min(y1)).map(move |y| (y, xs.clone()))
+            .map(move |(tx, ty)| {
+                (
+                    (tx * t).max(x0)..(tx * t + t).min(x1),
+                    (ty * t).max(y0)..(ty * t + t).min(y1),
+                )
             })
     }
 

@@ -9,6 +9,8 @@
 //! path's: [`Seen`], [`dry_terrain`], [`CellRule`], [`crate::water::bodies_from`].
 
 use super::*;
+use rayon::prelude::*;
+
 use crate::grid::RollingGrid;
 use crate::water::{bodies_from, seeds_body, CellInfos, Info};
 
@@ -34,6 +36,15 @@ impl WindowScratch {
             self.cells = map.cells;
         }
     }
+}
+
+/// What the water stage reads from one tile of the window: its observed cells (with their
+/// buffer index), the cells that seed a body, and the dry terrain (by raster index).
+#[derive(Default)]
+struct TileCells {
+    seen: Vec<(Seen, u32)>,
+    seeds: Vec<CellKey>,
+    dry: Vec<(usize, (f64, f64))>,
 }
 
 /// The observed cells of a window, looked up in its layers.
@@ -87,23 +98,31 @@ impl HazardMap {
         } = scratch;
         seen.clear();
         seeds.clear();
-        // No dry terrain but where an observed cell has some (a sequential fill).
-        dry.clear();
-        dry.resize(n * n, (f64::NAN, 0.0));
-        grid.for_each_by_tile(|key, i| {
+        // Per tile, in parallel: the observed cells, the seeds, and the dry terrain.
+        let per_tile = grid.map_by_tile(|key, i, acc: &mut TileCells| {
             if l.is_empty_at(i) {
                 return;
             }
             let c = l.elevation_stats(i);
             let p = l.get_ev(i).water_probability(&cfg.fusion);
             if seeds_body(p, &cfg.water) {
-                seeds.push(key);
+                acc.seeds.push(key);
             }
             if let Some(t) = dry_terrain(&c, z_ref) {
-                dry[at(key)] = t;
+                acc.dry.push((at(key), t));
             }
-            seen.push((Seen::of(key, &c, p as f32), i as u32));
+            acc.seen.push((Seen::of(key, &c, p as f32), i as u32));
         });
+        // No dry terrain but where an observed cell has some (a sequential fill).
+        dry.clear();
+        dry.resize(n * n, (f64::NAN, 0.0));
+        for t in per_tile {
+            seen.extend_from_slice(&t.seen);
+            seeds.extend_from_slice(&t.seeds);
+            for (j, v) in t.dry {
+                dry[j] = v;
+            }
+        }
         seeds.sort_unstable();
         let infos = WindowInfos {
             grid,
@@ -126,8 +145,9 @@ impl HazardMap {
         let mut out = std::mem::take(cells);
         out.clear();
         out.reserve(seen.len());
-        out.extend(
-            seen.iter()
+        // In parallel; a parallel extend keeps the order of `seen`.
+        out.par_extend(
+            seen.par_iter()
                 .filter_map(|&(s, i)| rule.record(s, || l.get_ev(i as usize).level_mm())),
         );
         if let DryCells::Dense { cells, .. } = dry_cells {
