@@ -382,17 +382,24 @@ impl RollingGrid {
     /// the buffer walked row by row, reading only the occupancy layer to skip the rest.
     pub(crate) fn observed_indices(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         let n = self.n;
-        let bx0 = self.origin.x.rem_euclid(n as i64) as usize;
-        let by0 = self.origin.y.rem_euclid(n as i64) as usize;
         (0..n).flat_map(move |dy| {
-            let row = (by0 + dy) % n * n;
-            // The row's cells in the buffer: from bx0 to the end, then from 0 (it wraps).
-            (row + bx0..row + n)
-                .chain(row..row + bx0)
-                .enumerate()
-                .filter(move |&(_, i)| !self.layers.is_empty_at(i))
+            self.observed_in_row(dy)
                 .map(move |(dx, i)| (dy * n + dx, i))
         })
+    }
+
+    /// The column (from the window's left edge) and buffer index of every cell holding data
+    /// in the window's row `dy` (from its lower edge), left to right.
+    pub(crate) fn observed_in_row(&self, dy: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
+        let n = self.n;
+        let bx0 = self.origin.x.rem_euclid(n as i64) as usize;
+        let by0 = self.origin.y.rem_euclid(n as i64) as usize;
+        let row = (by0 + dy) % n * n;
+        // The row's cells in the buffer: from bx0 to the end, then from 0 (it wraps).
+        (row + bx0..row + n)
+            .chain(row..row + bx0)
+            .enumerate()
+            .filter(move |&(_, i)| !self.layers.is_empty_at(i))
     }
 
     /// Every in-window cell that holds data, in the order of [`TileMap::observed`] (tile by

@@ -191,6 +191,8 @@ pub struct FrameLabels {
     /// Per raster cell: water pixels, other pixels, Σ z of the water pixels' hits.
     tally: Vec<(u32, u32, f64)>,
     touched: Vec<u32>,
+    /// The storage of the last frame's elevation raster.
+    raster: Vec<f32>,
 }
 
 /// Sky-above-horizon rule with the cached rays: the same as
@@ -346,6 +348,7 @@ impl FrameLabels {
             caches: [None, None, None],
             tally: Vec::new(),
             touched: Vec::new(),
+            raster: Vec::new(),
         })
     }
 
@@ -357,7 +360,8 @@ impl FrameLabels {
         if !any {
             return Ok(rep);
         }
-        let surface = GridSurface::from_grid_gated(grid, self.cfg.surface_max_std);
+        let raster = std::mem::take(&mut self.raster);
+        let surface = GridSurface::from_grid_gated_in(grid, self.cfg.surface_max_std, raster);
         let nn = surface.size() * surface.size();
         if self.tally.len() != nn {
             self.tally = vec![(0, 0, 0.0); nn];
@@ -403,6 +407,7 @@ impl FrameLabels {
                 Cue::Mwir => rep.mwir = Some(st),
             }
         }
+        self.raster = surface.into_raster();
         Ok(rep)
     }
 

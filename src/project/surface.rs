@@ -16,6 +16,7 @@
 //! before any observed cell, or never leaves it, stops nowhere in it.
 
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::geom::floor_i64;
@@ -60,18 +61,34 @@ impl GridSurface {
     /// unobserved: a cell seen only by a few far stereo points (σ grows with range²) holds
     /// an elevation that may belong to a cell metres nearer, and would stop rays short.
     pub fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
+        Self::from_grid_gated_in(grid, max_std_m, Vec::new())
+    }
+
+    /// [`Self::from_grid_gated`] built in the storage of `z` (the raster of a surface no
+    /// longer needed, [`Self::into_raster`]): a frame's surface without a fresh allocation.
+    /// Rows in parallel.
+    pub(crate) fn from_grid_gated_in(grid: &RollingGrid, max_std_m: f64, mut z: Vec<f32>) -> Self {
         let n = grid.size();
-        let o = grid.origin();
         let z_ref = grid.config().z_ref;
-        let mut z = vec![f32::NAN; n * n];
-        grid.observed_indices().for_each(|(j, i)| {
-            let c = grid.layers.elevation_stats(i);
-            let Some(m) = c.mean_mm() else { return };
-            if c.elevation_std_m().is_some_and(|sd| sd <= max_std_m) {
-                z[j] = (z_ref + m * 1e-3) as f32;
-            }
-        });
-        Self::with_blocks(n, grid.resolution(), o, z)
+        z.clear();
+        z.resize(n * n, f32::NAN);
+        z.par_chunks_mut(n.max(1))
+            .enumerate()
+            .for_each(|(dy, row)| {
+                for (dx, i) in grid.observed_in_row(dy) {
+                    let c = grid.layers.elevation_stats(i);
+                    let Some(m) = c.mean_mm() else { continue };
+                    if c.elevation_std_m().is_some_and(|sd| sd <= max_std_m) {
+                        row[dx] = (z_ref + m * 1e-3) as f32;
+                    }
+                }
+            });
+        Self::with_blocks(n, grid.resolution(), grid.origin(), z)
+    }
+
+    /// The raster's storage, for [`Self::from_grid_gated_in`].
+    pub(crate) fn into_raster(self) -> Vec<f32> {
+        self.z
     }
 
     fn with_blocks(n: usize, resolution: f64, origin: CellKey, z: Vec<f32>) -> Self {
@@ -82,19 +99,24 @@ impl GridSurface {
             void: true,
         };
         let mut blocks = vec![empty; nb * nb];
-        for (j, row) in z.chunks(n.max(1)).enumerate() {
-            let brow = &mut blocks[j / BLOCK * nb..];
-            for (b, cells) in brow.iter_mut().zip(row.chunks(BLOCK)) {
-                for &v in cells {
-                    if v.is_nan() {
-                        b.holes = true;
-                    } else {
-                        b.void = false;
-                        b.top = b.top.max(v);
+        // A row of blocks from `BLOCK` rows of cells, block rows in parallel.
+        blocks
+            .par_chunks_mut(nb.max(1))
+            .zip(z.par_chunks((n * BLOCK).max(1)))
+            .for_each(|(brow, rows)| {
+                for row in rows.chunks(n) {
+                    for (b, cells) in brow.iter_mut().zip(row.chunks(BLOCK)) {
+                        for &v in cells {
+                            if v.is_nan() {
+                                b.holes = true;
+                            } else {
+                                b.void = false;
+                                b.top = b.top.max(v);
+                            }
+                        }
                     }
                 }
-            }
-        }
+            });
         GridSurface {
             n,
             resolution,
@@ -465,6 +487,38 @@ mod tests {
         let gated = GridSurface::from_grid_gated(&g, 0.1);
         assert!(gated.elevation(1.05, 1.05).abs() < 1e-3);
         assert!(gated.elevation(2.05, 2.05).is_nan());
+    }
+
+    #[test]
+    fn surface_in_used_storage_is_the_cells_elevations() {
+        use crate::grid::{centre_of, DiscardSink};
+        let (mut g, _) = grid_of(|x, y| ((x * 7.0 + y * 3.0).sin() > -0.3).then_some(0.1 * x));
+        // The window moves, so its rows wrap around the buffer.
+        g.recenter(3.37, -2.71, &mut DiscardSink).unwrap();
+        let fresh = GridSurface::from_grid_gated(&g, f64::INFINITY);
+        // Storage of another size holding other values changes nothing.
+        let used = GridSurface::from_grid_gated_in(&g, f64::INFINITY, vec![7.0; 12345]);
+        assert_eq!(format!("{fresh:?}"), format!("{used:?}"));
+        let (n, o) = (g.size() as i64, g.origin());
+        let (mut seen, mut holes) = (0, 0);
+        for dy in 0..n {
+            for dx in 0..n {
+                let k = CellKey::new(o.x + dx, o.y + dy);
+                let (x, y) = centre_of(g.resolution(), k);
+                let z = fresh.elevation(x, y);
+                match g.elevation_at(x, y) {
+                    Some(e) => {
+                        assert_eq!(z, e as f32, "{k:?}");
+                        seen += 1;
+                    }
+                    None => {
+                        assert!(z.is_nan(), "{k:?}");
+                        holes += 1;
+                    }
+                }
+            }
+        }
+        assert!(seen > 10_000 && holes > 1_000, "{seen} {holes}");
     }
 
     /// The ray march as first written, one sample at a time: the reference the block
