@@ -334,6 +334,16 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             fl.apply(frame, &mut gl).map(|_| ())
         });
     }
+    {
+        // The water stage (bodies, surfaces, hazards of the window) of a mapper that has
+        // fused the frames up to the middle one with the rig's cues and labels.
+        let mut m = crate::mapper::Mapper::new(log_cfg.mapper.clone())?;
+        m.set_publish(false);
+        for f in &frames[..=mid] {
+            m.update(f)?;
+        }
+        st.add("water_window", true, move || m.publish_now().map(|_| ()));
+    }
     st.add("export_map (whole map)", false, || {
         let map = HazardMap::from_elevation(&tiles);
         crate::io::export::write_map_files(&out_dir, &map)
@@ -458,6 +468,7 @@ mod tests {
             "cue_lidar",
             "classify_640x480",
             "labels_colour",
+            "water_window",
             "export_map (whole map)",
         ] {
             let v = r.stages_ms[s];

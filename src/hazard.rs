@@ -462,10 +462,11 @@ impl HazardMap {
                 .collect(),
         );
         let rule = CellRule::new(cfg, res, tiles.z_ref(), &water, &dry);
+        let logs = cfg.fusion.logs();
         let cells = observed
             .iter()
             .filter_map(|(key, c)| {
-                let p = c.ev.water_probability(&cfg.fusion) as f32;
+                let p = c.ev.water_probability_in(&logs) as f32;
                 rule.record(Seen::of(*key, c, p), || c.ev.level_mm())
             })
             .collect();

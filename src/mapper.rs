@@ -645,14 +645,9 @@ impl Mapper {
         // 5. water: the window's hazard map, published.
         if self.publish {
             let t = Instant::now();
-            let map = Arc::new(self.window_map()?);
+            let map = self.publish_now()?;
             rep.snapshot_cells = map.cells.len();
             rep.snapshot_water_cells = map.class_counts()[crate::hazard::Class::Water as usize];
-            // The map this one replaces is storage for the next, once no other thread
-            // holds it (a published map is never changed).
-            if let Ok(old) = Arc::try_unwrap(self.snapshots.publish(map)) {
-                self.scratch.recycle(old);
-            }
             times.water = t.elapsed().as_secs_f64();
         }
 
@@ -661,6 +656,19 @@ impl Mapper {
         times.total = t0.elapsed().as_secs_f64();
         rep.times_s = times;
         Ok(rep)
+    }
+
+    /// Builds the window's hazard map now and publishes it (the water stage of
+    /// [`Mapper::update`]): for a mapper that does not publish every frame
+    /// ([`Mapper::set_publish`]) but wants a map every few frames.
+    pub fn publish_now(&mut self) -> Result<Arc<HazardMap>> {
+        let map = Arc::new(self.window_map()?);
+        // The map this one replaces is storage for the next, once no other thread holds
+        // it (a published map is never changed).
+        if let Ok(old) = Arc::try_unwrap(self.snapshots.publish(map.clone())) {
+            self.scratch.recycle(old);
+        }
+        Ok(map)
     }
 
     /// The hazard map of the current window, its cells in the order a tile map holds them

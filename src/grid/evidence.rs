@@ -222,74 +222,84 @@ impl Evidence {
 
     /// Per-cue log-likelihood ratios (before the prior), see the module documentation.
     pub fn cue_log_odds(&self, f: &Fusion) -> CueLogOdds {
+        self.cue_log_odds_in(&f.logs())
+    }
+
+    /// [`Self::cue_log_odds`] with the rule's logarithms computed once for many cells.
+    pub fn cue_log_odds_in(&self, f: &FusionLogs) -> CueLogOdds {
         let cap = |v: f64| v.clamp(-f.cue_cap, f.cue_cap);
-        let ln = |a: f64, b: f64| (a / b).ln();
-        // n · ln(a / b), with no logarithm for a count of 0 (most cells of a map have no
-        // evidence of most cues; the water stage asks every cell every frame). The sum is
-        // the same: the ratios are finite, so 0 · ln(a / b) is ±0.
-        let term = |n: u32, a: f64, b: f64| if n == 0 { 0.0 } else { f64::from(n) * ln(a, b) };
-        let image = |w: u16, d: u16, pd: f64, pf: f64| {
-            (term(w.into(), pd, pf) + term(d.into(), 1.0 - pd, 1.0 - pf))
-                .clamp(-f.image_cap, f.image_cap)
+        // n · ln(a / b), with no product for a count of 0 (most cells of a map have no
+        // evidence of most cues). The sum is the same: the ratios are finite, so
+        // 0 · ln(a / b) is ±0.
+        let term = |n: u32, ln: f64| if n == 0 { 0.0 } else { f64::from(n) * ln };
+        let image = |w: u16, d: u16, [lw, ld]: [f64; 2]| {
+            (term(w.into(), lw) + term(d.into(), ld)).clamp(-f.image_cap, f.image_cap)
         };
         CueLogOdds {
-            colour: image(
-                self.colour_water,
-                self.colour_dry,
-                f.p_colour_detect,
-                f.p_colour_false,
-            ),
-            swir: image(
-                self.swir_dark,
-                self.swir_lit,
-                f.p_swir_detect,
-                f.p_swir_false,
-            ),
-            mwir: image(
-                self.mwir_water,
-                self.mwir_dry,
-                f.p_mwir_detect,
-                f.p_mwir_false,
-            ),
-            noret: cap(term(self.noret.into(), 1.0 - f.p_water_return, f.p_dropout)
-                + term(self.diag_ret.into(), f.p_water_return, 1.0 - f.p_dropout)),
-            reflect: cap(term(
-                self.reflect.into(),
-                f.p_reflect_detect,
-                f.p_reflect_false,
-            )),
-            bottom: cap(term(self.depth_n, f.p_bottom_detect, f.p_bottom_false)),
+            colour: image(self.colour_water, self.colour_dry, f.colour),
+            swir: image(self.swir_dark, self.swir_lit, f.swir),
+            mwir: image(self.mwir_water, self.mwir_dry, f.mwir),
+            noret: cap(term(self.noret.into(), f.noret[0]) + term(self.diag_ret.into(), f.noret[1])),
+            reflect: cap(term(self.reflect.into(), f.reflect)),
+            bottom: cap(term(self.depth_n, f.bottom)),
             // The returns of one cell see one surface: one observation, by majority.
             reflectivity: match (self.dark, self.lit) {
                 (0, 0) => 0.0,
-                (d, l) if d > l => ln(f.p_dark_wet, f.p_dark_dry),
-                _ => ln(1.0 - f.p_dark_wet, 1.0 - f.p_dark_dry),
+                (d, l) if d > l => f.dark[0],
+                _ => f.dark[1],
             },
         }
     }
 
     /// Fused water log-odds: the prior plus every cue's capped log-likelihood ratio.
     pub fn water_log_odds(&self, f: &Fusion) -> f64 {
-        let c = self.cue_log_odds(f);
-        (f.prior / (1.0 - f.prior)).ln()
-            + c.noret
-            + c.reflect
-            + c.bottom
-            + c.reflectivity
-            + c.colour
-            + c.swir
-            + c.mwir
+        self.water_log_odds_in(&f.logs())
+    }
+
+    /// [`Self::water_log_odds`] with the rule's logarithms computed once for many cells.
+    pub fn water_log_odds_in(&self, f: &FusionLogs) -> f64 {
+        let c = self.cue_log_odds_in(f);
+        f.prior + c.noret + c.reflect + c.bottom + c.reflectivity + c.colour + c.swir + c.mwir
     }
 
     /// Fused water probability, 0..1.
     pub fn water_probability(&self, f: &Fusion) -> f64 {
-        // No evidence: the prior (most cells of a map, asked every frame).
+        // No evidence: the prior (most cells of a map), without a logarithm.
         if *self == Evidence::default() {
             return f.prior;
         }
-        let l = self.water_log_odds(f);
+        self.water_probability_in(&f.logs())
+    }
+
+    /// [`Self::water_probability`] with the rule's logarithms computed once for many cells
+    /// (the water stage asks every observed cell every frame): the same value, bit for bit.
+    pub fn water_probability_in(&self, f: &FusionLogs) -> f64 {
+        if *self == Evidence::default() {
+            return f.prior_p;
+        }
+        let l = self.water_log_odds_in(f);
         1.0 / (1.0 + (-l).exp())
     }
+}
+
+/// The logarithms of a [`Fusion`] rule: each cue's log-likelihood ratio per observation,
+/// ln(P(obs | water) / P(obs | dry)), and the prior's log-odds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FusionLogs {
+    prior_p: f64,
+    prior: f64,
+    /// Image cues: [water vote, dry vote].
+    colour: [f64; 2],
+    swir: [f64; 2],
+    mwir: [f64; 2],
+    /// [no return, return] of a diagnostic beam.
+    noret: [f64; 2],
+    reflect: f64,
+    bottom: f64,
+    /// Reflectivity: [dark, lit].
+    dark: [f64; 2],
+    cue_cap: f64,
+    image_cap: f64,
 }
 
 /// Each cue's contribution to a cell's log-odds (natural log).
@@ -372,6 +382,31 @@ impl Default for Fusion {
 }
 
 impl Fusion {
+    /// The rule's logarithms, for [`Evidence::water_probability_in`] over many cells.
+    pub fn logs(&self) -> FusionLogs {
+        let ln = |a: f64, b: f64| (a / b).ln();
+        let image = |pd: f64, pf: f64| [ln(pd, pf), ln(1.0 - pd, 1.0 - pf)];
+        FusionLogs {
+            prior_p: self.prior,
+            prior: ln(self.prior, 1.0 - self.prior),
+            colour: image(self.p_colour_detect, self.p_colour_false),
+            swir: image(self.p_swir_detect, self.p_swir_false),
+            mwir: image(self.p_mwir_detect, self.p_mwir_false),
+            noret: [
+                ln(1.0 - self.p_water_return, self.p_dropout),
+                ln(self.p_water_return, 1.0 - self.p_dropout),
+            ],
+            reflect: ln(self.p_reflect_detect, self.p_reflect_false),
+            bottom: ln(self.p_bottom_detect, self.p_bottom_false),
+            dark: [
+                ln(self.p_dark_wet, self.p_dark_dry),
+                ln(1.0 - self.p_dark_wet, 1.0 - self.p_dark_dry),
+            ],
+            cue_cap: self.cue_cap,
+            image_cap: self.image_cap,
+        }
+    }
+
     /// Every probability must lie strictly inside (0, 1) and the cap be positive.
     pub fn validate(&self) -> Result<()> {
         for (name, p) in [
@@ -553,6 +588,88 @@ mod tests {
             c[6 + 2 * cue] = d + 1;
             against.set_counts(c);
             prop_assert!(against.water_probability(&f) <= e.water_probability(&f));
+        }
+    }
+
+    /// The fusion rule as first written, each logarithm taken where it is used: the
+    /// reference for the rule's logarithms computed once ([`Fusion::logs`]).
+    fn reference_probability(e: &Evidence, f: &Fusion) -> f64 {
+        if *e == Evidence::default() {
+            return f.prior;
+        }
+        let cap = |v: f64| v.clamp(-f.cue_cap, f.cue_cap);
+        let ln = |a: f64, b: f64| (a / b).ln();
+        let term = |n: u32, a: f64, b: f64| if n == 0 { 0.0 } else { f64::from(n) * ln(a, b) };
+        let image = |w: u16, d: u16, pd: f64, pf: f64| {
+            (term(w.into(), pd, pf) + term(d.into(), 1.0 - pd, 1.0 - pf))
+                .clamp(-f.image_cap, f.image_cap)
+        };
+        let colour = image(
+            e.colour_water,
+            e.colour_dry,
+            f.p_colour_detect,
+            f.p_colour_false,
+        );
+        let swir = image(e.swir_dark, e.swir_lit, f.p_swir_detect, f.p_swir_false);
+        let mwir = image(e.mwir_water, e.mwir_dry, f.p_mwir_detect, f.p_mwir_false);
+        let noret = cap(term(e.noret.into(), 1.0 - f.p_water_return, f.p_dropout)
+            + term(e.diag_ret.into(), f.p_water_return, 1.0 - f.p_dropout));
+        let reflect = cap(term(
+            e.reflect.into(),
+            f.p_reflect_detect,
+            f.p_reflect_false,
+        ));
+        let bottom = cap(term(e.depth_n, f.p_bottom_detect, f.p_bottom_false));
+        let reflectivity = match (e.dark, e.lit) {
+            (0, 0) => 0.0,
+            (d, l) if d > l => ln(f.p_dark_wet, f.p_dark_dry),
+            _ => ln(1.0 - f.p_dark_wet, 1.0 - f.p_dark_dry),
+        };
+        let l = (f.prior / (1.0 - f.prior)).ln()
+            + noret
+            + reflect
+            + bottom
+            + reflectivity
+            + colour
+            + swir
+            + mwir;
+        1.0 / (1.0 + (-l).exp())
+    }
+
+    proptest! {
+        #[test]
+        fn logs_computed_once_give_the_rule_bit_for_bit(
+            e in arb_evidence(),
+            small in prop::array::uniform11(any::<bool>()),
+            p in prop::array::uniform15(0.001f64..0.999),
+            caps in (0.1f64..20.0, 0.1f64..20.0),
+        ) {
+            // Most cells hold few kinds of evidence and small counts (ties among them).
+            let mut e = e;
+            let c = e.counts();
+            e.set_counts(std::array::from_fn(|j| if small[j] { c[j] % 3 } else { c[j] }));
+            let f = Fusion {
+                prior: p[0],
+                p_dropout: p[1],
+                p_water_return: p[2],
+                p_reflect_detect: p[3],
+                p_reflect_false: p[4],
+                p_bottom_detect: p[5],
+                p_bottom_false: p[6],
+                p_dark_wet: p[7],
+                p_dark_dry: p[8],
+                p_colour_detect: p[9],
+                p_colour_false: p[10],
+                p_swir_detect: p[11],
+                p_swir_false: p[12],
+                p_mwir_detect: p[13],
+                p_mwir_false: p[14],
+                cue_cap: caps.0,
+                image_cap: caps.1,
+            };
+            let r = reference_probability(&e, &f);
+            prop_assert_eq!(e.water_probability(&f).to_bits(), r.to_bits());
+            prop_assert_eq!(e.water_probability_in(&f.logs()).to_bits(), r.to_bits());
         }
     }
 

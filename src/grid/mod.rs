@@ -16,7 +16,9 @@ mod ingest;
 mod tiles;
 
 pub use cell::{quantize_mm, quantize_weight, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
-pub use evidence::{CueLogOdds, Evidence, Fusion, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS};
+pub use evidence::{
+    CueLogOdds, Evidence, Fusion, FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS,
+};
 pub use ingest::{IngestStats, RangeNoise};
 pub use tiles::{TileMap, TILE_CELLS};
 

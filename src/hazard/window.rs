@@ -11,7 +11,7 @@
 use super::*;
 use rayon::prelude::*;
 
-use crate::grid::RollingGrid;
+use crate::grid::{FusionLogs, RollingGrid};
 use crate::water::{bodies_from, seeds_body, CellInfos, Info};
 
 /// Buffers of [`HazardMap::from_window_after`], kept between frames; what they hold is
@@ -50,7 +50,7 @@ struct TileCells {
 /// The observed cells of a window, looked up in its layers.
 struct WindowInfos<'a> {
     grid: &'a RollingGrid,
-    fusion: &'a Fusion,
+    fusion: &'a FusionLogs,
 }
 
 impl CellInfos for WindowInfos<'_> {
@@ -61,7 +61,7 @@ impl CellInfos for WindowInfos<'_> {
             return None;
         }
         let c = l.get(i);
-        let p = c.ev.water_probability(self.fusion);
+        let p = c.ev.water_probability_in(self.fusion);
         Some(Info::of(&c, p, self.grid.config().z_ref))
     }
 
@@ -98,13 +98,14 @@ impl HazardMap {
         } = scratch;
         seen.clear();
         seeds.clear();
+        let logs = cfg.fusion.logs();
         // Per tile, in parallel: the observed cells, the seeds, and the dry terrain.
         let per_tile = grid.map_by_tile(|key, i, acc: &mut TileCells| {
             if l.is_empty_at(i) {
                 return;
             }
             let c = l.elevation_stats(i);
-            let p = l.get_ev(i).water_probability(&cfg.fusion);
+            let p = l.get_ev(i).water_probability_in(&logs);
             if seeds_body(p, &cfg.water) {
                 acc.seeds.push(key);
             }
@@ -126,7 +127,7 @@ impl HazardMap {
         seeds.sort_unstable();
         let infos = WindowInfos {
             grid,
-            fusion: &cfg.fusion,
+            fusion: &logs,
         };
         let bodies = bodies_from(&infos, seeds.iter().copied(), res, &cfg.water, previous);
         let water = water_surface(&bodies, res);

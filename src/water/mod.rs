@@ -579,9 +579,10 @@ pub(crate) fn find_bodies_among(
     // dry and far from water: every frame, this skips an ordered map of all of it).
     let b = 2 * cfg.water.shore_radius_cells(res) + 2;
     let block = |k: CellKey| (k.x.div_euclid(b), k.y.div_euclid(b));
+    let logs = cfg.fusion.logs();
     let p: Vec<f64> = observed
         .iter()
-        .map(|(_, c)| c.ev.water_probability(&cfg.fusion))
+        .map(|(_, c)| c.ev.water_probability_in(&logs))
         .collect();
     let mut near: HashSet<(i64, i64)> = HashSet::new();
     for ((k, c), &p) in observed.iter().zip(&p) {
