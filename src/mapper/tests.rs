@@ -211,6 +211,30 @@ fn one_and_two_threads_give_the_same_map() {
 }
 
 #[test]
+fn a_map_published_on_demand_is_the_map_published_every_frame() {
+    let frames = &sim().frames;
+    let cfg = MapperConfig::default();
+    let mut every = Mapper::new(cfg.clone()).unwrap();
+    let mut asked = Mapper::new(cfg).unwrap();
+    asked.set_publish(false);
+    for (j, f) in frames.iter().enumerate() {
+        every.update(f).unwrap();
+        asked.update(f).unwrap();
+        if j % 2 == 1 {
+            let map = asked.publish_now().unwrap();
+            // What was published is what a reader gets.
+            assert!(Arc::ptr_eq(&map, &asked.hazard_map()));
+        }
+    }
+    let map = asked.publish_now().unwrap();
+    let last = every.hazard_map();
+    assert!(!last.cells.is_empty());
+    assert_eq!(format!("{:?}", map.cells), format!("{:?}", last.cells));
+    assert_eq!(map.bodies.len(), last.bodies.len());
+    assert!(!last.bodies.is_empty(), "the scene's pond is a body");
+}
+
+#[test]
 fn snapshots_are_readable_while_updating() {
     let frames = &sim().frames;
     let mut m = Mapper::new(MapperConfig::default()).unwrap();
