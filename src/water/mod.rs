@@ -59,6 +59,25 @@
 //! the water, the far bank's 8 cm; dropping the near ones took the surface RMS from 14.2 to
 //! 10.0 cm (the ponds are unchanged).
 //!
+//! A shore cell's centre lies up to a cell beyond the water's edge, so on a bank rising at
+//! g it stands up to g·res above the water, g·res/2 on average: 5 cm on a 45° bank with
+//! 10 cm cells. Each shore sample is moved down by half a cell of the rise behind it: the
+//! mean, over the directions with water on one side of the cell and a reliably measured dry
+//! cell on the other, of their elevation difference per cell, clamped to
+//! `0..=max_bank_slope` (1: 45°, about the angle of repose of soil and gravel; a bush
+//! behind the shore rises faster, and is not a bank). Flat ground beside the water gets no
+//! correction. On the simulated `puddles` the surface RMS went from 1.0 to 0.1 cm (their
+//! rims slope gently into the water), on `stream_slope` from 7.2 to 7.0 cm (its far bank
+//! rises at about 45°); the ponds were unchanged.
+//!
+//! A dry hole in a body smaller than the smallest body (`min_body_area_m2`; 25 cells of
+//! 10 cm) is not shore. Clear water shows its bed: a lidar return from the bed at grazing
+//! incidence appears n·d·cos θa/cos θw below the surface, inside the ground gate, and
+//! a cell seen only that way is dry and *below* the water. On `stream_slope` such cells lay
+//! scattered through the channel, 9 cm under the surface; leaving them out took the surface
+//! RMS from 7.0 to 6.7 cm. An island that small says little about the level anyway: the
+//! body's outer shore does.
+//!
 //! Only reliably measured shore cells count when there are at least `min_shore_samples`
 //! of them: a cell whose elevation σ exceeds `shore_max_std_m` (5 cm; far cells seen by a
 //! few stereo points, whose range noise grows with the square of the range) is left out.
@@ -159,6 +178,9 @@ pub struct WaterConfig {
     pub min_shore_samples: usize,
     /// Largest RMS of the shore about its median for a level surface (m).
     pub level_residual_m: f64,
+    /// Steepest bank (rise over run) whose slope moves a shore sample down to the water's
+    /// edge; 0 turns the correction off.
+    pub max_bank_slope: f64,
 }
 
 impl Default for WaterConfig {
@@ -175,6 +197,7 @@ impl Default for WaterConfig {
             shore_max_std_m: 0.05,
             min_shore_samples: 6,
             level_residual_m: 0.02,
+            max_bank_slope: 1.0,
         }
     }
 }
@@ -255,6 +278,12 @@ impl WaterConfig {
             "water.level_residual_m",
             nonneg(self.level_residual_m),
             self.level_residual_m,
+            "must be a finite number ≥ 0",
+        )?;
+        check(
+            "water.max_bank_slope",
+            nonneg(self.max_bank_slope),
+            self.max_bank_slope,
             "must be a finite number ≥ 0",
         )
     }
@@ -692,7 +721,9 @@ fn body_of(
     cfg: &WaterConfig,
 ) -> Option<WaterBody> {
     let set: BTreeSet<CellKey> = cells.iter().copied().collect();
-    // Shore: observed dry cells with an elevation, 4-adjacent to the body.
+    // Shore: observed dry cells with an elevation, 4-adjacent to the body, outside its
+    // small holes.
+    let hole_cells = (cfg.min_body_area_m2 / (res * res)).ceil() as usize;
     let mut shore_keys: BTreeSet<CellKey> = BTreeSet::new();
     for &k in &cells {
         for d in N4 {
@@ -706,6 +737,7 @@ fn body_of(
             }
         }
     }
+    shore_keys.retain(|&k| !in_small_hole(&set, k, hole_cells));
     // Only reliably measured shore cells, when there are enough of them: a far cell seen by
     // a few stereo points has an elevation σ of decimetres to metres and would pull the
     // level with it.
@@ -730,7 +762,10 @@ fn body_of(
     };
     let shore: Vec<ShoreSample> = shore_keys
         .iter()
-        .map(|&k| sample(k, info.get(k).and_then(|i| i.elevation).unwrap_or(f64::NAN)))
+        .map(|&k| {
+            let z = info.get(k).and_then(|i| i.elevation).unwrap_or(f64::NAN);
+            sample(k, z - bank_rise(&set, k, z, info, res, cfg))
+        })
         .collect();
     let ground = ground_near(&set, &shore_keys, info, res, cfg);
     let kept = surface::reject_spilling(
@@ -841,6 +876,60 @@ fn body_of(
         body.volume_m3 = Some(m.volume());
     }
     Some(body)
+}
+
+/// Whether the dry cell `k` lies in a hole of the body `set` of at most `max_cells` cells:
+/// the cells not in the body that `k` reaches through 4-neighbours are at most that many.
+/// Visits at most `max_cells + 1` cells.
+fn in_small_hole(set: &BTreeSet<CellKey>, k: CellKey, max_cells: usize) -> bool {
+    let mut seen: BTreeSet<CellKey> = BTreeSet::from([k]);
+    let mut queue = VecDeque::from([k]);
+    while let Some(c) = queue.pop_front() {
+        for d in N4 {
+            let n = add(c, d);
+            if !set.contains(&n) && seen.insert(n) {
+                if seen.len() > max_cells {
+                    return false;
+                }
+                queue.push_back(n);
+            }
+        }
+    }
+    seen.len() <= max_cells
+}
+
+/// How far the shore cell `k` (elevation `z`) stands above the water's edge beside it: half
+/// a cell of the bank's rise away from the water, `g·res/2`, where `g` is the mean over the
+/// directions in which `k` has water on one side and a reliably measured dry cell on the
+/// other of `(z_behind − z)/res`, clamped to `0..=max_bank_slope`. 0 where no direction
+/// has both. See the module documentation.
+fn bank_rise(
+    set: &BTreeSet<CellKey>,
+    k: CellKey,
+    z: f64,
+    info: &impl CellInfos,
+    res: f64,
+    cfg: &WaterConfig,
+) -> f64 {
+    let (mut sum, mut n) = (0.0, 0u32);
+    for d in N4 {
+        let behind = add(k, (-d.0, -d.1));
+        if !set.contains(&add(k, d)) || set.contains(&behind) {
+            continue;
+        }
+        let Some(i) = info.get(behind) else { continue };
+        if i.depth.is_some() || !i.std.is_some_and(|s| s <= cfg.shore_max_std_m) {
+            continue;
+        }
+        if let Some(zb) = i.elevation {
+            sum += ((zb - z) / res).clamp(0.0, cfg.max_bank_slope);
+            n += 1;
+        }
+    }
+    if n == 0 || !z.is_finite() {
+        return 0.0;
+    }
+    sum / n as f64 * res / 2.0
 }
 
 /// Dry, reliably measured cells (elevation σ ≤ `shore_max_std_m`, water probability below

@@ -111,6 +111,106 @@ fn a_level_pond_is_level() {
     );
 }
 
+/// A round pond of radius 3 m at level 0 whose banks rise at `slope` from the water's edge.
+fn steep_pond(slope: f64) -> impl Fn(f64, f64) -> Cell {
+    move |x: f64, y: f64| {
+        let rho = x.hypot(y);
+        if rho < 3.0 {
+            (-0.3, Some((0.0, None)))
+        } else {
+            (slope * (rho - 3.0), None)
+        }
+    }
+}
+
+fn level_of(map: &HazardMap) -> f64 {
+    assert_eq!(map.bodies.len(), 1);
+    match map.bodies[0].surface {
+        SurfaceModel::Level { z } => z,
+        ref m => panic!("{:?}", m.name()),
+    }
+}
+
+#[test]
+fn a_steep_bank_does_not_lift_the_water() {
+    // The shore cells' centres lie up to a cell beyond the water's edge: on banks rising at
+    // 45° they stand 0–10 cm above the water. Half a cell of the rise behind each one moves
+    // it back to the edge.
+    let (t, truth) = scene(50, steep_pond(1.0));
+    let with = |max_bank_slope: f64| {
+        let cfg = HazardConfig {
+            water: WaterConfig {
+                max_bank_slope,
+                ..WaterConfig::default()
+            },
+            ..HazardConfig::default()
+        };
+        HazardMap::from_tiles(&t, &cfg).unwrap()
+    };
+    let (on, off) = (with(1.0), with(0.0));
+    let (z_on, z_off) = (level_of(&on), level_of(&off));
+    let (rms, _) = surface_rms(&on, &truth);
+    eprintln!("pond with 45° banks: level {z_on:.4} m corrected, {z_off:.4} m uncorrected");
+    assert!(z_on.abs() <= 0.01, "corrected level {z_on}");
+    assert!(rms <= 0.01, "{rms}");
+    assert!(z_off >= 0.03, "the scene must need the correction: {z_off}");
+    // On flat ground beside the water there is no rise to correct: a puddle in a flat
+    // field (the ground at the level) keeps its level exactly.
+    let (flat, _) = scene(50, steep_pond(0.0));
+    let z = level_of(&HazardMap::from_tiles(&flat, &HazardConfig::default()).unwrap());
+    assert!(z.abs() < 1e-9, "{z}");
+    // A bush behind the shore is not a bank: the rise counts at most `max_bank_slope`, so
+    // the bush moves the shore cell in front of it down by at most half a cell of that.
+    let (t, _) = scene(50, |x, y| {
+        let (g, w) = steep_pond(0.0)(x, y);
+        if w.is_none() && (3.1..3.6).contains(&x) && y.abs() < 0.5 {
+            (1.0, None)
+        } else {
+            (g, w)
+        }
+    });
+    let z = level_of(&HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap());
+    assert!(z.abs() < 1e-9, "{z}");
+}
+
+#[test]
+fn a_small_dry_hole_in_the_water_is_not_its_shore() {
+    // Clear water shows its bed: a lidar return from the bed at grazing incidence appears
+    // n·d·cos θa/cos θw below the surface (9 cm for this stream), inside the ground gate, and
+    // a cell seen only that way is dry. Single cells of it inside the stream are holes in the
+    // body; as shore they would pull the surface down to the apparent bed.
+    let apparent_bed = |x: f64, y: f64| {
+        let (i, j) = ((x / RES).floor() as i64, (y / RES).floor() as i64);
+        y.abs() < 0.7 && (i.rem_euclid(7) == 3) && (j.rem_euclid(5) == 2)
+    };
+    let (t, truth) = scene(120, move |x, y| {
+        let (g, w) = stream(x, y);
+        match w {
+            Some((s, _)) if apparent_bed(x, y) => (s - 0.09, None),
+            _ => (g, w),
+        }
+    });
+    let holes = truth.len();
+    let rms_with = |min_body_area_m2: f64| {
+        let cfg = HazardConfig {
+            water: WaterConfig {
+                min_body_area_m2,
+                ..WaterConfig::default()
+            },
+            ..HazardConfig::default()
+        };
+        let map = HazardMap::from_tiles(&t, &cfg).unwrap();
+        assert_eq!(map.bodies.len(), 1);
+        surface_rms(&map, &truth).0
+    };
+    // Holes up to the smallest body (0.25 m², 25 cells) are not shore; with that area 0
+    // every hole is.
+    let (with, without) = (rms_with(0.25), rms_with(0.0));
+    eprintln!("stream with one-cell holes of apparent bed ({holes} water cells): surface RMS {with:.4} m, {without:.4} m with the holes as shore");
+    assert!(with <= 0.03, "{with}");
+    assert!(without > 0.045, "the scene must need the rule: {without}");
+}
+
 #[test]
 fn a_raised_bush_on_the_near_shore_does_not_lift_the_water() {
     // A 1 m bush (1 m × 1 m) standing on the shore at +x.
@@ -788,6 +888,42 @@ proptest! {
                 prop_assert!(v <= cols + 1e-12);
             } else {
                 prop_assert!(b.volume_m3.is_none());
+            }
+        }
+    }
+}
+
+proptest! {
+    /// The bounded search of a hole agrees with the whole dry region found by a flood fill
+    /// over a box whose border is outside every body.
+    #[test]
+    fn small_holes_are_the_bounded_dry_regions(
+        cells in proptest::collection::btree_set((0i64..12, 0i64..12), 0..100),
+        max_cells in 0usize..12,
+    ) {
+        let set: BTreeSet<CellKey> = cells.iter().map(|&(x, y)| CellKey::new(x, y)).collect();
+        for x in 0..12 {
+            for y in 0..12 {
+                let k = CellKey::new(x, y);
+                if set.contains(&k) {
+                    continue;
+                }
+                // The dry region of k in the box -1..13; reaching its border is unbounded.
+                let mut seen = BTreeSet::from([k]);
+                let mut stack = vec![k];
+                let mut bounded = true;
+                while let Some(c) = stack.pop() {
+                    for d in N4 {
+                        let n = add(c, d);
+                        if !(-1..13).contains(&n.x) || !(-1..13).contains(&n.y) {
+                            bounded = false;
+                        } else if !set.contains(&n) && seen.insert(n) {
+                            stack.push(n);
+                        }
+                    }
+                }
+                let small = bounded && seen.len() <= max_cells;
+                prop_assert_eq!(in_small_hole(&set, k, max_cells), small, "{:?}", k);
             }
         }
     }
