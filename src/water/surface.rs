@@ -73,8 +73,8 @@ pub enum Surface {
     Level(f64),
     Tin {
         cdt: ConstrainedDelaunayTriangulation<V>,
-        /// Samples for the nearest-sample fallback outside the triangulation.
-        samples: Vec<ShoreSample>,
+        /// The hull's edges, for points outside it.
+        hull: Vec<[V; 2]>,
     },
 }
 
@@ -83,12 +83,8 @@ impl Surface {
     /// samples do not span a triangle (all collinear, fewer than three distinct points, or
     /// non-finite). Crossing constraints are skipped, not a panic.
     fn tin(samples: &[ShoreSample], constraints: &[[usize; 2]]) -> Option<Surface> {
-        let ok: Vec<ShoreSample> = samples
-            .iter()
-            .copied()
-            .filter(|s| s.x.is_finite() && s.y.is_finite() && s.z.is_finite())
-            .collect();
-        if ok.len() != samples.len() || ok.len() < 3 {
+        let finite = |s: &ShoreSample| s.x.is_finite() && s.y.is_finite() && s.z.is_finite();
+        if samples.len() < 3 || !samples.iter().all(finite) {
             return None;
         }
         let verts: Vec<V> = samples
@@ -124,15 +120,20 @@ impl Surface {
         if cdt.num_inner_faces() == 0 {
             return None;
         }
-        Some(Surface::Tin { cdt, samples: ok })
+        let hull = cdt
+            .convex_hull()
+            .map(|e| e.vertices().map(|v| *v.data()))
+            .collect();
+        Some(Surface::Tin { cdt, hull })
     }
 
     /// Surface elevation at `(x, y)`: the plane, or barycentric interpolation in the
-    /// triangle containing the point; outside the triangulation's hull, the nearest sample.
+    /// triangle containing the point; outside the triangulation's hull, the surface at the
+    /// nearest point of the hull (continuous across it, level away from it).
     pub fn at(&self, x: f64, y: f64) -> f64 {
         match self {
             Surface::Level(z) => *z,
-            Surface::Tin { cdt, samples } => {
+            Surface::Tin { cdt, hull } => {
                 let p = Point2::new(x, y);
                 let z = match cdt.locate(p) {
                     PositionInTriangulation::OnFace(f) => {
@@ -144,39 +145,38 @@ impl Surface {
                     PositionInTriangulation::OnVertex(v) => cdt.vertex(v).data().z,
                     PositionInTriangulation::OnEdge(e) => {
                         let e = cdt.directed_edge(e);
-                        let [a, b] = e.vertices().map(|v| *v.data());
-                        let (dx, dy) = (b.p.x - a.p.x, b.p.y - a.p.y);
-                        let l2 = dx * dx + dy * dy;
-                        let t = if l2 > 0.0 {
-                            (((x - a.p.x) * dx + (y - a.p.y) * dy) / l2).clamp(0.0, 1.0)
-                        } else {
-                            0.0
-                        };
-                        a.z + t * (b.z - a.z)
+                        on_segment(e.vertices().map(|v| *v.data()), x, y).1
                     }
                     _ => f64::NAN,
                 };
                 // Outside the hull, or a point exactly on a hull edge for which the
-                // interpolation weights degenerate: the nearest sample.
+                // interpolation weights degenerate: the nearest point of the hull (the first
+                // edge of the hull's order among equally near ones).
                 if z.is_finite() {
                     z
                 } else {
-                    nearest(samples, x, y)
+                    hull.iter()
+                        .map(|&e| on_segment(e, x, y))
+                        .min_by(|a, b| a.0.total_cmp(&b.0))
+                        .map_or(f64::NAN, |(_, z)| z)
                 }
             }
         }
     }
 }
 
-fn nearest(samples: &[ShoreSample], x: f64, y: f64) -> f64 {
-    samples
-        .iter()
-        .min_by(|a, b| {
-            let da = (a.x - x).powi(2) + (a.y - y).powi(2);
-            let db = (b.x - x).powi(2) + (b.y - y).powi(2);
-            da.total_cmp(&db)
-        })
-        .map_or(f64::NAN, |s| s.z)
+/// The squared distance from `(x, y)` to the segment `[a, b]` and the linear interpolation
+/// of the ends' elevations at the segment's point nearest to it.
+fn on_segment([a, b]: [V; 2], x: f64, y: f64) -> (f64, f64) {
+    let (dx, dy) = (b.p.x - a.p.x, b.p.y - a.p.y);
+    let l2 = dx * dx + dy * dy;
+    let t = if l2 > 0.0 {
+        (((x - a.p.x) * dx + (y - a.p.y) * dy) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (px, py) = (a.p.x + t * dx - x, a.p.y + t * dy - y);
+    (px * px + py * py, a.z + t * (b.z - a.z))
 }
 
 /// The `q` quantile (0..1, nearest rank) of finite values; `None` when there are none.
@@ -460,7 +460,7 @@ mod tests {
     }
 
     #[test]
-    fn outside_the_hull_is_the_nearest_sample() {
+    fn outside_the_hull_is_the_nearest_point_of_the_hull() {
         let samples = vec![s(0.0, 0.0, 0.0), s(1.0, 0.0, 1.0), s(0.0, 1.0, 2.0)];
         let e = SurfaceModel::Delaunay {
             samples,
@@ -468,11 +468,39 @@ mod tests {
         }
         .evaluator();
         assert!((e.at(0.25, 0.25) - 0.75).abs() < 1e-12);
+        // Beyond a corner: the corner's sample.
         assert_eq!(e.at(5.0, -1.0), 1.0);
         assert_eq!(e.at(0.5, 0.0), 0.5);
+        // Beside an edge: the edge's interpolation at the foot of the perpendicular, not
+        // the nearest sample (0 or 1 here, 2 or 0 on the left).
+        assert!((e.at(0.5, -1.0) - 0.5).abs() < 1e-12);
+        assert!((e.at(-1.0, 0.5) - 1.0).abs() < 1e-12);
+        assert!((e.at(1.0, 1.0) - 1.5).abs() < 1e-12);
     }
 
     proptest! {
+        /// Samples of a plane on the integer points of a rectangle: outside it, the surface
+        /// is the plane at the rectangle's nearest point (the query clamped into it), which
+        /// is continuous across the hull and never beyond the samples' range.
+        #[test]
+        fn outside_a_rectangle_is_the_plane_at_its_nearest_point(
+            a in -2.0f64..2.0, b in -1.0f64..1.0, c in -1.0f64..1.0,
+            w in 1u32..5, h in 1u32..5,
+            x in -6.0f64..10.0, y in -6.0f64..10.0,
+        ) {
+            let plane = |x: f64, y: f64| a + b * x + c * y;
+            let mut samples = Vec::new();
+            for i in 0..=w {
+                for j in 0..=h {
+                    let (sx, sy) = (f64::from(i), f64::from(j));
+                    samples.push(s(sx, sy, plane(sx, sy)));
+                }
+            }
+            let e = SurfaceModel::Delaunay { samples, constraints: vec![] }.evaluator();
+            let want = plane(x.clamp(0.0, f64::from(w)), y.clamp(0.0, f64::from(h)));
+            prop_assert!((e.at(x, y) - want).abs() < 1e-9, "{} vs {}", e.at(x, y), want);
+        }
+
         /// Barycentric interpolation reproduces any plane exactly inside the hull, whatever
         /// the sample layout (duplicates included).
         #[test]
