@@ -123,6 +123,20 @@ fn steep_pond(slope: f64) -> impl Fn(f64, f64) -> Cell {
     }
 }
 
+/// The hazard map of `t` with the default config changed by `f`.
+fn map_with(t: &TileMap, f: impl Fn(&mut WaterConfig)) -> HazardMap {
+    let mut cfg = HazardConfig::default();
+    f(&mut cfg.water);
+    HazardMap::from_tiles(t, &cfg).unwrap()
+}
+
+/// The surface RMS of [`map_with`]'s map, which must hold one body.
+fn one_body_rms(t: &TileMap, truth: &HashMap<CellKey, f64>, f: impl Fn(&mut WaterConfig)) -> f64 {
+    let map = map_with(t, f);
+    assert_eq!(map.bodies.len(), 1);
+    surface_rms(&map, truth).0
+}
+
 fn level_of(map: &HazardMap) -> f64 {
     assert_eq!(map.bodies.len(), 1);
     match map.bodies[0].surface {
@@ -137,16 +151,7 @@ fn a_steep_bank_does_not_lift_the_water() {
     // 45° they stand 0–10 cm above the water. Half a cell of the rise behind each one moves
     // it back to the edge.
     let (t, truth) = scene(50, steep_pond(1.0));
-    let with = |max_bank_slope: f64| {
-        let cfg = HazardConfig {
-            water: WaterConfig {
-                max_bank_slope,
-                ..WaterConfig::default()
-            },
-            ..HazardConfig::default()
-        };
-        HazardMap::from_tiles(&t, &cfg).unwrap()
-    };
+    let with = |g: f64| map_with(&t, |w| w.max_bank_slope = g);
     let (on, off) = (with(1.0), with(0.0));
     let (z_on, z_off) = (level_of(&on), level_of(&off));
     let (rms, _) = surface_rms(&on, &truth);
@@ -190,23 +195,11 @@ fn a_small_dry_hole_in_the_water_is_not_its_shore() {
             _ => (g, w),
         }
     });
-    let holes = truth.len();
-    let rms_with = |min_body_area_m2: f64| {
-        let cfg = HazardConfig {
-            water: WaterConfig {
-                min_body_area_m2,
-                ..WaterConfig::default()
-            },
-            ..HazardConfig::default()
-        };
-        let map = HazardMap::from_tiles(&t, &cfg).unwrap();
-        assert_eq!(map.bodies.len(), 1);
-        surface_rms(&map, &truth).0
-    };
+    let rms_with = |a: f64| one_body_rms(&t, &truth, |w| w.min_body_area_m2 = a);
     // Holes up to the smallest body (0.25 m², 25 cells) are not shore; with that area 0
     // every hole is.
     let (with, without) = (rms_with(0.25), rms_with(0.0));
-    eprintln!("stream with one-cell holes of apparent bed ({holes} water cells): surface RMS {with:.4} m, {without:.4} m with the holes as shore");
+    eprintln!("stream with one-cell holes of apparent bed: surface RMS {with:.4} m, {without:.4} m with the holes as shore");
     assert!(with <= 0.03, "{with}");
     assert!(without > 0.045, "the scene must need the rule: {without}");
 }
@@ -392,13 +385,7 @@ fn a_bank_top_that_hides_the_waterline_does_not_lift_the_stream() {
             }
         }
     }
-    let rms_with = |spill_radius_m: f64| {
-        let mut cfg = HazardConfig::default();
-        cfg.water.spill_radius_m = spill_radius_m;
-        let map = HazardMap::from_tiles(&t, &cfg).unwrap();
-        assert_eq!(map.bodies.len(), 1);
-        surface_rms(&map, &truth).0
-    };
+    let rms_with = |r: f64| one_body_rms(&t, &truth, |w| w.spill_radius_m = r);
     let (with, without) = (rms_with(4.0), rms_with(0.0));
     eprintln!("stream behind a 0.3 m bank: surface RMS {with:.4} m with the spill test, {without:.4} m without");
     // What is left (4.4 cm) is the corners: where the stream's ends meet the near bank, the
