@@ -799,6 +799,16 @@ fn config_is_checked_and_named() {
         ),
         (
             HazardConfig {
+                water: WaterConfig {
+                    max_bank_slope: f64::NAN,
+                    ..WaterConfig::default()
+                },
+                ..HazardConfig::default()
+            },
+            "water.max_bank_slope",
+        ),
+        (
+            HazardConfig {
                 vehicle: Vehicle {
                     max_slope_deg: 90.0,
                     ..Vehicle::default()
