@@ -340,6 +340,80 @@ fn tighten_hole_levels(per_row: &mut [(Vec<Option<Hit>>, [u64; 3])], nc: usize) 
     }
 }
 
+/// Calls `f(raster index, level)` once for every cell of `surface` that the quad of pixel
+/// hits `q` = [a, b, c, d] overlaps (a = pixel (x, y), b = (x + s, y), c = (x, y + s),
+/// d = (x + s, y + s); each (x, y, z, level)): the quad stands for the ground between the
+/// four hits, and every cell it covers, even in part, gets the pixel's vote once. The quad
+/// is split into the triangles a-b-d and a-d-c; a cell overlaps a triangle when no axis
+/// separates them (x, y and the three edge normals). The level is interpolated linearly
+/// over the triangle at the cell's centre. A cell that overlaps both triangles counts once.
+fn quad_cells(surface: &GridSurface, q: [Vector4<f64>; 4], mut f: impl FnMut(usize, f64)) {
+    if !q.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+        return;
+    }
+    let [a, b, c, d] = q;
+    let res = surface.resolution();
+    let half = 0.5 * res;
+    let (o, n) = (surface.origin(), surface.size() as i64);
+    // Barycentric coordinates of the centre (x, y) in triangle t, if the cell overlaps it.
+    let bary = |t: &[Vector4<f64>; 3], x: f64, y: f64| -> Option<[f64; 3]> {
+        let [p0, p1, p2] = t;
+        let det = (p1.x - p0.x) * (p2.y - p0.y) - (p2.x - p0.x) * (p1.y - p0.y);
+        if det.abs() <= f64::EPSILON * res * res {
+            return None;
+        }
+        let l1 = ((x - p0.x) * (p2.y - p0.y) - (p2.x - p0.x) * (y - p0.y)) / det;
+        let l2 = ((p1.x - p0.x) * (y - p0.y) - (x - p0.x) * (p1.y - p0.y)) / det;
+        let l = [1.0 - l1 - l2, l1, l2];
+        // l[i]·|det| / |e| is the distance of the centre inside the edge e opposite vertex
+        // i; the cell reaches (|e.x| + |e.y|)·half / |e| beyond its centre along that
+        // edge's normal.
+        let inside = (0..3).all(|i| {
+            let e = t[(i + 1) % 3] - t[(i + 2) % 3];
+            l[i] * det.abs() >= -half * (e.x.abs() + e.y.abs())
+        });
+        inside.then_some(l)
+    };
+    let tris = [[a, b, d], [a, d, c]];
+    // Per triangle, the cells (global keys) that overlap its bounding box (their centres
+    // (i + ½)·res within half a cell of it), clipped to the window: i0, i1, j0, j1.
+    let ranges = tris.map(|t| {
+        let lo = |v: fn(&Vector4<f64>) -> f64| t.iter().map(v).fold(f64::INFINITY, f64::min);
+        let hi = |v: fn(&Vector4<f64>) -> f64| t.iter().map(v).fold(f64::NEG_INFINITY, f64::max);
+        let first = |m: f64, origin: i64| (((m - half) / res - 0.5).ceil() as i64).max(origin);
+        let last =
+            |m: f64, origin: i64| (((m + half) / res - 0.5).floor() as i64).min(origin + n - 1);
+        [
+            first(lo(|p| p.x), o.x),
+            last(hi(|p| p.x), o.x),
+            first(lo(|p| p.y), o.y),
+            last(hi(|p| p.y), o.y),
+        ]
+    });
+    let overlap = |k: usize, i: i64, j: i64| {
+        let [i0, i1, j0, j1] = ranges[k];
+        let (x, y) = ((i as f64 + 0.5) * res, (j as f64 + 0.5) * res);
+        (i0..=i1)
+            .contains(&i)
+            .then(|| (j0..=j1).contains(&j).then(|| bary(&tris[k], x, y)))
+            .flatten()
+            .flatten()
+    };
+    for (k, t) in tris.iter().enumerate() {
+        let [i0, i1, j0, j1] = ranges[k];
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let Some(l) = overlap(k, i, j) else { continue };
+                if k == 1 && overlap(0, i, j).is_some() {
+                    continue;
+                }
+                let level = l[0] * t[0].w + l[1] * t[1].w + l[2] * t[2].w;
+                f(((j - o.y) * n + (i - o.x)) as usize, level);
+            }
+        }
+    }
+}
+
 impl FrameLabels {
     pub fn new(cfg: FrameLabelConfig) -> Result<Self> {
         cfg.validate()?;
@@ -538,11 +612,10 @@ impl FrameLabels {
         tighten_hole_levels(&mut per_row, cols.len());
         // Each sampled pixel stands for the quad spanned by its hit and those of its right,
         // lower and diagonal neighbours: when all four agree and the quad is no larger than
-        // `QUAD_MAX_M` (larger ones straddle an occlusion edge), every cell under the quad
-        // gets the vote (a pixel row covers a metre of ground at 20 m, far more than a
-        // cell); otherwise only the pixel's own cell.
+        // `QUAD_MAX_M` (larger ones straddle an occlusion edge), every cell the quad
+        // overlaps gets the vote once (a pixel row covers a metre of ground at 20 m, far more
+        // than a cell; `quad_cells`); otherwise only the pixel's own cell.
         const QUAD_MAX_M: f64 = 3.0;
-        let half = 0.5 * surface.resolution();
         let hits: Vec<Vec<(u32, bool, f32)>> = (0..rows.len())
             .into_par_iter()
             .map(|r| {
@@ -570,22 +643,16 @@ impl FrameLabels {
                             }
                         }
                         Some(q) => {
-                            // Each point carries its level in its fourth coordinate, so that
-                            // the levels are interpolated with the points.
-                            let [a, b, cc, d] =
-                                q.map(|h| Vector4::new(h.p.x, h.p.y, h.p.z, h.level));
-                            // a = (x, y), b = (x + s, y), cc = (x, y + s), d = (x + s, y + s).
-                            let span = |u: Vector4<f64>, v: Vector4<f64>| (u - v).xy().norm();
-                            let nu = ((span(a, b).max(span(cc, d)) / half).ceil() as usize).max(1);
-                            let nv = ((span(a, cc).max(span(b, d)) / half).ceil() as usize).max(1);
-                            for iv in 0..nv {
-                                let tv = iv as f64 / nv as f64;
-                                let (l, rr) = (a + (cc - a) * tv, b + (d - b) * tv);
-                                for iu in 0..nu {
-                                    let p = l + (rr - l) * (iu as f64 / nu as f64);
-                                    if let Some(j) = surface.index_of(p.x, p.y) {
-                                        out.push((j as u32, wet, p.w as f32));
-                                    }
+                            let before = out.len();
+                            quad_cells(
+                                &surface,
+                                q.map(|h| Vector4::new(h.p.x, h.p.y, h.p.z, h.level)),
+                                |j, level| out.push((j as u32, wet, level as f32)),
+                            );
+                            if out.len() == before {
+                                // No cell centre under the quad: the pixel's own cell.
+                                if let Some(j) = surface.index_of(h00.p.x, h00.p.y) {
+                                    out.push((j as u32, wet, h00.level as f32));
                                 }
                             }
                         }

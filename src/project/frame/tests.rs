@@ -313,3 +313,128 @@ proptest::proptest! {
         }
     }
 }
+
+/// The polygon left of `poly` (counter-clockwise square corners) after clipping it to the
+/// side of the line through `a` and `b` where `c` lies (Sutherland–Hodgman; points on the
+/// line are kept).
+fn clip(poly: &[(f64, f64)], a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> Vec<(f64, f64)> {
+    let side = |p: (f64, f64)| (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0);
+    let s = side(c).signum();
+    let mut out = Vec::new();
+    for i in 0..poly.len() {
+        let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
+        let (sp, sq) = (s * side(p), s * side(q));
+        if sp >= 0.0 {
+            out.push(p);
+        }
+        if (sp > 0.0 && sq < 0.0) || (sp < 0.0 && sq > 0.0) {
+            let t = sp / (sp - sq);
+            out.push((p.0 + t * (q.0 - p.0), p.1 + t * (q.1 - p.1)));
+        }
+    }
+    out
+}
+
+/// Whether the square cell [x0, x0 + r] × [y0, y0 + r] meets the triangle t (clipped
+/// square non-empty, with a tolerance of `eps` on the triangle's edges).
+fn cell_meets_triangle(x0: f64, y0: f64, r: f64, t: [(f64, f64); 3], eps: f64) -> bool {
+    let area = (t[1].0 - t[0].0) * (t[2].1 - t[0].1) - (t[2].0 - t[0].0) * (t[1].1 - t[0].1);
+    if area.abs() < 1e-12 {
+        return false;
+    }
+    let mut poly = vec![
+        (x0 - eps, y0 - eps),
+        (x0 + r + eps, y0 - eps),
+        (x0 + r + eps, y0 + r + eps),
+        (x0 - eps, y0 + r + eps),
+    ];
+    for i in 0..3 {
+        poly = clip(&poly, t[i], t[(i + 1) % 3], t[(i + 2) % 3]);
+        if poly.is_empty() {
+            return false;
+        }
+    }
+    true
+}
+
+proptest::proptest! {
+    /// A quad of pixel hits votes in exactly the cells it overlaps, each once, with the
+    /// level interpolated linearly: against square–triangle clipping, for convex, folded
+    /// and degenerate quads anywhere (far from the origin too) and clipped by the window's
+    /// edge.
+    #[test]
+    fn a_quad_votes_once_in_every_cell_it_overlaps(
+        ox in -1000i64..1000,
+        oy in -1000i64..1000,
+        corners in proptest::collection::vec((-0.5f64..4.5, -0.5f64..4.5), 4),
+        plane in (-1.0f64..1.0, -1.0f64..1.0, -5.0f64..5.0),
+    ) {
+        let (res, n) = (0.1, 40usize);
+        let origin = CellKey::new(ox, oy);
+        let s = GridSurface::from_raster(n, res, origin, vec![0.0; n * n]).unwrap();
+        let (x0, y0) = (ox as f64 * res, oy as f64 * res);
+        let level = |x: f64, y: f64| plane.0 * (x - x0) + plane.1 * (y - y0) + plane.2;
+        let q: Vec<Vector4<f64>> = corners
+            .iter()
+            .map(|&(u, v)| {
+                let (x, y) = (x0 + u, y0 + v);
+                Vector4::new(x, y, 0.0, level(x, y))
+            })
+            .collect();
+        let q = [q[0], q[1], q[2], q[3]];
+        let mut got: Vec<(usize, f64)> = Vec::new();
+        quad_cells(&s, q, |j, l| got.push((j, l)));
+        let mut seen = std::collections::HashSet::new();
+        for &(j, l) in &got {
+            proptest::prop_assert!(seen.insert(j), "cell {} twice", j);
+            let (cx, cy) = (
+                (ox + (j % n) as i64) as f64 * res + 0.5 * res,
+                (oy + (j / n) as i64) as f64 * res + 0.5 * res,
+            );
+            proptest::prop_assert!((l - level(cx, cy)).abs() < 1e-6, "{} {}", l, level(cx, cy));
+        }
+        let xy = |k: usize| (q[k].x, q[k].y);
+        let tris = [[xy(0), xy(1), xy(3)], [xy(0), xy(3), xy(2)]];
+        for j in 0..n * n {
+            let (cx0, cy0) = (
+                (ox + (j % n) as i64) as f64 * res,
+                (oy + (j / n) as i64) as f64 * res,
+            );
+            let inner = tris.iter().any(|&t| cell_meets_triangle(cx0, cy0, res, t, -1e-7));
+            let outer = tris.iter().any(|&t| cell_meets_triangle(cx0, cy0, res, t, 1e-7));
+            if inner {
+                proptest::prop_assert!(seen.contains(&j), "cell {} overlapped but missed", j);
+            }
+            if seen.contains(&j) {
+                proptest::prop_assert!(outer, "cell {} voted but not overlapped", j);
+            }
+        }
+    }
+}
+
+/// A quad that covers no cell centre still votes in the cells it touches, and a quad with a
+/// non-finite corner votes nowhere (the caller puts the pixel's own vote in its cell).
+#[test]
+fn small_and_broken_quads() {
+    let s = GridSurface::from_raster(10, 0.1, CellKey::new(0, 0), vec![0.0; 100]).unwrap();
+    let v = |x: f64, y: f64| Vector4::new(x, y, 0.0, 1.0);
+    let mut got = Vec::new();
+    quad_cells(
+        &s,
+        [v(0.21, 0.31), v(0.23, 0.31), v(0.21, 0.33), v(0.23, 0.33)],
+        |j, l| got.push((j, l)),
+    );
+    assert_eq!(got, vec![(32, 1.0)]);
+    got.clear();
+    quad_cells(
+        &s,
+        [
+            v(0.21, 0.31),
+            v(f64::NAN, 0.31),
+            v(0.21, 0.33),
+            v(0.23, 0.33),
+        ],
+        |j, l| got.push((j, l)),
+    );
+    assert!(got.is_empty());
+}
