@@ -645,7 +645,7 @@ impl FrameLabels {
                         Some(q) => {
                             let before = out.len();
                             quad_cells(
-                                &surface,
+                                surface,
                                 q.map(|h| Vector4::new(h.p.x, h.p.y, h.p.z, h.level)),
                                 |j, level| out.push((j as u32, wet, level as f32)),
                             );
