@@ -33,10 +33,16 @@ pub struct GridSurface {
     /// Summary of each `BLOCK` × `BLOCK` block of cells, row-major, `nb` blocks per side.
     blocks: Vec<Block>,
     nb: usize,
+    /// The same of each `SUPER` × `SUPER` cells (`SUPER / BLOCK` blocks a side), `ns` a
+    /// side: a ray high above the ground crosses one in a step.
+    supers: Vec<Block>,
+    ns: usize,
 }
 
 /// Cells per side of a [`Block`].
 const BLOCK: usize = 8;
+/// Cells per side of a superblock (a whole number of blocks).
+const SUPER: usize = 32;
 
 /// What the march needs to know of a block of cells to cross it in one step: a ray above
 /// its highest cell hits nothing in a block without holes, and a ray in a hole (or before
@@ -117,6 +123,22 @@ impl GridSurface {
                     }
                 }
             });
+        let ns = n.div_ceil(SUPER);
+        let k = SUPER / BLOCK;
+        let supers = (0..ns * ns)
+            .map(|q| {
+                let (si, sj) = (q % ns, q / ns);
+                let mut sb = empty;
+                for bj in sj * k..((sj + 1) * k).min(nb) {
+                    for b in &blocks[bj * nb + si * k..bj * nb + ((si + 1) * k).min(nb)] {
+                        sb.top = sb.top.max(b.top);
+                        sb.holes |= b.holes;
+                        sb.void &= b.void;
+                    }
+                }
+                sb
+            })
+            .collect();
         GridSurface {
             n,
             resolution,
@@ -124,6 +146,8 @@ impl GridSurface {
             z,
             blocks,
             nb,
+            supers,
+            ns,
         }
     }
 
@@ -209,6 +233,7 @@ impl GridSurface {
         let mut was_inside = false;
         // The block the ray was last found to dip below the top of: no skipping there.
         let mut low = usize::MAX;
+        let mut low_super = usize::MAX;
         // Magnitude of the heights and times compared, for the rounding margin.
         let scale = 1.0 + origin.z.abs() + dir.z.abs() * (steps as f64 * dt);
         let mut s = 0;
@@ -229,12 +254,36 @@ impl GridSurface {
             // rounding: then no sample hits, nor crosses a rim level (at most the top) out of
             // a hole, and what they leave is the last observed sample's level and, if holes
             // follow it, a hole entered after it.
+            // The same for a whole superblock, when it is void or without holes: what it
+            // leaves is then known without searching it (the last sample's level, or a
+            // hole entered at its first).
+            let q = cj / SUPER * self.ns + ci / SUPER;
+            let sup = self.supers[q];
+            let stop = sup.top as f64;
+            let over = |z: f64| sup.void || z > stop + 1e-9 * (scale + stop.abs());
+            if q != low_super && (sup.void || !sup.holes) && over(p.z) {
+                let (last, j) = self.block_end(origin, dir, dt, (s, i), steps, SUPER);
+                if !over(sample(origin, dir, dt, last).z) {
+                    low_super = q;
+                } else {
+                    if sup.void {
+                        if level.is_finite() && entry.is_none() {
+                            entry = Some(t - dt);
+                        }
+                    } else {
+                        level = self.z[j] as f64;
+                        entry = None;
+                    }
+                    s = last;
+                    continue;
+                }
+            }
             let b = cj / BLOCK * self.nb + ci / BLOCK;
             let block = self.blocks[b];
             let top = block.top as f64;
             let above = |z: f64| block.void || z > top + 1e-9 * (scale + top.abs());
             if b != low && above(p.z) {
-                let (last, j) = self.block_end(origin, dir, dt, (s, i), steps);
+                let (last, j) = self.block_end(origin, dir, dt, (s, i), steps, BLOCK);
                 if !above(sample(origin, dir, dt, last).z) {
                     low = b;
                 } else {
@@ -289,10 +338,10 @@ impl GridSurface {
         }
     }
 
-    /// The last sample (≤ `steps`) of the march in the block of sample `first` = (step,
-    /// cell), and its cell. A sample's cell is monotonic in the step along both axes, so a
-    /// block's samples are consecutive: the step where the ray leaves the block, checked
-    /// by sampling either side.
+    /// The last sample (≤ `steps`) of the march in the `size` × `size` block of sample
+    /// `first` = (step, cell), and its cell. A sample's cell is monotonic in the step along
+    /// both axes, so a block's samples are consecutive: the step where the ray leaves the
+    /// block, checked by sampling either side.
     fn block_end(
         &self,
         origin: &Point3<f64>,
@@ -300,12 +349,13 @@ impl GridSurface {
         dt: f64,
         first: (usize, usize),
         steps: usize,
+        size: usize,
     ) -> (usize, usize) {
         let (s, i) = first;
-        let (bi, bj) = (i % self.n / BLOCK, i / self.n / BLOCK);
+        let (bi, bj) = (i % self.n / size, i / self.n / size);
         let exit = |o: f64, d: f64, b: usize, key: i64| {
             let side = if d > 0.0 { b + 1 } else { b };
-            let edge = (key + (side * BLOCK) as i64) as f64 * self.resolution;
+            let edge = (key + (side * size) as i64) as f64 * self.resolution;
             if d == 0.0 {
                 f64::INFINITY
             } else {
@@ -317,7 +367,7 @@ impl GridSurface {
         let in_block = |k: usize| {
             let p = sample(origin, dir, dt, k);
             self.cell_of(p.x, p.y)
-                .filter(|&(ci, cj)| ci / BLOCK == bi && cj / BLOCK == bj)
+                .filter(|&(ci, cj)| ci / size == bi && cj / size == bj)
                 .map(|(ci, cj)| cj * self.n + ci)
         };
         let mut k = ((t / dt).floor() as usize).clamp(s, steps);
@@ -595,7 +645,7 @@ mod tests {
         /// the window and out of it).
         #[test]
         fn cast_matches_reference_march(
-            n in 1usize..90,
+            n in prop_oneof![1usize..90, 90usize..220],
             res in prop_oneof![Just(0.1), Just(0.25), 0.02f64..0.6],
             ox in -300i64..300,
             oy in -300i64..300,
@@ -660,6 +710,51 @@ mod tests {
                     ),
                     bits(reference_cast(&s, &o, &d, range)),
                     "ray from {} along {} for {} m", o, d, range
+                );
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// The same on rasters made of whole superblocks, each void, a rough plateau without
+        /// holes, or one with scattered holes, and rays that run low over them: the
+        /// skips of whole superblocks leave the march in the state (level, hole entered) the
+        /// reference reaches sample by sample.
+        #[test]
+        fn superblock_skips_match_reference_march(
+            seed in any::<u64>(),
+            kinds in prop::collection::vec((0u8..3, -0.5f64..0.5), 16),
+            res in prop_oneof![Just(0.1), 0.05f64..0.3],
+        ) {
+            let n = 4 * SUPER;
+            let mut rng = Rng(seed);
+            let mut z = vec![0f32; n * n];
+            for (k, v) in z.iter_mut().enumerate() {
+                let (i, j) = (k % n, k / n);
+                let (kind, e) = kinds[(j / SUPER) * 4 + i / SUPER];
+                let hole = kind == 0 || (kind == 2 && rng.chance(0.2));
+                *v = if hole { f32::NAN } else { (e + rng.range(0.0, 0.05)) as f32 };
+            }
+            let s = GridSurface::from_raster(n, res, CellKey::new(-7, 11), z).unwrap();
+            let w = n as f64 * res;
+            let (x0, y0) = (-7.0 * res, 11.0 * res);
+            for _ in 0..64 {
+                let o = Point3::new(
+                    x0 + rng.range(-0.1, 1.1) * w,
+                    y0 + rng.range(-0.1, 1.1) * w,
+                    rng.range(0.0, 1.5),
+                );
+                let az = rng.range(-3.2, 3.2);
+                let d = Vector3::new(az.cos(), az.sin(), -rng.range(0.0, 0.1)).normalize();
+                let range = 1.5 * w;
+                prop_assert_eq!(
+                    bits(
+                        s.cast_through_holes(&o, &d, range)
+                            .map(|(p, i, end)| (p, i, end.is_some()))
+                    ),
+                    bits(reference_cast(&s, &o, &d, range)),
+                    "ray from {} along {}", o, d
                 );
             }
         }
