@@ -650,7 +650,8 @@ impl FrameLabels {
                                 |j, level| out.push((j as u32, wet, level as f32)),
                             );
                             if out.len() == before {
-                                // No cell centre under the quad: the pixel's own cell.
+                                // A degenerate quad (no area, or a corner not finite):
+                                // the pixel's own cell.
                                 if let Some(j) = surface.index_of(h00.p.x, h00.p.y) {
                                     out.push((j as u32, wet, h00.level as f32));
                                 }
