@@ -57,6 +57,15 @@ struct Block {
     void: bool,
 }
 
+impl Block {
+    /// Whether a ray at height `z` is above every observed cell of the block by more than
+    /// the rounding of numbers of magnitude `scale`.
+    fn clears(&self, z: f64, scale: f64) -> bool {
+        let top = self.top as f64;
+        self.void || z > top + 1e-9 * (scale + top.abs())
+    }
+}
+
 impl GridSurface {
     pub fn from_grid(grid: &RollingGrid) -> Self {
         Self::from_grid_gated(grid, f64::INFINITY)
@@ -256,45 +265,29 @@ impl GridSurface {
             // follow it, a hole entered after it.
             // The same for a whole superblock, when it is void or without holes: what it
             // leaves is then known without searching it (the last sample's level, or a
-            // hole entered at its first).
+            // hole entered at its first; `last_observed` does not search either block).
             let q = cj / SUPER * self.ns + ci / SUPER;
             let sup = self.supers[q];
-            let stop = sup.top as f64;
-            let over = |z: f64| sup.void || z > stop + 1e-9 * (scale + stop.abs());
-            if q != low_super && (sup.void || !sup.holes) && over(p.z) {
+            if q != low_super && (sup.void || !sup.holes) && sup.clears(p.z, scale) {
                 let (last, j) = self.block_end(origin, dir, dt, (s, i), steps, SUPER);
-                if !over(sample(origin, dir, dt, last).z) {
+                if !sup.clears(sample(origin, dir, dt, last).z, scale) {
                     low_super = q;
                 } else {
-                    if sup.void {
-                        if level.is_finite() && entry.is_none() {
-                            entry = Some(t - dt);
-                        }
-                    } else {
-                        level = self.z[j] as f64;
-                        entry = None;
-                    }
+                    let seen = self.last_observed(origin, dir, dt, (s, i), (last, j), &sup);
+                    self.after_skip(seen, last, dt, t, &mut level, &mut entry);
                     s = last;
                     continue;
                 }
             }
             let b = cj / BLOCK * self.nb + ci / BLOCK;
             let block = self.blocks[b];
-            let top = block.top as f64;
-            let above = |z: f64| block.void || z > top + 1e-9 * (scale + top.abs());
-            if b != low && above(p.z) {
+            if b != low && block.clears(p.z, scale) {
                 let (last, j) = self.block_end(origin, dir, dt, (s, i), steps, BLOCK);
-                if !above(sample(origin, dir, dt, last).z) {
+                if !block.clears(sample(origin, dir, dt, last).z, scale) {
                     low = b;
                 } else {
-                    match self.last_observed(origin, dir, dt, (s, i), (last, j), &block) {
-                        Some((k, c)) => {
-                            level = self.z[c] as f64;
-                            entry = (k < last).then(|| (k + 1) as f64 * dt - dt);
-                        }
-                        None if level.is_finite() && entry.is_none() => entry = Some(t - dt),
-                        None => {}
-                    }
+                    let seen = self.last_observed(origin, dir, dt, (s, i), (last, j), &block);
+                    self.after_skip(seen, last, dt, t, &mut level, &mut entry);
                     s = last;
                     continue;
                 }
@@ -381,6 +374,31 @@ impl GridSurface {
             cell = Some(next);
         }
         (k, cell.unwrap_or(i))
+    }
+
+    /// The march's rim level and hole entry after a skip from the sample at time `t` to
+    /// sample `last`, given the last of those samples on an observed cell (`seen`, from
+    /// [`Self::last_observed`]): that cell's level, and a hole entered after it if it is not
+    /// the last; with none, a hole entered at `t` if the march has a level and is not in
+    /// one already.
+    #[inline]
+    fn after_skip(
+        &self,
+        seen: Option<(usize, usize)>,
+        last: usize,
+        dt: f64,
+        t: f64,
+        level: &mut f64,
+        entry: &mut Option<f64>,
+    ) {
+        match seen {
+            Some((k, c)) => {
+                *level = self.z[c] as f64;
+                *entry = (k < last).then(|| (k + 1) as f64 * dt - dt);
+            }
+            None if level.is_finite() && entry.is_none() => *entry = Some(t - dt),
+            None => {}
+        }
     }
 
     /// The last sample from `first` to `last` (step, cell; both in `block`) that falls
