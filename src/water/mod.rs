@@ -916,6 +916,9 @@ fn bank_rise(
     res: f64,
     cfg: &WaterConfig,
 ) -> f64 {
+    if !z.is_finite() {
+        return 0.0;
+    }
     let (mut sum, mut n) = (0.0, 0u32);
     for d in N4 {
         let behind = add(k, (-d.0, -d.1));
@@ -931,7 +934,7 @@ fn bank_rise(
             n += 1;
         }
     }
-    if n == 0 || !z.is_finite() {
+    if n == 0 {
         return 0.0;
     }
     sum / n as f64 * res / 2.0
