@@ -89,6 +89,67 @@ fn fit_line(pts: impl Iterator<Item = (f64, f64)> + Clone) -> Option<(f64, f64, 
     (sxx > 1e-12).then(|| (mx, my, sxy / sxx))
 }
 
+/// The ground returns of a scan line's last [`SLOPE_WINDOW_M`] with running sums, so that
+/// their least-squares slope costs the same however many returns the window holds (the
+/// steep rings of a 64-ring lidar put 20 returns within 3 m, and refitting them at every
+/// return was most of the walk). Sums are of offsets from the first point, so that a map
+/// kilometres from its origin, or a level far from zero, loses no precision to them.
+#[derive(Debug)]
+struct SlopeWindow {
+    pts: VecDeque<(f64, f64)>,
+    origin: (f64, f64),
+    sx: f64,
+    sy: f64,
+    sxx: f64,
+    sxy: f64,
+}
+
+impl SlopeWindow {
+    fn new(first: (f64, f64)) -> SlopeWindow {
+        SlopeWindow {
+            pts: VecDeque::from([first]),
+            origin: first,
+            sx: 0.0,
+            sy: 0.0,
+            sxx: 0.0,
+            sxy: 0.0,
+        }
+    }
+
+    fn offset(&self, (x, y): (f64, f64)) -> (f64, f64) {
+        (x - self.origin.0, y - self.origin.1)
+    }
+
+    /// Adds the return at lookahead `x`, then drops the oldest while more than two remain
+    /// and the oldest lies more than [`SLOPE_WINDOW_M`] behind it.
+    fn push(&mut self, p: (f64, f64)) {
+        let (x, y) = self.offset(p);
+        (self.sx, self.sy, self.sxx, self.sxy) =
+            (self.sx + x, self.sy + y, self.sxx + x * x, self.sxy + x * y);
+        self.pts.push_back(p);
+        while self.pts.len() > 2 && self.pts.front().is_some_and(|f| p.0 - f.0 > SLOPE_WINDOW_M) {
+            if let Some(f) = self.pts.pop_front() {
+                let (x, y) = self.offset(f);
+                (self.sx, self.sy, self.sxx, self.sxy) =
+                    (self.sx - x, self.sy - y, self.sxx - x * x, self.sxy - x * y);
+            }
+        }
+    }
+
+    /// The least-squares slope dy/dx of the window once it spans [`SLOPE_BASELINE_M`] of
+    /// lookahead; `None` before, or without spread in x.
+    fn slope(&self) -> Option<f64> {
+        let (first, last) = (self.pts.front()?, self.pts.back()?);
+        if last.0 - first.0 < SLOPE_BASELINE_M {
+            return None;
+        }
+        let n = self.pts.len() as f64;
+        let sxx = self.sxx - self.sx * self.sx / n;
+        let sxy = self.sxy - self.sx * self.sy / n;
+        (sxx > 1e-12).then(|| sxy / sxx)
+    }
+}
+
 /// Gates and thresholds of the lidar cues.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -439,7 +500,7 @@ impl LidarCueModel {
         // (lookahead, z) of the ground returns of the last SLOPE_WINDOW_M, starting with the
         // ground under the sensor: the slope is their least-squares line, so 1 cm of range
         // noise does not tilt it by the 6 % it would between two returns 25 cm apart.
-        let mut recent: VecDeque<(f64, f64)> = VecDeque::from([(0.0, level0)]);
+        let mut recent = SlopeWindow::new((0.0, level0));
         let mut out = Vec::new();
         for &s in line {
             let s = s as usize;
@@ -493,15 +554,9 @@ impl LidarCueModel {
                 } else if dz <= cfg.above_gate_m + slack {
                     // Ground. The slope of the recent ground, once it spans enough
                     // lookahead to measure one, clamped to what ground does.
-                    recent.push_back((d, p.z));
-                    while recent.len() > 2
-                        && recent.front().is_some_and(|f| d - f.0 > SLOPE_WINDOW_M)
-                    {
-                        recent.pop_front();
-                    }
-                    if recent.front().is_some_and(|f| d - f.0 >= SLOPE_BASELINE_M) {
-                        slope = fit_line(recent.iter().copied())
-                            .map(|(_, _, g)| g.clamp(-g_max, g_max));
+                    recent.push((d, p.z));
+                    if let Some(g) = recent.slope() {
+                        slope = Some(g.clamp(-g_max, g_max));
                     }
                     level = p.z;
                     d_level = d;

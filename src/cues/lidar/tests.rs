@@ -546,3 +546,39 @@ fn dry_ground_sloping_away_is_not_the_bottom_of_water() {
         "{flat:?}"
     );
 }
+
+proptest::proptest! {
+    /// The sliding window's running sums give the slope a fresh least-squares fit of the
+    /// same returns gives, also with the level kilometres from zero, and span the same
+    /// returns the walk kept before it had sums: the oldest dropped while more than two
+    /// remain and it lies more than the window behind the newest.
+    #[test]
+    fn slope_window_is_a_fresh_fit_of_its_returns(
+        level0 in proptest::prop_oneof![-5.0f64..5.0, 3000.0f64..5000.0],
+        steps in proptest::collection::vec((0.0f64..1.5, -0.3f64..0.3), 1..80),
+    ) {
+        let mut w = SlopeWindow::new((0.0, level0));
+        let mut kept: VecDeque<(f64, f64)> = VecDeque::from([(0.0, level0)]);
+        let mut d = 0.0;
+        for (dd, dz) in steps {
+            d += dd;
+            let p = (d, level0 + dz + 0.02 * d);
+            w.push(p);
+            kept.push_back(p);
+            while kept.len() > 2 && kept.front().is_some_and(|f| d - f.0 > SLOPE_WINDOW_M) {
+                kept.pop_front();
+            }
+            proptest::prop_assert_eq!(&w.pts, &kept);
+            let want = if kept.front().is_some_and(|f| d - f.0 >= SLOPE_BASELINE_M) {
+                fit_line(kept.iter().copied()).map(|(_, _, g)| g)
+            } else {
+                None
+            };
+            match (w.slope(), want) {
+                (None, None) => {}
+                (Some(a), Some(b)) => proptest::prop_assert!((a - b).abs() < 1e-9, "{} vs {}", a, b),
+                (a, b) => proptest::prop_assert!(false, "{:?} vs {:?}", a, b),
+            }
+        }
+    }
+}
