@@ -508,7 +508,7 @@ impl LidarCueModel {
                 let p = cloud.point_in_map(s);
                 let v = p - o;
                 let range = v.norm();
-                let d = v.x.hypot(v.y);
+                let d = crate::geom::hypot(v.x, v.y);
                 let run = (d - d_level).max(0.0);
                 // Only a falling slope is followed: ground rising ahead moves the level up
                 // through the above-gate anyway, while a rising slope carried over a long
@@ -521,7 +521,7 @@ impl LidarCueModel {
                     let u = v / range;
                     let t = (o.z - level) / -u.z;
                     let c = o + u * t;
-                    let d_c = (c.x - o.x).hypot(c.y - o.y);
+                    let d_c = crate::geom::hypot(c.x - o.x, c.y - o.y);
                     let Ok(q) = self.optics.correct_bottom_return(o, p, level) else {
                         continue;
                     };
@@ -582,7 +582,7 @@ impl LidarCueModel {
                 }
                 let t = (o.z - level) / -u.z;
                 let hit = o + u * t;
-                let d = (hit.x - o.x).hypot(hit.y - o.y);
+                let d = crate::geom::hypot(hit.x - o.x, hit.y - o.y);
                 if self.in_interval(d) {
                     out.push(Event::NoRet {
                         x: hit.x,

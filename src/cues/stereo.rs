@@ -297,7 +297,7 @@ pub fn stereo_reflections(
                 }
                 let slots = std::mem::take(run);
                 let rng = |s: usize| (pts[s] - o).norm();
-                let hor = |s: usize| (pts[s].x - o.x).hypot(pts[s].y - o.y);
+                let hor = |s: usize| crate::geom::hypot(pts[s].x - o.x, pts[s].y - o.y);
                 let wraps = match next {
                     Some((hn, _, _)) => {
                         // The run's distance is its median: its nearest point is the one
@@ -337,7 +337,7 @@ pub fn stereo_reflections(
                     continue;
                 }
                 let p = pts[s];
-                let h = (p.x - o.x).hypot(p.y - o.y);
+                let h = crate::geom::hypot(p.x - o.x, p.y - o.y);
                 let Some(zg) = z_g else {
                     z_g = Some(p.z);
                     h_g = h;

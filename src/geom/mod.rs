@@ -21,6 +21,14 @@ pub fn pose_xyz_rpy(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> 
     )
 }
 
+/// `x.hypot(y)` for the magnitudes of a map (far from overflow and underflow), as one
+/// square root instead of a call into libm: the libm `hypot` was 10 % of the lidar cue's
+/// profile. Both are correctly rounded to within an ulp; a test holds them together.
+#[inline(always)]
+pub fn hypot(x: f64, y: f64) -> f64 {
+    (x * x + y * y).sqrt()
+}
+
 /// `v.floor() as i64`, bit for bit (NaN → 0, saturating), without a call: the x86-64
 /// baseline has no rounding instruction, and `f64::floor` there is a software routine that
 /// showed as 4 % of a full-frame build in the label ray march. (Inside a function built
@@ -183,6 +191,16 @@ pub fn direction(a: &Point3<f64>, b: &Point3<f64>) -> Option<Vector3<f64>> {
 #[cfg(test)]
 mod tests {
     proptest::proptest! {
+        /// Within two ulps of libm's `hypot` over the magnitudes a map has (1 µm to 100 km).
+        #[test]
+        fn hypot_is_libm_hypot(
+            x in proptest::prop_oneof![-1e5f64..1e5, -1.0f64..1.0],
+            y in proptest::prop_oneof![-1e5f64..1e5, -1e-6f64..1e-6],
+        ) {
+            let (a, b) = (super::hypot(x, y), x.hypot(y));
+            proptest::prop_assert!((a - b).abs() <= 2.0 * f64::EPSILON * b, "{} vs {}", a, b);
+        }
+
         #[test]
         fn floor_i64_is_floor_as_i64(v in proptest::num::f64::ANY) {
             proptest::prop_assert_eq!(super::floor_i64(v), v.floor() as i64);
