@@ -120,8 +120,8 @@ impl SlopeWindow {
         (x - self.origin.0, y - self.origin.1)
     }
 
-    /// Adds the return at lookahead `x`, then drops the oldest while more than two remain
-    /// and the oldest lies more than [`SLOPE_WINDOW_M`] behind it.
+    /// Adds the return `p` = (lookahead, z), then drops the oldest while more than two
+    /// remain and the oldest lies more than [`SLOPE_WINDOW_M`] behind `p`.
     fn push(&mut self, p: (f64, f64)) {
         let (x, y) = self.offset(p);
         (self.sx, self.sy, self.sxx, self.sxy) =

@@ -23,7 +23,7 @@ pub fn pose_xyz_rpy(x: f64, y: f64, z: f64, roll: f64, pitch: f64, yaw: f64) -> 
 
 /// `x.hypot(y)` for the magnitudes of a map (far from overflow and underflow), as one
 /// square root instead of a call into libm: the libm `hypot` was 10 % of the lidar cue's
-/// profile. Both are correctly rounded to within an ulp; a test holds them together.
+/// profile. A proptest holds the two within two ulps of each other.
 #[inline(always)]
 pub fn hypot(x: f64, y: f64) -> f64 {
     (x * x + y * y).sqrt()
