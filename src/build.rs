@@ -543,7 +543,7 @@ pub fn build_log(
     let t0 = Instant::now();
     let mut mapper = Mapper::new(cfg.mapper.clone())?;
     mapper.set_publish(cfg.per_frame_maps);
-    let summary = mcap_log::summarize(input)?;
+    let summary = mcap_log::summarize_quick(input)?;
     let mut log_cfg = cfg.log.clone();
     log_cfg.frame_topic = match &cfg.frame_topic {
         Some(t) => t.clone(),
@@ -575,64 +575,68 @@ pub fn build_log(
     // frame: the order, and so the map, is the log's. A bounded queue keeps at most two
     // decoded frames waiting.
     let (tx, rx) = std::sync::mpsc::sync_channel(2);
-    let stream_stats = std::thread::scope(|scope| -> Result<crate::io::frames::FrameStats> {
-        // Owned here, so that an early return drops it and the reader's next send fails.
-        let rx = rx;
-        let reader = scope.spawn(move || {
-            while let Some(item) = stream.next() {
-                // The fusing side stopped (an interrupt): stop reading.
-                if tx.send((item, stream.progress())).is_err() {
-                    break;
+    let (stream_stats, stream_damage) = std::thread::scope(
+        |scope| -> Result<(crate::io::frames::FrameStats, Option<String>)> {
+            // Owned here, so that an early return drops it and the reader's next send fails.
+            let rx = rx;
+            let reader = scope.spawn(move || {
+                while let Some(item) = stream.next() {
+                    // The fusing side stopped (an interrupt): stop reading.
+                    if tx.send((item, stream.progress())).is_err() {
+                        break;
+                    }
                 }
+                (stream.stats().clone(), stream.damage().map(str::to_string))
+            });
+            for (item, (done, total)) in rx.iter() {
+                crate::interrupt::check("reading the log")?;
+                progress(done, total);
+                let frame = match item {
+                    Ok(f) => f,
+                    Err(e) => {
+                        errors.push(e.to_string());
+                        continue;
+                    }
+                };
+                let t = Instant::now();
+                match mapper.update(&frame) {
+                    Ok(r) => {
+                        if let Some(s) = r.lidar_points() {
+                            lidar.merge(s);
+                        }
+                        if let Some(s) = r.stereo_points() {
+                            stereo.merge(s);
+                        }
+                        counts.add(&r.cues);
+                        if let Some(l) = &r.labels {
+                            crate::project::FrameLabelsReport::merge(
+                                label_totals.get_or_insert_with(Default::default),
+                                l,
+                            );
+                        }
+                        stage_totals.add(&r.times_s);
+                        per_frame.push(r.times_s);
+                        frames_fused += 1;
+                    }
+                    Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
+                }
+                t_fuse += t.elapsed().as_secs_f64();
             }
-            stream.stats().clone()
-        });
-        for (item, (done, total)) in rx.iter() {
-            crate::interrupt::check("reading the log")?;
-            progress(done, total);
-            let frame = match item {
-                Ok(f) => f,
-                Err(e) => {
-                    errors.push(e.to_string());
-                    continue;
-                }
-            };
-            let t = Instant::now();
-            match mapper.update(&frame) {
-                Ok(r) => {
-                    if let Some(s) = r.lidar_points() {
-                        lidar.merge(s);
-                    }
-                    if let Some(s) = r.stereo_points() {
-                        stereo.merge(s);
-                    }
-                    counts.add(&r.cues);
-                    if let Some(l) = &r.labels {
-                        crate::project::FrameLabelsReport::merge(
-                            label_totals.get_or_insert_with(Default::default),
-                            l,
-                        );
-                    }
-                    stage_totals.add(&r.times_s);
-                    per_frame.push(r.times_s);
-                    frames_fused += 1;
-                }
-                Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
-            }
-            t_fuse += t.elapsed().as_secs_f64();
-        }
-        reader.join().map_err(|_| {
-            Error::format(
-                input,
-                "frames",
-                "the thread reading the log stopped unexpectedly",
-            )
-        })
-    })?;
+            reader.join().map_err(|_| {
+                Error::format(
+                    input,
+                    "frames",
+                    "the thread reading the log stopped unexpectedly",
+                )
+            })
+        },
+    )?;
+    // The stream meets any damage; a log without a summary section was streamed once more
+    // for its counts and met it there too.
+    let damage = summary.damage.clone().or(stream_damage);
     if frames_fused == 0 {
         // Nothing to map: refuse rather than replace a previous map with an empty one.
-        let why = summary
-            .damage
+        let why = damage
             .clone()
             .or_else(|| errors.first().cloned())
             .unwrap_or_else(|| {
@@ -680,7 +684,7 @@ pub fn build_log(
         cue_counts: counts,
         frames: stream_stats,
         errors,
-        damage: summary.damage.clone(),
+        damage,
         labels: label_totals,
         cells_observed: map.cells.len(),
         tiles: tiles.tile_count(),

@@ -7,7 +7,9 @@ use nalgebra::Point3;
 use tarn::geom::camera::{CameraModel, Distortion};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::io::frames::{Frame, FrameStream, LogConfig};
-use tarn::io::mcap_log::{summarize, LogCompression, LogReader, LogWriter, WriteOptions};
+use tarn::io::mcap_log::{
+    summarize, summarize_quick, LogCompression, LogReader, LogWriter, WriteOptions,
+};
 use tarn::io::ros::{
     cloud_to_pointcloud2, Endian, Header, Image, ImageMsg, Pixels, TfMessage, TransformStamped,
 };
@@ -415,6 +417,12 @@ fn truncated_file_reads_what_precedes_the_damage_then_says_where() {
         let sum = summarize(&q).unwrap();
         assert_eq!(sum.messages, n);
         assert!(sum.damage.as_ref().unwrap().contains("truncated"));
+        // No footer, so no summary section: the quick summary streams and finds the same.
+        assert_eq!(summarize_quick(&q).unwrap(), sum);
+        // The frame stream says where the damage is too.
+        let mut st = FrameStream::open(&q, &LogConfig::default()).unwrap();
+        for _ in st.by_ref() {}
+        assert_eq!(st.damage(), sum.damage.as_deref());
 
         let (fr, _) = frames(&q);
         let (last, good) = fr.split_last().unwrap();
@@ -577,4 +585,36 @@ fn log_without_summary_or_indexes_is_read() {
         1e-9
     ));
     assert_eq!(stats.messages, 5);
+}
+
+/// The summary section a chunked writer appends gives what streaming the messages counts
+/// (topics, schemas, counts, time span), for every writer variant; a log without one is
+/// streamed; a whole log's stream reports no damage.
+#[test]
+fn summary_section_agrees_with_streaming() {
+    let dir = tempfile::tempdir().unwrap();
+    for chunked in [false, true] {
+        for compression in [LogCompression::None, LogCompression::Zstd, LogCompression::Lz4] {
+            let p = dir.path().join(format!("{chunked}-{compression:?}.mcap"));
+            let opts = WriteOptions {
+                chunked,
+                compression,
+                chunk_size: Some(4096),
+                ..Default::default()
+            };
+            write_log(
+                &p,
+                &Spec {
+                    opts,
+                    ..Default::default()
+                },
+            );
+            let streamed = summarize(&p).unwrap();
+            assert!(streamed.messages > 100 && streamed.damage.is_none());
+            assert_eq!(summarize_quick(&p).unwrap(), streamed, "chunked {chunked}");
+            let mut st = FrameStream::open(&p, &LogConfig::default()).unwrap();
+            for _ in st.by_ref() {}
+            assert_eq!(st.damage(), None);
+        }
+    }
 }

@@ -176,6 +176,8 @@ pub struct FrameStream {
     /// Latest log time seen, ns.
     now_ns: i64,
     stats: FrameStats,
+    /// The read error that ended the stream (a damaged or truncated file).
+    damage: Option<String>,
     ended: bool,
     out: VecDeque<Result<Frame>>,
 }
@@ -203,6 +205,7 @@ impl FrameStream {
             infos: Default::default(),
             now_ns: i64::MIN,
             stats: FrameStats::default(),
+            damage: None,
             ended: false,
             out: VecDeque::new(),
         })
@@ -210,6 +213,11 @@ impl FrameStream {
 
     pub fn stats(&self) -> &FrameStats {
         &self.stats
+    }
+
+    /// Where and why reading stopped early (a damaged or truncated file), once it has.
+    pub fn damage(&self) -> Option<&str> {
+        self.damage.as_deref()
     }
 
     /// Bytes of the log read so far and the log's size, for a progress bar.
@@ -488,6 +496,7 @@ impl Iterator for FrameStream {
                 Some(Err(e)) => {
                     // Everything before the damage still makes frames; then the error.
                     self.emit_ready(true);
+                    self.damage = Some(e.to_string());
                     self.out.push_back(Err(e));
                     self.ended = true;
                 }

@@ -320,6 +320,74 @@ pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
     })
 }
 
+/// What a log holds, from its summary section (the statistics and channels a chunked
+/// writer such as `ros2 bag` appends) when it has one, read without touching the messages;
+/// else [`summarize`]'s streaming pass. A log with a summary reports no damage here: a
+/// reader of its messages finds any.
+pub fn summarize_quick(path: impl AsRef<Path>) -> Result<LogSummary> {
+    let path = path.as_ref();
+    match summary_section(path) {
+        Some(s) => Ok(s),
+        None => summarize(path),
+    }
+}
+
+/// [`LogSummary`] from the summary section's statistics record, if the file has a valid
+/// footer, a summary and statistics (`None` on any error: the caller streams instead).
+fn summary_section(path: &Path) -> Option<LogSummary> {
+    use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+    use std::io::Seek;
+    let mut file = File::open(path).ok()?;
+    let size = file.metadata().ok()?.len();
+    let mut reader = SummaryReader::new_with_options(
+        SummaryReaderOptions::default()
+            .with_file_size(size)
+            .with_record_length_limit(record_length_limit(size)),
+    );
+    while let Some(event) = reader.next_event() {
+        match event.ok()? {
+            SummaryReadEvent::ReadRequest(need) => {
+                let n = file.read(reader.insert(need)).ok()?;
+                reader.notify_read(n);
+            }
+            SummaryReadEvent::SeekRequest(to) => reader.notify_seeked(file.seek(to).ok()?),
+        }
+    }
+    let summary = reader.finish()?;
+    let stats = summary.stats.as_ref()?;
+    let mut counts: BTreeMap<String, (String, u64)> = BTreeMap::new();
+    for (id, &n) in &stats.channel_message_counts {
+        let ch = summary.channels.get(id)?;
+        let schema = ch.schema.as_ref().map_or(String::new(), |s| s.name.clone());
+        counts.entry(ch.topic.clone()).or_insert((schema, 0)).1 += n;
+    }
+    let messages: u64 = counts.values().map(|v| v.1).sum();
+    if messages != stats.message_count {
+        return None;
+    }
+    let (start, end) = (messages > 0)
+        .then_some((stats.message_start_time, stats.message_end_time))
+        .unzip();
+    Some(LogSummary {
+        messages,
+        topics: counts
+            .into_iter()
+            .map(|(topic, (schema, count))| TopicInfo {
+                topic,
+                schema,
+                count,
+            })
+            .collect(),
+        duration_s: match (start, end) {
+            (Some(s), Some(e)) => e.saturating_sub(s) as f64 * 1e-9,
+            _ => 0.0,
+        },
+        start_ns: start,
+        end_ns: end,
+        damage: None,
+    })
+}
+
 /// Chunk compression for written logs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LogCompression {
