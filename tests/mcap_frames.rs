@@ -594,7 +594,11 @@ fn log_without_summary_or_indexes_is_read() {
 fn summary_section_agrees_with_streaming() {
     let dir = tempfile::tempdir().unwrap();
     for chunked in [false, true] {
-        for compression in [LogCompression::None, LogCompression::Zstd, LogCompression::Lz4] {
+        for compression in [
+            LogCompression::None,
+            LogCompression::Zstd,
+            LogCompression::Lz4,
+        ] {
             let p = dir.path().join(format!("{chunked}-{compression:?}.mcap"));
             let opts = WriteOptions {
                 chunked,
