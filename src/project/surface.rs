@@ -263,12 +263,12 @@ impl GridSurface {
             // rounding: then no sample hits, nor crosses a rim level (at most the top) out of
             // a hole, and what they leave is the last observed sample's level and, if holes
             // follow it, a hole entered after it.
-            // The same for a whole superblock, when it is void or without holes: what it
-            // leaves is then known without searching it (the last sample's level, or a
-            // hole entered at its first; `last_observed` does not search either block).
+            // The same for a whole superblock first: a ray high above the ground crosses it
+            // in one step, and only a superblock with holes is searched back for its last
+            // observed sample (`last_observed`).
             let q = cj / SUPER * self.ns + ci / SUPER;
             let sup = self.supers[q];
-            if q != low_super && (sup.void || !sup.holes) && sup.clears(p.z, scale) {
+            if q != low_super && sup.clears(p.z, scale) {
                 let (last, j) = self.block_end(origin, dir, dt, (s, i), steps, SUPER);
                 if !sup.clears(sample(origin, dir, dt, last).z, scale) {
                     low_super = q;
