@@ -19,8 +19,10 @@ fn d_noise_scale() -> f64 {
 fn d_noon() -> f64 {
     12.0
 }
+/// The mapper's default cell size, so that each cell of a map at that size is scored
+/// against the truth at its own centre.
 fn d_truth_res() -> f64 {
-    0.2
+    crate::grid::GridConfig::default().resolution
 }
 
 /// A whole scene.
