@@ -300,24 +300,36 @@ pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
         start = Some(start.map_or(m.log_time, |s| s.min(m.log_time)));
         end = Some(end.map_or(m.log_time, |s| s.max(m.log_time)));
     }
-    Ok(LogSummary {
-        messages: counts.values().map(|v| v.1).sum(),
-        topics: counts
-            .into_iter()
-            .map(|(topic, (schema, count))| TopicInfo {
-                topic,
-                schema,
-                count,
-            })
-            .collect(),
-        duration_s: match (start, end) {
-            (Some(s), Some(e)) => (e - s) as f64 * 1e-9,
-            _ => 0.0,
-        },
-        start_ns: start,
-        end_ns: end,
-        damage,
-    })
+    Ok(LogSummary::of(counts, start, end, damage))
+}
+
+impl LogSummary {
+    /// From the (schema, message count) of each topic and the first and last log times.
+    fn of(
+        counts: BTreeMap<String, (String, u64)>,
+        start: Option<u64>,
+        end: Option<u64>,
+        damage: Option<String>,
+    ) -> Self {
+        LogSummary {
+            messages: counts.values().map(|v| v.1).sum(),
+            topics: counts
+                .into_iter()
+                .map(|(topic, (schema, count))| TopicInfo {
+                    topic,
+                    schema,
+                    count,
+                })
+                .collect(),
+            duration_s: match (start, end) {
+                (Some(s), Some(e)) => e.saturating_sub(s) as f64 * 1e-9,
+                _ => 0.0,
+            },
+            start_ns: start,
+            end_ns: end,
+            damage,
+        }
+    }
 }
 
 /// What a log holds, from its summary section (the statistics and channels a chunked
@@ -368,24 +380,7 @@ fn summary_section(path: &Path) -> Option<LogSummary> {
     let (start, end) = (messages > 0)
         .then_some((stats.message_start_time, stats.message_end_time))
         .unzip();
-    Some(LogSummary {
-        messages,
-        topics: counts
-            .into_iter()
-            .map(|(topic, (schema, count))| TopicInfo {
-                topic,
-                schema,
-                count,
-            })
-            .collect(),
-        duration_s: match (start, end) {
-            (Some(s), Some(e)) => e.saturating_sub(s) as f64 * 1e-9,
-            _ => 0.0,
-        },
-        start_ns: start,
-        end_ns: end,
-        damage: None,
-    })
+    Some(LogSummary::of(counts, start, end, None))
 }
 
 /// Chunk compression for written logs.
