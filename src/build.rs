@@ -575,62 +575,62 @@ pub fn build_log(
     // frame: the order, and so the map, is the log's. A bounded queue keeps at most two
     // decoded frames waiting.
     let (tx, rx) = std::sync::mpsc::sync_channel(2);
-    let (stream_stats, stream_damage) = std::thread::scope(
-        |scope| -> Result<(crate::io::frames::FrameStats, Option<String>)> {
-            // Owned here, so that an early return drops it and the reader's next send fails.
-            let rx = rx;
-            let reader = scope.spawn(move || {
-                while let Some(item) = stream.next() {
-                    // The fusing side stopped (an interrupt): stop reading.
-                    if tx.send((item, stream.progress())).is_err() {
-                        break;
-                    }
+    // What the reader leaves: its counts, and where the log was damaged if it was.
+    type ReadEnd = (crate::io::frames::FrameStats, Option<String>);
+    let (stream_stats, stream_damage) = std::thread::scope(|scope| -> Result<ReadEnd> {
+        // Owned here, so that an early return drops it and the reader's next send fails.
+        let rx = rx;
+        let reader = scope.spawn(move || {
+            while let Some(item) = stream.next() {
+                // The fusing side stopped (an interrupt): stop reading.
+                if tx.send((item, stream.progress())).is_err() {
+                    break;
                 }
-                (stream.stats().clone(), stream.damage().map(str::to_string))
-            });
-            for (item, (done, total)) in rx.iter() {
-                crate::interrupt::check("reading the log")?;
-                progress(done, total);
-                let frame = match item {
-                    Ok(f) => f,
-                    Err(e) => {
-                        errors.push(e.to_string());
-                        continue;
-                    }
-                };
-                let t = Instant::now();
-                match mapper.update(&frame) {
-                    Ok(r) => {
-                        if let Some(s) = r.lidar_points() {
-                            lidar.merge(s);
-                        }
-                        if let Some(s) = r.stereo_points() {
-                            stereo.merge(s);
-                        }
-                        counts.add(&r.cues);
-                        if let Some(l) = &r.labels {
-                            crate::project::FrameLabelsReport::merge(
-                                label_totals.get_or_insert_with(Default::default),
-                                l,
-                            );
-                        }
-                        stage_totals.add(&r.times_s);
-                        per_frame.push(r.times_s);
-                        frames_fused += 1;
-                    }
-                    Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
-                }
-                t_fuse += t.elapsed().as_secs_f64();
             }
-            reader.join().map_err(|_| {
-                Error::format(
-                    input,
-                    "frames",
-                    "the thread reading the log stopped unexpectedly",
-                )
-            })
-        },
-    )?;
+            (stream.stats().clone(), stream.damage().map(str::to_string))
+        });
+        for (item, (done, total)) in rx.iter() {
+            crate::interrupt::check("reading the log")?;
+            progress(done, total);
+            let frame = match item {
+                Ok(f) => f,
+                Err(e) => {
+                    errors.push(e.to_string());
+                    continue;
+                }
+            };
+            let t = Instant::now();
+            match mapper.update(&frame) {
+                Ok(r) => {
+                    if let Some(s) = r.lidar_points() {
+                        lidar.merge(s);
+                    }
+                    if let Some(s) = r.stereo_points() {
+                        stereo.merge(s);
+                    }
+                    counts.add(&r.cues);
+                    if let Some(l) = &r.labels {
+                        crate::project::FrameLabelsReport::merge(
+                            label_totals.get_or_insert_with(Default::default),
+                            l,
+                        );
+                    }
+                    stage_totals.add(&r.times_s);
+                    per_frame.push(r.times_s);
+                    frames_fused += 1;
+                }
+                Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
+            }
+            t_fuse += t.elapsed().as_secs_f64();
+        }
+        reader.join().map_err(|_| {
+            Error::format(
+                input,
+                "frames",
+                "the thread reading the log stopped unexpectedly",
+            )
+        })
+    })?;
     // The stream meets any damage; a log without a summary section was streamed once more
     // for its counts and met it there too.
     let damage = summary.damage.clone().or(stream_damage);
