@@ -271,6 +271,9 @@ struct Hit {
     /// For water placed where its ray drops to a hole's rim level: the ray's height at the
     /// end of the hole. The water under the pixel lies between that and the hit.
     floor: Option<f64>,
+    /// The hole has no far rim within range or the window: the hit is only the nearest
+    /// place the water can be (see [`tighten_hole_levels`]).
+    open: bool,
 }
 
 impl Hit {
@@ -280,6 +283,7 @@ impl Hit {
             wet,
             level: p.z,
             floor: None,
+            open: false,
         }
     }
 }
@@ -296,9 +300,20 @@ const HOLE_LEVEL_WINDOW: usize = 8;
 /// it. Every ray across the same water bounds the same level, so each such pixel's level is
 /// the lowest upper bound among the hole-placed water pixels within [`HOLE_LEVEL_WINDOW`]
 /// sampled pixels of it in the image (what is near in the image is one water surface; a
-/// stream's level varies along it), but never below its own lower bound. The vote stays
-/// where it is: only the level it gives changes.
-fn tighten_hole_levels(per_row: &mut [(Vec<Option<Hit>>, [u64; 3])], nc: usize) {
+/// stream's level varies along it), but never below its own lower bound.
+///
+/// A pixel whose hole has a far rim keeps its vote where it is: only the level it gives
+/// changes (moving those votes too took the default pond's surface from 1.5 to 7.2 cm: its
+/// near shore was no longer reached). A pixel whose hole is open (no far rim in reach, as in
+/// the first frames, when the far bank between the lidar's rings is not yet observed) was
+/// placed where its ray drops to the near rim's height, the nearest place the water can
+/// be: up to 3.7 m short of a pond 0.35 m below its banks, on the near bank. It moves along
+/// its ray to where the ray meets the tightened level.
+fn tighten_hole_levels(
+    per_row: &mut [(Vec<Option<Hit>>, [u64; 3])],
+    nc: usize,
+    origin: Point3<f64>,
+) {
     let nr = per_row.len();
     let upper: Vec<f64> = per_row
         .iter()
@@ -327,6 +342,8 @@ fn tighten_hole_levels(per_row: &mut [(Vec<Option<Hit>>, [u64; 3])], nc: usize) 
             let Some(Hit {
                 floor: Some(floor),
                 level,
+                p,
+                open,
                 ..
             }) = h
             else {
@@ -336,6 +353,9 @@ fn tighten_hole_levels(per_row: &mut [(Vec<Option<Hit>>, [u64; 3])], nc: usize) 
                 .map(|rr| across[rr * nc + c])
                 .fold(f64::INFINITY, f64::min);
             *level = low.max(*floor).min(*level);
+            if *open && *level < p.z && p.z < origin.z {
+                *p = origin + (*p - origin) * ((origin.z - *level) / (origin.z - p.z));
+            }
         }
     }
 }
@@ -596,6 +616,7 @@ impl FrameLabels {
                                 let floor = hole.map(|t| origin.z + d.z * t);
                                 Some(Hit {
                                     floor,
+                                    open: hole == Some(max_range),
                                     ..Hit::at(p, water)
                                 })
                             }
@@ -609,7 +630,7 @@ impl FrameLabels {
                 (hits, n)
             })
             .collect();
-        tighten_hole_levels(&mut per_row, cols.len());
+        tighten_hole_levels(&mut per_row, cols.len(), origin);
         // Each sampled pixel stands for the quad spanned by its hit and those of its right,
         // lower and diagonal neighbours: when all four agree and the quad is no larger than
         // `QUAD_MAX_M` (larger ones straddle an occlusion edge), every cell the quad

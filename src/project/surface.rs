@@ -222,7 +222,8 @@ impl GridSurface {
     /// hole's rim level (`Some`: no observed surface was met there; the hit is where water
     /// in the hole would be) rather than observed terrain, and then the distance along the
     /// ray of the last sample still in the hole: water in the hole lies at or below the
-    /// hit's level, so anywhere from the hit to there.
+    /// hit's level, so anywhere from the hit to there. That distance is exactly
+    /// `max_range` when the hole has no far rim within range or the window.
     pub fn cast_through_holes(
         &self,
         origin: &Point3<f64>,

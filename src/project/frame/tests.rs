@@ -241,7 +241,7 @@ fn cached_horizon_equals_the_classifier_horizon() {
 }
 
 /// Sampled pixels on an `nr` × `nc` grid: hole-placed water (upper bound `level`, lower
-/// bound `floor`), other water, or no hit.
+/// bound `floor`; kind 0 a hole with a far rim, 3 an open one), other water, or no hit.
 fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<Hit>>, [u64; 3])> {
     (0..nr)
         .map(|r| {
@@ -249,9 +249,10 @@ fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<
                 .map(|c| {
                     let (kind, upper, floor) = cells[r * nc + c];
                     let p = Point3::new(c as f64, r as f64, upper);
-                    match kind % 3 {
-                        0 => Some(Hit {
+                    match kind {
+                        0 | 3 => Some(Hit {
                             floor: Some(floor),
+                            open: kind == 3,
                             ..Hit::at(p, true)
                         }),
                         1 => Some(Hit::at(p, true)),
@@ -267,16 +268,18 @@ fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<
 proptest::proptest! {
     /// Tightening gives each hole-placed pixel the lowest upper bound of its window, its
     /// own floor permitting, as a direct search of the window finds it: never higher than
-    /// it was, never below its floor. Other pixels keep their level, and no hit moves.
-    /// When every pixel bounds one water level `l` (floor ≤ l ≤ upper), no level goes
-    /// below `l`; otherwise (another hole's water in the window) a floor may bind.
+    /// it was, never below its floor. Other pixels keep their level. When every pixel
+    /// bounds one water level `l` (floor ≤ l ≤ upper), no level goes below `l`; otherwise
+    /// (another hole's water in the window) a floor may bind. Only the hits over open
+    /// holes move: along the ray from the camera, to the height of their new level.
     #[test]
     fn hole_levels_tighten_towards_the_level_all_bounds_admit(
         nr in 1usize..24,
         nc in 1usize..24,
         l in -2.0f64..2.0,
         one_level in proptest::bool::ANY,
-        cells in proptest::collection::vec((0u8..3, 0.0f64..1.0, 0.0f64..1.0), 24 * 24),
+        cells in proptest::collection::vec((0u8..4, 0.0f64..1.0, 0.0f64..1.0), 24 * 24),
+        cam in (-5.0f64..5.0, -5.0f64..5.0, 3.5f64..10.0),
     ) {
         let cells: Vec<(u8, f64, f64)> = cells
             .iter()
@@ -284,7 +287,8 @@ proptest::proptest! {
             .collect();
         let before = hole_rows(nr, nc, &cells);
         let mut after = before.clone();
-        tighten_hole_levels(&mut after, nc);
+        let origin = Point3::new(cam.0, cam.1, cam.2);
+        tighten_hole_levels(&mut after, nc, origin);
         let k = HOLE_LEVEL_WINDOW as i64;
         for r in 0..nr {
             for c in 0..nc {
@@ -295,6 +299,7 @@ proptest::proptest! {
                 };
                 let Some(floor) = b.floor else {
                     proptest::prop_assert_eq!(a.level, b.level);
+                    proptest::prop_assert_eq!(a.p, b.p);
                     continue;
                 };
                 let mut low = f64::INFINITY;
@@ -308,7 +313,15 @@ proptest::proptest! {
                 proptest::prop_assert_eq!(a.level, low.max(floor));
                 proptest::prop_assert!(a.level <= b.level && a.level >= floor);
                 proptest::prop_assert!(!one_level || a.level >= l);
-                proptest::prop_assert_eq!(a.p, b.p);
+                if b.open {
+                    // On the ray through the old hit, at the new level.
+                    let (u, v) = (b.p - origin, a.p - origin);
+                    proptest::prop_assert!((a.p.z - a.level).abs() <= 1e-9);
+                    proptest::prop_assert!(u.cross(&v).norm() <= 1e-9 * (1.0 + u.norm() * v.norm()));
+                    proptest::prop_assert!(u.dot(&v) > 0.0 && v.norm() >= u.norm() - 1e-12);
+                } else {
+                    proptest::prop_assert_eq!(a.p, b.p);
+                }
             }
         }
     }
