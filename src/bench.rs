@@ -678,16 +678,25 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     }
 
     // Label projection: every `stride`-th pixel in x and y is classified and placed on the
-    // map (the rest fill the quads between agreeing samples). Colour labels by the Table 1
-    // rule on the default scene with the main job's 80 m window; the error is the water
-    // the map misses.
-    for stride in [1usize, 2, 4, 8] {
-        let out = tmp.path().join(format!("stride{stride}"));
+    // map (the rest fill the quads between agreeing samples), and with `wide_rows` every row
+    // whose ground footprint is wider than a cell too. Colour labels by the Table 1 rule on
+    // the default scene with the main job's 80 m window; the error is the water the map
+    // misses.
+    let mut label_runs = Vec::new();
+    for (stride, wide_rows) in [
+        (1usize, false),
+        (2, false),
+        (4, false),
+        (8, false),
+        (2, true),
+    ] {
+        let out = tmp.path().join(format!("stride{stride}-{wide_rows}"));
         let mut mapper = crate::sim::mapper_config(&scene);
         mapper.grid.size_cells = 800;
         mapper.labels = Some(crate::project::FrameLabelConfig {
             colour: Some(ColorLut::compile(&RuleClassifier::default(), 8)?),
             ray_stride: stride,
+            wide_rows,
             ..crate::project::FrameLabelConfig::default()
         });
         let cfg = LogBuildConfig {
@@ -701,13 +710,36 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
             .iter()
             .find(|l| l.stage == "labels")
             .map(|l| l.median_ms);
-        rows.push(row(
-            "label ray-cast stride (pixels)",
+        label_runs.push((
             stride,
-            "labels stage per frame (median), default scene",
+            wide_rows,
             labels_ms,
-            "water cells missed (1 − recall, all ranges)",
             e.all.water_recall.map(|r| 1.0 - r),
+        ));
+    }
+    let label_row = |knob: &str, value: String, &(_, _, ms, missed): &(usize, bool, _, _)| {
+        row(
+            knob,
+            value,
+            "labels stage per frame (median), default scene",
+            ms,
+            "water cells missed (1 − recall, all ranges)",
+            missed,
+        )
+    };
+    for r in label_runs.iter().filter(|r| !r.1) {
+        rows.push(label_row(
+            "label ray-cast stride (pixels)",
+            r.0.to_string(),
+            r,
+        ));
+    }
+    for r in label_runs.iter().filter(|r| r.0 == 2) {
+        let value = if r.1 { "all" } else { "every 2nd" };
+        rows.push(label_row(
+            "label rows wider than a cell (stride 2)",
+            value.into(),
+            r,
         ));
     }
 

@@ -50,6 +50,12 @@ pub struct FrameLabelConfig {
     pub mwir: Option<MwirLabelConfig>,
     /// Use every `ray_stride`-th pixel in x and y (1 = all).
     pub ray_stride: usize,
+    /// Also use every row of pixels whose ground footprint is wider than a map cell
+    /// ([`sampled_rows`]): there a skipped row skips whole cells, and the labels' edges
+    /// (the water's, and a sky reflection's) move by that much. Off by default: with
+    /// every cue the extra votes on the water's edge move the shores (README, "Image
+    /// labels").
+    pub wide_rows: bool,
     /// Pixels whose hit lies farther than this along the ray (metres) do not vote.
     pub max_range: f64,
     /// A stereo point places its pixel only up to this range (metres); farther pixels are
@@ -69,6 +75,7 @@ impl Default for FrameLabelConfig {
             swir: None,
             mwir: None,
             ray_stride: 2,
+            wide_rows: false,
             max_range: 40.0,
             stereo_max_range: 10.0,
             surface_max_std: 0.1,
@@ -286,6 +293,44 @@ impl Hit {
             open: false,
         }
     }
+}
+
+/// The image rows to label: every `stride`-th, and every row whose ground footprint on
+/// either side is wider than `cell` metres, so that no skipped row spans more than a cell.
+/// The footprint between two rows is how far apart their rays meet level ground `height`
+/// metres below the camera, the widest of the first, middle and last columns (infinite
+/// where only one of the two reaches the ground: the horizon). The footprint grows with the square of the range (r² / (h f) for focal length
+/// f): with the simulated 320 × 240 camera 1.6 m up, a row spans a 0.1 m cell from about
+/// 6 m on, and 1 m at 20 m.
+fn sampled_rows(
+    map_rays: &[Option<Vector3<f64>>],
+    w: usize,
+    stride: usize,
+    height: f64,
+    cell: f64,
+) -> Vec<usize> {
+    let h = map_rays.len() / w.max(1);
+    let stride = stride.max(1);
+    let ground = |r: &Option<Vector3<f64>>| match r {
+        Some(r) if r.z < 0.0 && height > 0.0 => Some(height / -r.z * r.xy().norm()),
+        _ => None,
+    };
+    let wide = |y: usize| {
+        y + 1 < h
+            && [0, w / 2, w.saturating_sub(1)].iter().any(|&x| {
+                match (
+                    ground(&map_rays[y * w + x]),
+                    ground(&map_rays[(y + 1) * w + x]),
+                ) {
+                    (Some(a), Some(b)) => (a - b).abs() > cell,
+                    (None, None) => false,
+                    _ => true,
+                }
+            })
+    };
+    (0..h)
+        .filter(|&y| y % stride == 0 || wide(y) || (y > 0 && wide(y - 1)))
+        .collect()
 }
 
 /// Image neighbourhood (sampled pixels either side) over which water placed over holes
@@ -574,8 +619,18 @@ impl FrameLabels {
         let origin = Point3::from(cam_to_map.translation.vector);
         let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);
         let stereo_range = self.cfg.stereo_max_range.min(max_range);
-        let (cols, rows): (Vec<usize>, Vec<usize>) =
-            ((0..w).step_by(s).collect(), (0..h).step_by(s).collect());
+        let cols: Vec<usize> = (0..w).step_by(s).collect();
+        let rows = if self.cfg.wide_rows {
+            sampled_rows(
+                map_rays,
+                w,
+                s,
+                cam_to_map.translation.z - ground_z,
+                surface.resolution(),
+            )
+        } else {
+            (0..h).step_by(s).collect()
+        };
         // Per sampled pixel: its hit, whether it is water (`None`: no vote), and the water
         // level it gives (see `tighten_hole_levels`).
         let mut per_row: Vec<(Vec<Option<Hit>>, [u64; 3])> = rows

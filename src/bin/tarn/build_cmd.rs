@@ -67,6 +67,10 @@ pub struct BuildArgs {
     /// (log) Label every n-th pixel in x and y.
     #[arg(long, default_value_t = 2)]
     pub label_stride: usize,
+    /// (log) Also label every row of pixels whose ground footprint is wider than a map
+    /// cell, whatever the stride.
+    #[arg(long)]
+    pub label_wide_rows: bool,
     /// (log) Pixels whose hit is farther than this do not vote, metres.
     #[arg(long, default_value_t = 40.0)]
     pub label_max_range: f64,
@@ -95,6 +99,7 @@ fn label_config(a: &BuildArgs) -> anyhow::Result<Option<FrameLabelConfig>> {
     }
     let mut cfg = FrameLabelConfig {
         ray_stride: a.label_stride,
+        wide_rows: a.label_wide_rows,
         max_range: a.label_max_range,
         surface_max_std: a.label_surface_max_std,
         ..FrameLabelConfig::default()
@@ -146,6 +151,7 @@ impl BuildArgs {
             colour_model: None,
             hour: None,
             label_stride: 2,
+            label_wide_rows: false,
             label_max_range: 40.0,
             label_surface_max_std: 0.1,
             per_frame_maps: false,

@@ -451,3 +451,55 @@ fn small_and_broken_quads() {
     );
     assert!(got.is_empty());
 }
+
+proptest::proptest! {
+    /// The rows `sampled_rows` keeps: every `stride`-th, and where rows are skipped, the
+    /// ground between two kept rows that both see it is at most `stride` cells wide at the
+    /// first, middle and last columns (each skipped row spans at most a cell). Found by
+    /// casting each kept row's rays onto level ground directly, for a pinhole camera at any
+    /// height, pitch and roll (upside down, the footprint grows down the image).
+    #[test]
+    fn wide_rows_are_all_kept(
+        stride in 1usize..6,
+        height in 0.3f64..4.0,
+        pitch_deg in -5.0f64..60.0,
+        roll_deg in -180.0f64..180.0,
+        cell in 0.02f64..0.5,
+    ) {
+        let cam = CameraModel::new(80, 60, [60.0, 60.0, 39.5, 29.5], Distortion::None, "cam").unwrap();
+        let pose = optical_pose(&pose_xyz_rpy(
+            0.0,
+            0.0,
+            height,
+            roll_deg.to_radians(),
+            pitch_deg.to_radians(),
+            0.0,
+        ));
+        let rays: Vec<_> = RayCache::new(&cam)
+            .rays
+            .into_iter()
+            .map(|r| r.map(|r| pose.rotation * r))
+            .collect();
+        let rows = sampled_rows(&rays, cam.width, stride, height, cell);
+        let on_ground = |x: usize, y: usize| {
+            let r = cam.pixel_ray(x as f64, y as f64).map(|r| pose.rotation * r).unwrap();
+            (r.z < 0.0).then(|| height / -r.z * r.xy().norm())
+        };
+        for y in (0..cam.height).step_by(stride) {
+            proptest::prop_assert!(rows.contains(&y));
+        }
+        for w in rows.windows(2) {
+            proptest::prop_assert!(w[1] > w[0] && w[1] - w[0] <= stride);
+            for x in [0, cam.width / 2, cam.width - 1] {
+                if let (Some(a), Some(b)) = (on_ground(x, w[0]), on_ground(x, w[1])) {
+                    if w[1] - w[0] > 1 {
+                        proptest::prop_assert!(
+                            (a - b).abs() <= (w[1] - w[0]) as f64 * cell * (1.0 + 1e-9),
+                            "rows {} and {} are {} m apart at column {x}", w[0], w[1], (a - b).abs()
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
