@@ -299,9 +299,9 @@ impl Hit {
 /// either side is wider than `cell` metres, so that no skipped row spans more than a cell.
 /// The footprint between two rows is how far apart their rays meet level ground `height`
 /// metres below the camera, the widest of the first, middle and last columns (infinite
-/// where only one of the two reaches the ground: the horizon). The footprint grows with the square of the range (r² / (h f) for focal length
-/// f): with the simulated 320 × 240 camera 1.6 m up, a row spans a 0.1 m cell from about
-/// 6 m on, and 1 m at 20 m.
+/// where only one of the two reaches the ground: the horizon). It grows with the square of
+/// the range (r² / (h f) for focal length f): with the simulated 320 × 240 camera 1.6 m
+/// up, a row spans a 0.1 m cell from about 6 m on, and 1 m at 20 m.
 fn sampled_rows(
     map_rays: &[Option<Vector3<f64>>],
     w: usize,
