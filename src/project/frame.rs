@@ -349,11 +349,11 @@ const HOLE_LEVEL_WINDOW: usize = 8;
 ///
 /// A pixel whose hole has a far rim keeps its vote where it is: only the level it gives
 /// changes (moving those votes too took the default pond's surface from 1.5 to 7.2 cm: its
-/// near shore was no longer reached). A pixel whose hole is open (no far rim in reach, as in
-/// the first frames, when the far bank between the lidar's rings is not yet observed) was
-/// placed where its ray drops to the near rim's height, the nearest place the water can
-/// be: up to 3.7 m short of a pond 0.35 m below its banks, on the near bank. It moves along
-/// its ray to where the ray meets the tightened level.
+/// near shore was no longer reached). A pixel whose hole is open (no far rim in reach, as
+/// on the simulated pond in the first frames) was placed where its ray drops to the near
+/// rim's height, the nearest place the water can be: up to 3.7 m short of a pond 0.35 m
+/// below its banks, on the near bank. It moves along its ray to where the ray meets the
+/// tightened level.
 fn tighten_hole_levels(
     per_row: &mut [(Vec<Option<Hit>>, [u64; 3])],
     nc: usize,
