@@ -833,7 +833,18 @@ pub fn sweep_plot(rows: &[SweepRow], path: &Path) -> Result<()> {
         k
     };
     let err = |e: Box<dyn std::error::Error>| Error::invalid("sweep plot", e.to_string());
-    let (w, h) = (1500u32, 500u32);
+    // Three significant digits, no trailing zeros.
+    let short = |v: f64| {
+        let d = (2 - v.abs().max(1e-9).log10().floor() as i32).clamp(0, 6) as usize;
+        let s = format!("{v:.d$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    };
+    // Room for each knob's caption.
+    let (w, h) = (320 * knobs.len().max(1) as u32, 500u32);
     let mut buf = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
@@ -858,10 +869,14 @@ pub fn sweep_plot(rows: &[SweepRow], path: &Path) -> Result<()> {
                 .margin(12)
                 .x_label_area_size(40)
                 .y_label_area_size(70)
-                .build_cartesian_2d((t0 * 0.7..t1 * 1.4).log_scale(), 0.0..e1 * 1.15 + 1e-9)
+                .build_cartesian_2d((t0 * 0.7..t1 * 2.5).log_scale(), 0.0..e1 * 1.15 + 1e-9)
                 .map_err(|e| err(Box::new(e)))?;
+            // A few labels on the log axis (its default key points crowd a decade with
+            // labels that overlap); each point says its own time.
             chart
                 .configure_mesh()
+                .x_labels(6)
+                .x_label_formatter(&|v| short(*v))
                 .x_desc("time (ms, log)")
                 .y_desc(metric.unwrap_or_default())
                 .label_style(("sans-serif", 12))
@@ -874,7 +889,11 @@ pub fn sweep_plot(rows: &[SweepRow], path: &Path) -> Result<()> {
                 .draw_series(pts.iter().map(|p| {
                     EmptyElement::at((p.0, p.1))
                         + Circle::new((0, 0), 4, BLUE.filled())
-                        + Text::new(p.2.clone(), (6, -14), ("sans-serif", 13))
+                        + Text::new(
+                            format!("{} ({} ms)", p.2, short(p.0)),
+                            (6, -14),
+                            ("sans-serif", 13),
+                        )
                 }))
                 .map_err(|e| err(Box::new(e)))?;
         }
