@@ -754,11 +754,26 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
         mapper.update(&f?)?;
     }
     let tiles = mapper.finish();
-    for (name, level_residual_m) in [("level plane", 1e9), ("barycentric (Delaunay)", 0.0)] {
+    // The Delaunay surface with its vertices as measured and at the median of their 1.5 m
+    // of shore (the default).
+    let default_radius = crate::water::WaterConfig::default().vertex_median_radius_m;
+    for (i, (name, level_residual_m, vertex_median_radius_m)) in [
+        ("level plane", 1e9, default_radius),
+        ("barycentric (Delaunay), vertices as measured", 0.0, 0.0),
+        (
+            "barycentric (Delaunay), vertices at local medians",
+            0.0,
+            default_radius,
+        ),
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let mut hc = crate::sim::mapper_config(&stream).hazard_config();
         hc.water.level_residual_m = level_residual_m;
+        hc.water.vertex_median_radius_m = vertex_median_radius_m;
         let (ms, map) = timed(reps, || HazardMap::from_tiles(&tiles, &hc))?;
-        let out = tmp.path().join(format!("surface-{level_residual_m}"));
+        let out = tmp.path().join(format!("surface-{i}"));
         crate::io::export::write_map_files(&out, &map)?;
         let e = crate::eval::evaluate_dirs(&out, &stream_dir)?;
         rows.push(row(

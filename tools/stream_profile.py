@@ -2,7 +2,9 @@
 
 Reads MAPDIR/map.ply (binary, the map contract) built from `maps/stream_slope.toml` and
 prints, per 2 m of x, the mean and RMS of (water cell z − true surface), where the true
-surface is the scene's stream: −0.5 + 0.03 (x + 5) m, within 1.5 m of y = 5.
+surface is the scene's stream: −0.5 + 0.03 (x + 5) m, within 1.5 m of y = 5; then the
+same on either side of x = 18 m, where the simulated rig's map splits the stream in two
+bodies, and over all.
 
     .venv/bin/python tools/stream_profile.py out/eval_water/stream_slope/map
 """
@@ -47,6 +49,11 @@ def main():
         if m.any():
             e = err[m]
             print(f"| {x0}..{x0 + 2} | {m.sum()} | {e.mean():+.3f} | {np.sqrt((e**2).mean()):.3f} |")
+    # The simulated rig sees the stream as two bodies, split near x = 18 m.
+    for name, m in (("x < 18", w["x"] < 18.0), ("x ≥ 18", w["x"] >= 18.0)):
+        if m.any():
+            e = err[m]
+            print(f"| {name} | {m.sum()} | {e.mean():+.3f} | {np.sqrt((e**2).mean()):.3f} |")
     print(f"| all | {len(err)} | {err.mean():+.3f} | {np.sqrt((err**2).mean()):.3f} |")
 
 

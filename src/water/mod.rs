@@ -108,7 +108,8 @@
 //! half took one sample's height per stretch, with steps of up to 18 cm between stretches;
 //! the stream's surface RMS went from 6.6 to 5.4 cm, the other scenes did not move.)
 //! The vertices are not the samples as measured but each at the median of the kept samples
-//! within `shore_radius_m` of it ([`surface::local_medians`]): a triangulation carries each
+//! within `vertex_median_radius_m` (1.5 m) of it ([`surface::local_medians`]; 0 keeps them
+//! as measured): a triangulation carries each
 //! vertex's own error to the water around it, and across a stream seen from one bank, to
 //! the whole near half of the channel. Single shore cells stand well off the water: a
 //! waterline cell mostly under water, seen through it at grazing incidence (10–14 cm
@@ -196,6 +197,9 @@ pub struct WaterConfig {
     /// Steepest bank (rise over run) whose slope moves a shore sample down to the water's
     /// edge; 0 turns the correction off.
     pub max_bank_slope: f64,
+    /// A Delaunay surface's vertices are its samples at the median of the samples within
+    /// this distance (m); 0 keeps them as measured.
+    pub vertex_median_radius_m: f64,
 }
 
 impl Default for WaterConfig {
@@ -213,6 +217,7 @@ impl Default for WaterConfig {
             min_shore_samples: 6,
             level_residual_m: 0.02,
             max_bank_slope: 1.0,
+            vertex_median_radius_m: 1.5,
         }
     }
 }
@@ -299,6 +304,12 @@ impl WaterConfig {
             "water.max_bank_slope",
             nonneg(self.max_bank_slope),
             self.max_bank_slope,
+            "must be a finite number ≥ 0",
+        )?;
+        check(
+            "water.vertex_median_radius_m",
+            nonneg(self.vertex_median_radius_m),
+            self.vertex_median_radius_m,
             "must be a finite number ≥ 0",
         )
     }

@@ -809,6 +809,16 @@ fn config_is_checked_and_named() {
         ),
         (
             HazardConfig {
+                water: WaterConfig {
+                    vertex_median_radius_m: -0.5,
+                    ..WaterConfig::default()
+                },
+                ..HazardConfig::default()
+            },
+            "water.vertex_median_radius_m",
+        ),
+        (
+            HazardConfig {
                 vehicle: Vehicle {
                     max_slope_deg: 90.0,
                     ..Vehicle::default()
