@@ -88,10 +88,25 @@
 //! no Delaunay surface. Counted equally, stereo cells of σ 2 m outvoted the one lidar cell
 //! at the water's edge (`pond_bush`: 9.2 cm surface RMS, 0.5 cm weighted).
 //!
-//! Where the shore is poorly seen (fewer than `min_shore_samples` kept), the water-level
-//! samples the cues measured with their evidence (`Evidence::level_mm`: the level of the
-//! last ground a no-return beam or reflection ray was cast from) are used instead, one per
-//! water cell, at the cell centre. Without either, the body's own cell elevations.
+//! Where the shore is poorly seen (fewer than `min_shore_samples` kept), the shore may lie
+//! across water that no sensor measured: a stream seen 12–22 m off is a sky reflection in
+//! the camera along its near half, its near shore hidden by the near bank, its far half
+//! giving neither returns nor labels, while the lidar measures the far bank's waterline a
+//! metre beyond. The *far shore* is, from each body cell in each of the four directions,
+//! the first reliably measured dry cell within `shore_radius_m` past at least one cell
+//! that is unobserved or unreliable. It passes the occluder and spill tests, and one more:
+//! a sample more than `occluder_height_m` below the median of the others within
+//! `shore_radius_m` is dropped, because the spill test takes the lowest sample as the
+//! truth and, across an unseen channel, some cells of the far bank lie well below the
+//! water (on `stream_slope`, six cells 8–22 cm under it, returns placed wrongly, which
+//! bounded every good sample away). On `stream_slope` the second body's surface went from
+//! 8.4 to 2.9 cm RMS (its far bank's waterline cells stand within 2 cm of the water), the
+//! stream's from 4.4 to 3.2 cm; `pond_bush`'s small second body takes it too, with no
+//! change (1.2 cm). Without a far shore, the water-level samples the cues measured with
+//! their evidence (`Evidence::level_mm`: the level of the last ground a no-return beam or
+//! reflection ray was cast from) are used instead, one per water cell, at the cell
+//! centre: upper bounds, 7–10 cm above the stream there. Without either, the body's own
+//! cell elevations.
 //!
 //! ## 3. Surface: level plane, or constrained Delaunay where the shore is not level
 //!
@@ -399,6 +414,8 @@ impl HazardConfig {
 pub enum SurfaceSource {
     /// Dry cells along the water's edge.
     Shore,
+    /// Dry cells across unobserved water from the body (its own shore was poorly seen).
+    FarShore,
     /// The cues' water-level samples (the shore was poorly seen).
     WaterLevels,
     /// The body's own cell elevations (nothing better).
@@ -799,12 +816,15 @@ fn body_of(
         &surface::reject_occluders(&shore, &ground, cfg),
         cfg,
     );
-    let (samples, keys, source) = if kept.len() >= cfg.min_shore_samples.max(1) {
+    let enough = kept.len() >= cfg.min_shore_samples.max(1);
+    let (samples, keys, source) = if enough {
         (
             kept.iter().map(|&i| shore[i]).collect::<Vec<_>>(),
             kept.iter().map(|&i| shore_keys[i]).collect::<Vec<_>>(),
             SurfaceSource::Shore,
         )
+    } else if let Some((s, k)) = far_shore(&set, info, res, cfg) {
+        (s, k, SurfaceSource::FarShore)
     } else {
         let levels: Vec<(CellKey, f64)> = cells
             .iter()
@@ -902,6 +922,67 @@ fn body_of(
         body.volume_m3 = Some(m.volume());
     }
     Some(body)
+}
+
+/// The shore of a body seen across water no sensor measured (module documentation,
+/// section 2): from each body cell, in each of the four directions, the first reliably
+/// measured dry cell within `shore_radius_m` past at least one cell that is unobserved or
+/// measured unreliably; kept when the occluder test keeps it, it stands no more than
+/// `occluder_height_m` below the median of the others within `shore_radius_m`, and the
+/// spill test keeps it. `None` when fewer than `min_shore_samples` are kept.
+fn far_shore(
+    set: &BTreeSet<CellKey>,
+    info: &impl CellInfos,
+    res: f64,
+    cfg: &WaterConfig,
+) -> Option<(Vec<ShoreSample>, Vec<CellKey>)> {
+    let firm = |i: &Info| {
+        i.elevation.is_some()
+            && i.depth.is_none()
+            && i.std.is_some_and(|s| s <= cfg.shore_max_std_m)
+    };
+    let n = cfg.shore_radius_cells(res);
+    let mut keys: BTreeSet<CellKey> = BTreeSet::new();
+    for &k in set {
+        for d in N4 {
+            for j in 1..=n {
+                let c = add(k, (d.0 * j, d.1 * j));
+                if set.contains(&c) {
+                    break;
+                }
+                if let Some(i) = info.get(c) {
+                    if firm(&i) {
+                        if j > 1 {
+                            keys.insert(c);
+                        }
+                        break;
+                    }
+                }
+            }
+        }
+    }
+    let keys: Vec<CellKey> = keys.into_iter().collect();
+    let shore: Vec<ShoreSample> = keys
+        .iter()
+        .map(|&k| {
+            let (x, y) = centre_of(res, k);
+            let z = info.get(k).and_then(|i| i.elevation).unwrap_or(f64::NAN);
+            ShoreSample { x, y, z }
+        })
+        .collect();
+    let ground = ground_near(set, &keys, info, res, cfg);
+    let medians = surface::local_medians(&shore, cfg.shore_radius_m);
+    let not_low: Vec<usize> = surface::reject_occluders(&shore, &ground, cfg)
+        .into_iter()
+        .filter(|&i| medians[i].z - shore[i].z <= cfg.occluder_height_m)
+        .collect();
+    let kept = surface::reject_spilling(&shore, &not_low, cfg);
+    (kept.len() >= cfg.min_shore_samples.max(1)).then(|| {
+        (
+            kept.iter().map(|&i| shore[i]).collect(),
+            kept.iter().map(|&i| keys[i]).collect(),
+        )
+    })
 }
 
 /// Whether the dry cell `k` lies in a hole of the body `set` of at most `max_cells` cells:

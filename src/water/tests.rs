@@ -935,3 +935,42 @@ proptest! {
         }
     }
 }
+
+/// A stream falling 3 % along x whose near bank hides its near shore and whose far half is
+/// unobserved (no return, no label): the only measured shore is the far bank, winding 1–1.3 m
+/// beyond the water that was seen, with a few cells on it 20 cm under the water (returns
+/// placed wrongly). The far shore gives the surface within 3 cm; the water cells' own level
+/// samples, upper bounds 30 cm above the water, are not used.
+#[test]
+fn the_far_shore_across_unobserved_water_places_the_surface() {
+    let water = |x: f64| 0.03 * x;
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    let mut truth = HashMap::new();
+    for ky in -60..60 {
+        for kx in -60..60 {
+            let k = CellKey::new(kx, ky);
+            let (x, y) = t.centre_of(k);
+            if (-1.0..0.5).contains(&y) {
+                t.add(k, &wet(water(x) + 0.3, None));
+                truth.insert(k, water(x));
+            } else if y >= 1.5 + 0.3 * (x * 1.3).sin().abs() {
+                let edge = 1.5 + 0.3 * (x * 1.3).sin().abs();
+                let polluted = kx.rem_euclid(17) == 0 && y < edge + 0.2;
+                let z = if polluted {
+                    water(x) - 0.2
+                } else {
+                    water(x) + 0.3 * (y - edge)
+                };
+                t.add(k, &dry(z));
+            }
+        }
+    }
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    assert_eq!(b.surface_source, SurfaceSource::FarShore);
+    let (rms, n) = surface_rms(&map, &truth);
+    assert_eq!(n, truth.len());
+    eprintln!("stream seen across unobserved water: surface RMS {rms:.4} m from the far shore");
+    assert!(rms <= 0.03, "{rms}");
+}
