@@ -754,17 +754,13 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
         mapper.update(&f?)?;
     }
     let tiles = mapper.finish();
-    // The Delaunay surface with its vertices as measured and at the median of their 1.5 m
-    // of shore (the default).
+    // The Delaunay surface (barycentric) with its vertices as measured ("raw") and at the
+    // median of their 1.5 m of shore (the default).
     let default_radius = crate::water::WaterConfig::default().vertex_median_radius_m;
     for (i, (name, level_residual_m, vertex_median_radius_m)) in [
         ("level plane", 1e9, default_radius),
-        ("barycentric (Delaunay), vertices as measured", 0.0, 0.0),
-        (
-            "barycentric (Delaunay), vertices at local medians",
-            0.0,
-            default_radius,
-        ),
+        ("Delaunay, raw", 0.0, 0.0),
+        ("Delaunay, medians", 0.0, default_radius),
     ]
     .into_iter()
     .enumerate()
