@@ -8,7 +8,7 @@
 //! colour camera's labels when the log has one: the frame of issue 9 includes colour
 //! classification and projection.
 //!
-//! A stage is one entry of [`Stages`]: adding one (water surfaces, labels) is one line.
+//! A stage is one entry of `Stages`: adding one (water surfaces, labels) is one line.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

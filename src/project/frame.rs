@@ -51,7 +51,7 @@ pub struct FrameLabelConfig {
     /// Use every `ray_stride`-th pixel in x and y (1 = all).
     pub ray_stride: usize,
     /// Also use every row of pixels whose ground footprint is wider than a map cell
-    /// ([`sampled_rows`]): there a skipped row skips whole cells, and the labels' edges
+    /// (`sampled_rows`): there a skipped row skips whole cells, and the labels' edges
     /// (the water's, and a sky reflection's) move by that much. Off by default: with
     /// every cue the extra votes on the water's edge move the shores (README, "Image
     /// labels").

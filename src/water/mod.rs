@@ -124,15 +124,14 @@
 //! the stream's surface RMS went from 6.6 to 5.4 cm, the other scenes did not move.)
 //! The vertices are not the samples as measured but each at the median of the kept samples
 //! within `vertex_median_radius_m` (1.5 m) of it ([`surface::local_medians`]; 0 keeps them
-//! as measured): a triangulation carries each
-//! vertex's own error to the water around it, and across a stream seen from one bank, to
-//! the whole near half of the channel. Single shore cells stand well off the water: a
-//! waterline cell mostly under water, seen through it at grazing incidence (10–14 cm
-//! low), or the top of a short stretch of bank. On `stream_slope` the surface RMS went
-//! from 5.5 to 4.4 cm (at x = −4..6 m from 3–6 cm to 1–2.4 cm) and its depth RMS from
-//! 0.132 to 0.118 m; the level bodies do not change.
-//! The median of a one-sided neighbourhood, within the radius of a shore's end, stands
-//! off by up to the slope times half the radius (2.25 cm on a 3 % stream).
+//! as measured): a triangulation carries each vertex's own error to the water around it,
+//! and across a stream seen from one bank, to the whole near half of the channel. Single
+//! shore cells stand well off the water: a waterline cell mostly under water, seen through
+//! it at grazing incidence (10–14 cm low), or the top of a short stretch of bank. On
+//! `stream_slope` the surface RMS went from 5.5 to 4.4 cm (at x = −4..6 m from 3–6 cm to
+//! 1–2.4 cm) and its depth RMS from 0.132 to 0.118 m; the level bodies do not change. The
+//! median of a one-sided neighbourhood, within the radius of a shore's end, stands off by
+//! up to the slope times half the radius (2.25 cm on a 3 % stream).
 //! The Delaunay model must earn its place: its hold-out residual (every
 //! other sample predicted from the triangulation of the others) must beat the level's, or
 //! the body stays level. Both residuals are reported per body. Degenerate samples
@@ -816,8 +815,7 @@ fn body_of(
         &surface::reject_occluders(&shore, &ground, cfg),
         cfg,
     );
-    let enough = kept.len() >= cfg.min_shore_samples.max(1);
-    let (samples, keys, source) = if enough {
+    let (samples, keys, source) = if kept.len() >= cfg.min_shore_samples.max(1) {
         (
             kept.iter().map(|&i| shore[i]).collect::<Vec<_>>(),
             kept.iter().map(|&i| shore_keys[i]).collect::<Vec<_>>(),

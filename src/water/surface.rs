@@ -372,8 +372,8 @@ fn rms(it: impl Iterator<Item = f64>) -> f64 {
 /// edges between them: the level plane at the median when its RMS residual is within
 /// `cfg.level_residual_m`; otherwise the constrained Delaunay surface when its hold-out
 /// residual beats the level's, else still the level. The Delaunay surface's vertices are
-/// the samples at their [`local_medians`] within `cfg.vertex_median_radius_m`; the residuals are
-/// those of the samples as measured. `None` without finite samples.
+/// the samples at their [`local_medians`] within `cfg.vertex_median_radius_m`; the
+/// residuals are those of the samples as measured. `None` without finite samples.
 pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfig) -> Option<Fit> {
     let z = median(samples.iter().map(|s| s.z).collect())?;
     let level_residual_m = rms(samples.iter().map(|s| s.z - z));
