@@ -157,10 +157,8 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
     }
     put("ply", "binary-be.ply", &be)?;
     let tmp = tempfile::tempdir()?;
-    let map = tarn::sim::truth_map(&tarn::sim::World::build(&tarn::sim::Scene::from_toml_str(
-        &std::fs::read_to_string(
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("maps/vertical_scanner.toml"),
-        )?,
+    let map = tarn::sim::truth_map(&tarn::sim::World::build(&tarn::sim::Scene::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("maps/vertical_scanner.toml"),
     )?)?);
     let small = tarn::hazard::HazardMap::new(
         map.resolution,

@@ -43,6 +43,8 @@ pub struct BenchOptions {
     pub log: Option<PathBuf>,
     /// The scene to simulate when no log is given.
     pub scene: PathBuf,
+    /// The rig to simulate it with (`None`: the one the scene names).
+    pub rig: Option<PathBuf>,
     /// Points of the synthetic lidar-like cloud that measures raw ingest throughput.
     pub ingest_points: usize,
     /// Bits per channel of the colour lookup table.
@@ -56,6 +58,7 @@ impl Default for BenchOptions {
             reps: 7,
             log: None,
             scene: PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/maps/default.toml")),
+            rig: None,
             ingest_points: 4_000_000,
             lut_bits: 6,
             grid: GridConfig::default(),
@@ -219,11 +222,11 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let (log, mapper) = match &opts.log {
         Some(l) => (l.clone(), crate::mapper::MapperConfig::default()),
         None => {
-            let scene = crate::sim::Scene::load(&opts.scene)?;
+            let scene = crate::sim::Scene::load_with_rig(&opts.scene, opts.rig.as_deref())?;
             crate::sim::simulate(&scene, tmp.path(), crate::sim::SimOptions::default())?;
             (
                 tmp.path().join("log.mcap"),
-                crate::sim::mapper_config(&scene),
+                crate::sim::mapper_config(&scene.rig),
             )
         }
     };
@@ -244,7 +247,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     };
     let log_cfg = LogBuildConfig {
         mapper: crate::mapper::MapperConfig {
-            labels: colour_labels.clone(),
+            label_models: colour_labels.clone(),
             ..mapper
         },
         ..LogBuildConfig::default()
@@ -395,7 +398,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         frame_ms_method: format!(
             "median Mapper::update time over the log's frames (build_log with the rig's mapper \
              config{}, the hazard map published every frame), median over repetitions",
-            if log_cfg.mapper.labels.is_some() {
+            if log_cfg.mapper.label_models.is_some() {
                 " and colour labels"
             } else {
                 ""
@@ -601,12 +604,12 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
 
     // Grid resolution on the simulated scene, scored by `tarn eval` against its truth.
     let sim_dir = tmp.path().join("sim");
-    let scene = crate::sim::Scene::load(&opts.scene)?;
+    let scene = crate::sim::Scene::load_with_rig(&opts.scene, opts.rig.as_deref())?;
     crate::sim::simulate(&scene, &sim_dir, crate::sim::SimOptions::default())?;
     let log = sim_dir.join("log.mcap");
     for res in [0.05, 0.1, 0.2, 0.4] {
         let out = tmp.path().join(format!("res{res}"));
-        let mut mapper = crate::sim::mapper_config(&scene);
+        let mut mapper = crate::sim::mapper_config(&scene.rig);
         mapper.grid = GridConfig {
             resolution: res,
             size_cells: ((40.0 / res).round() as usize).max(2),
@@ -691,9 +694,9 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
         (2, true),
     ] {
         let out = tmp.path().join(format!("stride{stride}-{wide_rows}"));
-        let mut mapper = crate::sim::mapper_config(&scene);
+        let mut mapper = crate::sim::mapper_config(&scene.rig);
         mapper.grid.size_cells = 800;
-        mapper.labels = Some(crate::project::FrameLabelConfig {
+        mapper.label_models = Some(crate::project::FrameLabelConfig {
             colour: Some(ColorLut::compile(&RuleClassifier::default(), 8)?),
             ray_stride: stride,
             wide_rows,
@@ -749,7 +752,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     let stream = crate::sim::Scene::load(&opts.scene.with_file_name("stream_slope.toml"))?;
     let stream_dir = tmp.path().join("stream");
     crate::sim::simulate(&stream, &stream_dir, crate::sim::SimOptions::default())?;
-    let mut mapper = crate::mapper::Mapper::new(crate::sim::mapper_config(&stream))?;
+    let mut mapper = crate::mapper::Mapper::new(crate::sim::mapper_config(&stream.rig))?;
     for f in FrameStream::open(stream_dir.join("log.mcap"), &LogConfig::default())? {
         mapper.update(&f?)?;
     }
@@ -765,7 +768,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     .into_iter()
     .enumerate()
     {
-        let mut hc = crate::sim::mapper_config(&stream).hazard_config();
+        let mut hc = crate::sim::mapper_config(&stream.rig).hazard_config();
         hc.water.level_residual_m = level_residual_m;
         hc.water.vertex_median_radius_m = vertex_median_radius_m;
         let (ms, map) = timed(reps, || HazardMap::from_tiles(&tiles, &hc))?;

@@ -114,7 +114,18 @@ pub struct StereoConfig {
     /// Confirm reflections by mirror-image correlation of the camera image (when the frame
     /// has one with its camera model).
     pub mirror_check: bool,
-    /// Cue settings, and the range noise used to fuse the cloud.
+    /// Disparity noise (one σ, pixels of the disparity image that made the cloud): a
+    /// datasheet value. With the focal length (the left `CameraInfo`), the binning (image
+    /// width over cloud width) and the baseline, it gives the cloud's range noise
+    /// ([`StereoConfig::range_noise`]).
+    pub disparity_noise_px: f64,
+    /// Smallest disparity the matcher reports (pixels of the disparity image).
+    pub min_disparity_px: f64,
+    /// The baseline (m), for logs without the right camera's `CameraInfo` (which, when
+    /// present, is used instead).
+    pub baseline_m: Option<f64>,
+    /// Cue settings; `cue.noise` is the range noise used only where the frame does not
+    /// give the focal length and the baseline.
     pub cue: StereoCueConfig,
 }
 
@@ -123,13 +134,62 @@ impl Default for StereoConfig {
         StereoConfig {
             reflections: true,
             mirror_check: true,
+            disparity_noise_px: 0.5,
+            min_disparity_px: 1.0,
+            baseline_m: None,
             cue: StereoCueConfig::default(),
+        }
+    }
+}
+
+/// Where a frame's stereo range noise came from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StereoNoiseSource {
+    /// σ_z = z²·σ_d·k/(f·B), from the camera, the binning, the baseline and σ_d.
+    Disparity,
+    /// The config's `cue.noise` polynomial: the frame had no camera model or no baseline.
+    Config,
+}
+
+impl StereoConfig {
+    /// The range noise of a stereo cloud of `cloud_cols` columns from a left camera
+    /// `camera` and a baseline `baseline_m` (the log's, else the config's): depth
+    /// z = f_k·B/d with f_k = f/k (k = image width / cloud width, the binning), so a
+    /// disparity error of σ_d is a depth error of z²·σ_d/(f_k·B) = z²·σ_d·k/(f·B). Range
+    /// stands in for depth (r ≥ z: the noise is not underestimated). Without a camera or a
+    /// baseline, the config's `cue.noise`.
+    pub fn range_noise(
+        &self,
+        camera: Option<&crate::geom::camera::CameraModel>,
+        cloud_cols: usize,
+        baseline_m: Option<f64>,
+    ) -> (RangeNoise, StereoNoiseSource) {
+        let b = baseline_m
+            .or(self.baseline_m)
+            .filter(|b| b.is_finite() && *b > 0.0);
+        match (camera, b) {
+            (Some(cam), Some(b)) if cloud_cols > 0 && cam.fx > 0.0 => {
+                let k = (cam.width / cloud_cols).max(1) as f64;
+                let noise = RangeNoise {
+                    sigma0: self.cue.noise.sigma0,
+                    per_m: 0.0,
+                    per_m2: self.disparity_noise_px * k / (cam.fx * b),
+                };
+                (noise, StereoNoiseSource::Disparity)
+            }
+            _ => (self.cue.noise, StereoNoiseSource::Config),
         }
     }
 }
 
 /// Everything the [`Mapper`] needs. Loadable from TOML or JSON ([`MapperConfig::load`]);
 /// unknown keys are errors; [`MapperConfig::validate`] names the field that is wrong.
+///
+/// In a file, a sensor whose section is absent (`[lidar]`, `[stereo]`, `[labels]`) is off:
+/// its data is not read at all. [`MapperConfig::default`] has the lidar and the stereo pair
+/// and no image labels; [`MapperConfig::every_sensor`] adds colour and SWIR labels (what
+/// `tarn build LOG` uses without a config).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MapperConfig {
@@ -140,14 +200,46 @@ pub struct MapperConfig {
     /// How evidence becomes water bodies with a surface and a depth.
     pub water: WaterConfig,
     /// The lidar; absent: lidar scans are not used at all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lidar: Option<LidarConfig>,
     /// The stereo camera; absent: stereo clouds are not used at all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stereo: Option<StereoConfig>,
     /// Image labels (colour, SWIR, MWIR) into the water evidence; absent: images are not
-    /// used at all. Set in code or from the command line (`tarn build --labels`); not read
-    /// from config files (a trained colour model is its own JSON file).
+    /// used at all.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub labels: Option<crate::project::LabelsConfig>,
+    /// The compiled form of `labels` (lookup tables), for code that builds its own; when
+    /// absent, [`Mapper::new`] compiles `labels`.
     #[serde(skip)]
-    pub labels: Option<crate::project::FrameLabelConfig>,
+    pub label_models: Option<crate::project::FrameLabelConfig>,
+    /// Topics, frame names and timing of the log.
+    pub log: crate::io::frames::LogConfig,
+    /// What `tarn build` does besides mapping.
+    pub build: BuildOptions,
+}
+
+/// The `[build]` section: options of an offline build (`tarn build`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BuildOptions {
+    /// Publish the window's hazard map after every frame, as on the vehicle, and time it;
+    /// off, the water stage runs once at the end (the map is the same).
+    pub per_frame_maps: bool,
+    /// (cloud inputs) Elevation noise of the points (m, one σ).
+    pub noise_sigma_m: f64,
+    /// (cloud inputs) Largest window side (cells); larger clouds are built in blocks.
+    pub max_window_cells: usize,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            per_frame_maps: false,
+            noise_sigma_m: 0.02,
+            max_window_cells: 2048,
+        }
+    }
 }
 
 impl Default for MapperConfig {
@@ -160,6 +252,9 @@ impl Default for MapperConfig {
             lidar: Some(LidarConfig::default()),
             stereo: Some(StereoConfig::default()),
             labels: None,
+            label_models: None,
+            log: Default::default(),
+            build: BuildOptions::default(),
         }
     }
 }
@@ -168,6 +263,22 @@ impl Default for MapperConfig {
 pub const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
 
 impl MapperConfig {
+    /// Every sensor a log may carry: the lidar and the stereo pair with every cue, and
+    /// colour and SWIR labels (MWIR labels need the log's solar hour, which a log does not
+    /// carry). A sensor the log lacks costs nothing.
+    pub fn every_sensor() -> Self {
+        MapperConfig {
+            labels: Some(crate::project::LabelsConfig {
+                sensors: vec![
+                    crate::project::LabelSensor::Colour,
+                    crate::project::LabelSensor::Swir,
+                ],
+                ..Default::default()
+            }),
+            ..Self::default()
+        }
+    }
+
     /// Reads a config from a `.toml` file, or JSON for any other extension. Errors name the
     /// file, and the key and line where parsing failed; then the config is validated.
     pub fn load(path: &Path) -> Result<Self> {
@@ -285,7 +396,44 @@ impl MapperConfig {
                     "the mirror check confirms stereo reflections: set stereo.reflections too",
                 ));
             }
+            if !(s.disparity_noise_px.is_finite() && s.disparity_noise_px >= 0.0) {
+                return Err(Error::invalid(
+                    "mapper config stereo.disparity_noise_px",
+                    format!("{} is not a number ≥ 0", s.disparity_noise_px),
+                ));
+            }
+            if !(s.min_disparity_px.is_finite() && s.min_disparity_px > 0.0) {
+                return Err(Error::invalid(
+                    "mapper config stereo.min_disparity_px",
+                    format!("{} is not a number > 0", s.min_disparity_px),
+                ));
+            }
+            if let Some(b) = s.baseline_m {
+                if !(b.is_finite() && b > 0.0) {
+                    return Err(Error::invalid(
+                        "mapper config stereo.baseline_m",
+                        format!("{b} is not a finite number > 0"),
+                    ));
+                }
+            }
             named("stereo.cue", s.cue.validate())?;
+        }
+        named("log", self.log.validate())?;
+        if !(self.build.noise_sigma_m.is_finite() && self.build.noise_sigma_m > 0.0) {
+            return Err(Error::invalid(
+                "mapper config build.noise_sigma_m",
+                format!("{} is not a finite number > 0", self.build.noise_sigma_m),
+            ));
+        }
+        if self.build.max_window_cells < 16 {
+            return Err(Error::invalid(
+                "mapper config build.max_window_cells",
+                format!("{} must be ≥ 16", self.build.max_window_cells),
+            ));
+        }
+        if let Some(l) = &self.labels {
+            l.compile()
+                .map_err(|e| Error::invalid("mapper config labels", e.to_string()))?;
         }
         Ok(())
     }
@@ -419,6 +567,8 @@ pub struct FrameReport {
     pub cues: FrameCuesReport,
     /// The lidar height used by the cue model (given or estimated), once known.
     pub lidar_height_m: Option<f64>,
+    /// The stereo cloud's range noise and where it came from (a frame with a stereo cloud).
+    pub stereo_noise: Option<(RangeNoise, StereoNoiseSource)>,
     /// Cells of the published snapshot, and those called water.
     pub snapshot_cells: usize,
     pub snapshot_water_cells: usize,
@@ -507,11 +657,12 @@ impl Mapper {
         }
         let global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
         let empty = Arc::new(HazardMap::new(cfg.grid.resolution, Vec::new()));
-        let labels = cfg
-            .labels
-            .clone()
-            .map(crate::project::FrameLabels::new)
-            .transpose()?;
+        let models = match (&cfg.label_models, &cfg.labels) {
+            (Some(m), _) => Some(m.clone()),
+            (None, Some(l)) => Some(l.compile()?),
+            (None, None) => None,
+        };
+        let labels = models.map(crate::project::FrameLabels::new).transpose()?;
         Ok(Mapper {
             cfg,
             cues: FrameCues::new(fc),
@@ -627,10 +778,16 @@ impl Mapper {
         // 3. stereo
         let t = Instant::now();
         if let (Some(s), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
+            let camera = frame.image.as_ref().and_then(|i| i.camera.as_ref());
+            let (noise, source) = s.range_noise(camera, cloud.cols, frame.stereo_baseline_m);
+            rep.stereo_noise = Some((noise, source));
+            if let Some(c) = self.cues.cfg.stereo.as_mut() {
+                c.noise = noise;
+            }
             if s.reflections {
                 self.cues.apply_stereo(frame, grid, &mut rep.cues)?;
             } else {
-                rep.stereo_ingest = Some(grid.ingest(cloud, &s.cue.noise)?);
+                rep.stereo_ingest = Some(grid.ingest(cloud, &noise)?);
             }
         }
         times.stereo = t.elapsed().as_secs_f64();

@@ -32,6 +32,9 @@ pub struct LogConfig {
     pub stereo_topic: String,
     pub image_topic: String,
     pub camera_info_topic: String,
+    /// The right camera of the stereo pair: its projection gives the baseline
+    /// (P[0][3] = −f·B).
+    pub right_camera_info_topic: String,
     pub swir_topic: String,
     pub swir_info_topic: String,
     pub mwir_topic: String,
@@ -56,6 +59,7 @@ impl Default for LogConfig {
             stereo_topic: "/stereo/points".into(),
             image_topic: "/camera/image".into(),
             camera_info_topic: "/camera/camera_info".into(),
+            right_camera_info_topic: "/camera_right/camera_info".into(),
             swir_topic: "/swir/image".into(),
             swir_info_topic: "/swir/camera_info".into(),
             mwir_topic: "/mwir/image".into(),
@@ -96,6 +100,20 @@ impl LogConfig {
     }
 }
 
+/// The baseline (m) of a stereo pair from its right camera's rectified projection:
+/// ROS stereo drivers publish P[0][3] = −f·B (f = P[0][0]).
+pub fn stereo_baseline(right: &CameraInfoMsg) -> std::result::Result<f64, String> {
+    let (f, tx) = (right.p[0], right.p[3]);
+    let b = -tx / f;
+    if f.is_finite() && f > 0.0 && b.is_finite() && b > 0.0 {
+        Ok(b)
+    } else {
+        Err(format!(
+            "right camera P[0][0] = {f}, P[0][3] = {tx}: no baseline (P[0][3] must be −f·B, B > 0)"
+        ))
+    }
+}
+
 /// An image with what is needed to project it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SensorImage {
@@ -121,6 +139,9 @@ pub struct Frame {
     pub image: Option<SensorImage>,
     pub swir: Option<SensorImage>,
     pub mwir: Option<SensorImage>,
+    /// The stereo baseline (m) from the latest right-camera `CameraInfo`, when the log has
+    /// one.
+    pub stereo_baseline_m: Option<f64>,
 }
 
 /// What happened while streaming.
@@ -173,6 +194,7 @@ pub struct FrameStream {
     other_clouds: VecDeque<Pending<(PointCloud, String)>>,
     images: [VecDeque<Pending<Image>>; 3],
     infos: [Option<CameraModel>; 3],
+    baseline_m: Option<f64>,
     /// Latest log time seen, ns.
     now_ns: i64,
     stats: FrameStats,
@@ -203,6 +225,7 @@ impl FrameStream {
             other_clouds: VecDeque::new(),
             images: Default::default(),
             infos: Default::default(),
+            baseline_m: None,
             now_ns: i64::MIN,
             stats: FrameStats::default(),
             damage: None,
@@ -306,6 +329,11 @@ impl FrameStream {
                 }
             }
             schema_name::CAMERA_INFO => {
+                if ch.topic == self.cfg.right_camera_info_topic {
+                    let info = CameraInfoMsg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                    self.baseline_m = Some(stereo_baseline(&info).map_err(|e| self.bad(&m, e))?);
+                    return Ok(());
+                }
                 let k = if ch.topic == self.cfg.camera_info_topic {
                     0
                 } else if ch.topic == self.cfg.swir_info_topic {
@@ -443,6 +471,7 @@ impl FrameStream {
             image: self.matched_image(0, ns),
             swir: self.matched_image(1, ns),
             mwir: self.matched_image(2, ns),
+            stereo_baseline_m: self.baseline_m,
         })
     }
 

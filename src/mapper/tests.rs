@@ -7,13 +7,16 @@ use crate::sim::{simulate, Scene, SimOptions};
 
 /// The default scene, cut down: 6 frames 2 m apart, a 256-column lidar, 160 × 120 stereo.
 fn small_scene() -> Scene {
-    let text =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/maps/default.toml")).unwrap();
-    let mut s = Scene::from_toml_str(&text).unwrap();
+    let mut s = Scene::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/maps/default.toml"
+    )))
+    .unwrap();
     s.trajectory.frames = Some(6);
     s.trajectory.speed = 20.0;
     let l = s.rig.lidar.as_mut().unwrap();
     l.columns = 256;
+    l.elevation_deg = [-25.0, 5.0];
     let st = s.rig.stereo.as_mut().unwrap();
     st.width = 160;
     st.height = 120;
@@ -58,7 +61,7 @@ fn run(cfg: &MapperConfig, frames: &[Frame]) -> (TileMap, Vec<FrameReport>) {
 
 #[test]
 fn cues_put_water_evidence_at_the_pond() {
-    let mut cfg = crate::sim::mapper_config(&small_scene());
+    let mut cfg = crate::sim::mapper_config(&small_scene().rig);
     cfg.lidar.as_mut().unwrap().height_m = None; // estimated from the scan
     let (tiles, reps) = run(&cfg, &sim().frames);
     // The lidar is 1.8 m above base_link, which the simulator puts on the terrain.
@@ -173,8 +176,12 @@ fn without_cues_the_mapper_is_plain_ingest() {
         };
         g.ingest(f.lidar.as_ref().unwrap(), &RangeNoise::LIDAR)
             .unwrap();
-        g.ingest(f.stereo.as_ref().unwrap(), &RangeNoise::STEREO)
-            .unwrap();
+        let stereo = f.stereo.as_ref().unwrap();
+        let camera = f.image.as_ref().and_then(|i| i.camera.as_ref());
+        let (noise, source) =
+            StereoConfig::default().range_noise(camera, stereo.cols, f.stereo_baseline_m);
+        assert_eq!(source, StereoNoiseSource::Disparity);
+        g.ingest(stereo, &noise).unwrap();
     }
     grid.unwrap().flush(&mut global);
     assert!(tiles == global);
@@ -190,7 +197,7 @@ fn one_and_two_threads_give_the_same_map() {
             .build()
             .unwrap()
             .install(|| {
-                let mut m = Mapper::new(MapperConfig::default()).unwrap();
+                let mut m = Mapper::new(MapperConfig::every_sensor()).unwrap();
                 // The published hazard map of every frame, bit for bit (NaN depths too).
                 let maps: Vec<String> = frames
                     .iter()
@@ -213,7 +220,7 @@ fn one_and_two_threads_give_the_same_map() {
 #[test]
 fn a_map_published_on_demand_is_the_map_published_every_frame() {
     let frames = &sim().frames;
-    let cfg = MapperConfig::default();
+    let cfg = MapperConfig::every_sensor();
     let mut every = Mapper::new(cfg.clone()).unwrap();
     let mut asked = Mapper::new(cfg).unwrap();
     asked.set_publish(false);
@@ -385,8 +392,107 @@ fn configs_round_trip_through_toml_and_cue_lists() {
     );
     c.set_cues("none").unwrap();
     assert!(crate::build::cue_names(&c).is_empty());
-    // An empty file is the default config.
-    assert_eq!(load_str("e.toml", "").unwrap(), MapperConfig::default());
+    // Every section round-trips, labels and build options too.
+    let mut every = MapperConfig::every_sensor();
+    every.build.per_frame_maps = true;
+    every.log.frame_topic = every.log.stereo_topic.clone();
+    every.labels.as_mut().unwrap().stride = 3;
+    assert_eq!(
+        load_str("v.toml", &every.to_toml().unwrap()).unwrap(),
+        every
+    );
+}
+
+/// In a config file a sensor whose section is absent is off, in TOML as in JSON: an empty
+/// file reads no sensor at all; a section alone turns its sensor on with its defaults.
+#[test]
+fn an_absent_section_turns_its_sensor_off() {
+    let none = MapperConfig {
+        lidar: None,
+        stereo: None,
+        labels: None,
+        ..MapperConfig::default()
+    };
+    assert_eq!(load_str("e.toml", "").unwrap(), none);
+    assert_eq!(load_str("e.json", "{}").unwrap(), none);
+    assert_eq!(
+        load_str(
+            "g.toml",
+            "[grid]
+size_cells = 200
+"
+        )
+        .unwrap()
+        .lidar,
+        None
+    );
+    let l = load_str(
+        "l.toml", "[lidar]
+",
+    )
+    .unwrap();
+    assert_eq!(l.lidar, Some(LidarConfig::default()));
+    assert_eq!((l.stereo.is_none(), l.labels.is_none()), (true, true));
+    let s = load_str(
+        "s.json",
+        r#"{"stereo": {}, "labels": {"sensors": ["color"]}}"#,
+    )
+    .unwrap();
+    assert_eq!(s.stereo, Some(StereoConfig::default()));
+    assert_eq!(s.lidar, None);
+    assert_eq!(
+        s.labels.unwrap().sensors,
+        [crate::project::LabelSensor::Colour]
+    );
+    // MWIR labels need the hour; the error says so.
+    let e = load_str("m.toml", "[labels]\nsensors = [\"mwir\"]\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("hour"), "{e}");
+}
+
+/// The stereo range noise comes from the disparity noise, the focal length and binning of
+/// the log's camera and the baseline of its right CameraInfo: σ_z = z²·σ_d·k/(f·B).
+/// Without a baseline (from the log or the config) it falls back to the config's and says
+/// so.
+#[test]
+fn stereo_noise_comes_from_the_camera_and_the_baseline() {
+    let s = sim();
+    let f = &s.frames[2];
+    let cam = f.image.as_ref().unwrap().camera.as_ref().unwrap();
+    let cloud = f.stereo.as_ref().unwrap();
+    let b = f.stereo_baseline_m.unwrap();
+    let spec = small_scene().rig.stereo.unwrap();
+    assert!((b - spec.baseline_m).abs() < 1e-12);
+    let k = (cam.width / cloud.cols) as f64;
+    assert_eq!(k, spec.bin as f64);
+    let cfg = StereoConfig {
+        disparity_noise_px: 0.4,
+        ..StereoConfig::default()
+    };
+    let (n, src) = cfg.range_noise(Some(cam), cloud.cols, Some(b));
+    assert_eq!(src, StereoNoiseSource::Disparity);
+    assert!((n.per_m2 - 0.4 * k / (cam.fx * b)).abs() < 1e-15);
+    assert_eq!(n.per_m, 0.0);
+    // The config's baseline serves a log without the right camera; neither: the config's
+    // noise polynomial.
+    let with_b = StereoConfig {
+        baseline_m: Some(b),
+        ..cfg
+    };
+    assert_eq!(with_b.range_noise(Some(cam), cloud.cols, None), (n, src));
+    assert_eq!(
+        cfg.range_noise(Some(cam), cloud.cols, None),
+        (cfg.cue.noise, StereoNoiseSource::Config)
+    );
+    assert_eq!(
+        cfg.range_noise(None, cloud.cols, Some(b)).1,
+        StereoNoiseSource::Config
+    );
+    // The mapper reports what it used.
+    let mut m = Mapper::new(MapperConfig::default()).unwrap();
+    let r = m.update(f).unwrap();
+    assert_eq!(r.stereo_noise.unwrap().1, StereoNoiseSource::Disparity);
 }
 
 #[test]

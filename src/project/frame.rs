@@ -107,6 +107,117 @@ impl FrameLabelConfig {
     }
 }
 
+/// An image sensor whose labels vote in the map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LabelSensor {
+    /// The colour camera (`color` is read too).
+    #[serde(alias = "color")]
+    Colour,
+    Swir,
+    Mwir,
+}
+
+impl std::str::FromStr for LabelSensor {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim() {
+            "colour" | "color" => Ok(LabelSensor::Colour),
+            "swir" => Ok(LabelSensor::Swir),
+            "mwir" => Ok(LabelSensor::Mwir),
+            o => Err(Error::invalid(
+                "labels",
+                format!("unknown image sensor {o:?} (colour, swir, mwir)"),
+            )),
+        }
+    }
+}
+
+/// The `[labels]` section of a mapper config: which image sensors label the map, and how
+/// ([`LabelsConfig::compile`] makes the [`FrameLabelConfig`] the mapper runs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LabelsConfig {
+    /// Sensors whose labels vote (a sensor the log lacks is skipped, and counted).
+    pub sensors: Vec<LabelSensor>,
+    /// A colour model (JSON from `tarn train-color`), compiled into a 6-bit lookup table;
+    /// without it the paper's Table 1 rule (8-bit table).
+    pub colour_model: Option<std::path::PathBuf>,
+    /// Local solar hour of the log (0..24), which the MWIR labels need.
+    pub hour: Option<f64>,
+    /// Label every n-th pixel in x and y.
+    pub stride: usize,
+    /// Also label every row of pixels whose ground footprint is wider than a map cell.
+    pub wide_rows: bool,
+    /// Pixels whose hit is farther than this do not vote (m).
+    pub max_range_m: f64,
+    /// Cells whose elevation σ exceeds this are holes to the ray march (m).
+    pub surface_max_std_m: f64,
+}
+
+impl Default for LabelsConfig {
+    fn default() -> Self {
+        let f = FrameLabelConfig::default();
+        LabelsConfig {
+            sensors: vec![LabelSensor::Colour],
+            colour_model: None,
+            hour: None,
+            stride: f.ray_stride,
+            wide_rows: f.wide_rows,
+            max_range_m: f.max_range,
+            surface_max_std_m: f.surface_max_std,
+        }
+    }
+}
+
+impl LabelsConfig {
+    /// The classifiers and settings the mapper runs: the colour model read and compiled
+    /// (or the Table 1 rule), SWIR and MWIR with their defaults. MWIR without `hour` is an
+    /// error that says so.
+    pub fn compile(&self) -> Result<FrameLabelConfig> {
+        use crate::classify::color::RuleClassifier;
+        use crate::classify::gmm::ColorModel;
+        let mut cfg = FrameLabelConfig {
+            ray_stride: self.stride,
+            wide_rows: self.wide_rows,
+            max_range: self.max_range_m,
+            surface_max_std: self.surface_max_std_m,
+            ..FrameLabelConfig::default()
+        };
+        for s in &self.sensors {
+            match s {
+                LabelSensor::Colour => {
+                    cfg.colour = Some(match &self.colour_model {
+                        Some(p) => ColorLut::compile(&ColorModel::load(p)?, 6)?,
+                        None => ColorLut::compile(&RuleClassifier::default(), 8)?,
+                    })
+                }
+                LabelSensor::Swir => cfg.swir = Some(SwirConfig::default()),
+                LabelSensor::Mwir => {
+                    let hour = self.hour.ok_or_else(|| {
+                        Error::invalid(
+                            "labels",
+                            "mwir needs the local solar hour of the log (labels.hour, --hour)",
+                        )
+                    })?;
+                    cfg.mwir = Some(MwirLabelConfig {
+                        classifier: MwirConfig::default(),
+                        hour,
+                    })
+                }
+            }
+        }
+        if self.colour_model.is_some() && cfg.colour.is_none() {
+            return Err(Error::invalid(
+                "labels",
+                "a colour model needs the colour sensor in labels.sensors (--labels colour)",
+            ));
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
 /// What one sensor contributed in one frame (or, summed, over a log).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SensorLabelStats {

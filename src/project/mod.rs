@@ -19,7 +19,9 @@
 pub mod frame;
 pub mod surface;
 
-pub use frame::{FrameLabelConfig, FrameLabels, FrameLabelsReport, MwirLabelConfig};
+pub use frame::{
+    FrameLabelConfig, FrameLabels, FrameLabelsReport, LabelSensor, LabelsConfig, MwirLabelConfig,
+};
 pub use surface::GridSurface;
 
 use std::collections::HashMap;

@@ -4,8 +4,9 @@
 //! [`simulate`] turns a [`Scene`] into `DIR/log.mcap` (the DESIGN.md contract topics, only
 //! for the sensors the rig configures), `DIR/truth.ply` (the `map.ply` schema: one vertex
 //! per truth cell), `DIR/truth.json` ([`TruthInfo`]) and `DIR/scene.ply` (the terrain and
-//! object mesh the rays were cast against), and `DIR/mapper.toml` ([`mapper_config`]: the
-//! rig as the mapper is told about it). `maps/README.md` documents the formats.
+//! object mesh the rays were cast against), and `DIR/rig.toml` (the rig: datasheet values
+//! and mounts, which [`mapper_config`] turns into what the mapper is told). `maps/README.md`
+//! documents the formats.
 //!
 //! `sim` sits beside the pipeline: it uses every module, no pipeline module uses it.
 
@@ -26,8 +27,8 @@ use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 pub use render::{
-    body_to_optical, mount, pinhole, radiance, render_image, sun, water_views, Band, Lidar,
-    LidarReturn, Light, Radiance, Stereo, N_WATER,
+    body_to_optical, lens, mount, pinhole, radiance, render_image, sun, water_views, Band, Lidar,
+    LidarReturn, Light, Radiance, Stereo, N_WATER, RIGHT_CAMERA_FRAME,
 };
 pub use rng::{hash, normal, unit_f64};
 pub use scene::*;
@@ -156,26 +157,19 @@ pub fn write_scene_mesh(w: &World, path: &Path) -> Result<()> {
     )
 }
 
-/// The [`MapperConfig`](crate::mapper::MapperConfig) of a scene's rig: what the operator of
-/// that vehicle knows about its sensors — the lidar's wavelength, sensitivity (dry limit and
-/// reference albedo), aperture, mounting height above base_link (which the simulator puts on
-/// the terrain) and range noise; the stereo range noise from its disparity noise
-/// (`σ_z = z² σ_d / (f B)`); the fording depth. The water clarity is a configured
-/// assumption: the first water body's attenuation when the scene sets one, else pure water.
-/// Every cue on. `tarn simulate` writes it as `DIR/mapper.toml`.
-pub fn mapper_config(scene: &Scene) -> crate::mapper::MapperConfig {
+/// The [`MapperConfig`](crate::mapper::MapperConfig) of a rig: the default config with
+/// what the sensors' datasheets say and a log cannot — the lidar's wavelength, sensitivity
+/// (dry limit and its reference albedo), aperture and range noise; the stereo pair's
+/// disparity noise, minimum disparity and baseline. It takes the rig alone, so nothing of a
+/// scene (water clarity, levels, depths) can reach the mapper; what the log holds (focal
+/// lengths, binning, mounts, the lidar's height) the mapper reads from the log.
+pub fn mapper_config(rig: &RigSpec) -> crate::mapper::MapperConfig {
     use crate::grid::RangeNoise;
     use crate::mapper::{LidarConfig, MapperConfig, StereoConfig};
     MapperConfig {
-        vehicle: crate::water::Vehicle {
-            fording_depth_m: scene.fording_depth,
-            ..Default::default()
-        },
-        lidar: scene.rig.lidar.as_ref().map(|l| LidarConfig {
+        lidar: rig.lidar.as_ref().map(|l| LidarConfig {
             wavelength_nm: l.wavelength_nm,
-            attenuation_per_m: scene.water.iter().find_map(|w| w.attenuation),
             dry_limit_m: l.dry_limit_m,
-            height_m: Some(l.position[2]),
             albedo: l.reference_albedo,
             aperture_diameter_m: l.aperture_m,
             noise: RangeNoise {
@@ -184,15 +178,11 @@ pub fn mapper_config(scene: &Scene) -> crate::mapper::MapperConfig {
             },
             ..LidarConfig::default()
         }),
-        stereo: scene.rig.stereo.as_ref().map(|s| {
-            let f_px = s.width as f64 / 2.0 / (s.hfov_deg.to_radians() / 2.0).tan();
-            let mut c = StereoConfig::default();
-            c.cue.noise = RangeNoise {
-                sigma0: 0.005,
-                per_m: 0.0,
-                per_m2: s.disparity_noise_px.max(0.05) / (f_px * s.baseline_m),
-            };
-            c
+        stereo: rig.stereo.as_ref().map(|s| StereoConfig {
+            disparity_noise_px: s.disparity_noise_px,
+            min_disparity_px: s.min_disparity_px,
+            baseline_m: Some(s.baseline_m),
+            ..StereoConfig::default()
         }),
         ..MapperConfig::default()
     }
@@ -207,6 +197,11 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
     let rig = &scene.rig;
     let lidar = rig.lidar.as_ref().map(Lidar::new).transpose()?;
     let stereo = rig.stereo.as_ref().map(Stereo::new).transpose()?;
+    let camera = rig
+        .camera
+        .as_ref()
+        .map(|c| render::camera_of(c, CAMERA_FRAME))
+        .transpose()?;
     let swir = rig
         .swir
         .as_ref()
@@ -235,7 +230,26 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
     }
     if let Some(s) = &stereo {
         statics.push(tf(start, "base_link", CAMERA_FRAME, s.optical_mount));
-        topics.extend(["/stereo/points", "/camera/image", "/camera/camera_info"].map(String::from));
+        // The right camera sits B to the right of the left one (+x of the optical frame).
+        let right = s.optical_mount
+            * Pose::from_parts(
+                nalgebra::Translation3::new(s.spec.baseline_m, 0.0, 0.0),
+                nalgebra::UnitQuaternion::identity(),
+            );
+        statics.push(tf(start, "base_link", RIGHT_CAMERA_FRAME, right));
+        topics.extend(
+            [
+                "/stereo/points",
+                "/camera/image",
+                "/camera/camera_info",
+                "/camera_right/camera_info",
+            ]
+            .map(String::from),
+        );
+    }
+    if let Some((_, m)) = &camera {
+        statics.push(tf(start, "base_link", CAMERA_FRAME, *m));
+        topics.extend(["/camera/image", "/camera/camera_info"].map(String::from));
     }
     if let Some((_, m)) = &swir {
         statics.push(tf(start, "base_link", SWIR_FRAME, *m));
@@ -257,7 +271,10 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
     // Per truth cell of water the colour camera saw: whether any pixel of any frame saw a
     // sky reflection there. A BTreeMap: the lists come out in key order.
     let mut views: std::collections::BTreeMap<[i64; 2], bool> = Default::default();
+    // Truth cells of water that some lidar beam or camera pixel met first.
+    let mut seen: std::collections::BTreeSet<[i64; 2]> = Default::default();
     let tres = scene.truth_resolution;
+    let key = |x: f64, y: f64| [(x / tres).floor() as i64, (y / tres).floor() as i64];
     for (fi, p) in poses.iter().enumerate() {
         let base = pose_of(p);
         let ns = stamp_ns(p.stamp) as u64;
@@ -273,7 +290,8 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         write_s += tw.elapsed().as_secs_f64();
         if let Some(l) = &lidar {
             let tr = Instant::now();
-            let cloud = l.scan(&w, &(base * l.mount), f, opts.noise)?;
+            let (cloud, water) = l.scan_with_water(&w, &(base * l.mount), f, opts.noise)?;
+            seen.extend(water.iter().map(|p| key(p[0], p[1])));
             render_s += tr.elapsed().as_secs_f64();
             rep.lidar_beams += cloud.len() as u64;
             rep.lidar_returns += cloud.valid_count() as u64;
@@ -296,9 +314,7 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
                 opts.noise,
             );
             for (x, y, sky) in water_views(&w, &s.camera, &opt, s.spec.max_range_m) {
-                *views
-                    .entry([(x / tres).floor() as i64, (y / tres).floor() as i64])
-                    .or_default() |= sky;
+                *views.entry(key(x, y)).or_default() |= sky;
             }
             render_s += tr.elapsed().as_secs_f64();
             rep.stereo_rays += cloud.len() as u64;
@@ -317,6 +333,46 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             log.write_camera(
                 "/camera/camera_info",
                 &s.camera,
+                header(p.stamp, CAMERA_FRAME),
+                ns,
+            )?;
+            log.write_camera_info_msg(
+                "/camera_right/camera_info",
+                &s.right_info(header(p.stamp, RIGHT_CAMERA_FRAME)),
+                ns,
+            )?;
+            write_s += tw.elapsed().as_secs_f64();
+        }
+        if let (Some((model, m)), Some(spec)) = (&camera, &rig.camera) {
+            let tr = Instant::now();
+            let opt = base * m;
+            let px = render_image(
+                &w,
+                &light,
+                model,
+                &opt,
+                Band::Rgb,
+                spec.image_noise,
+                f,
+                opts.noise,
+            );
+            for (x, y, sky) in water_views(&w, model, &opt, 120.0) {
+                *views.entry(key(x, y)).or_default() |= sky;
+            }
+            render_s += tr.elapsed().as_secs_f64();
+            rep.image_pixels += (model.width * model.height) as u64;
+            let tw = Instant::now();
+            let img = Image {
+                width: model.width,
+                height: model.height,
+                pixels: px,
+                frame_id: CAMERA_FRAME.into(),
+                stamp: p.stamp,
+            };
+            log.write_image("/camera/image", &img, header(p.stamp, CAMERA_FRAME), ns)?;
+            log.write_camera(
+                "/camera/camera_info",
+                model,
                 header(p.stamp, CAMERA_FRAME),
                 ns,
             )?;
@@ -388,18 +444,23 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         water_bodies: water_stats(&w, &truth),
         class_counts: counts,
         topics,
-        colour_view: stereo.is_some().then(|| ColourView {
+        colour_view: (stereo.is_some() || camera.is_some()).then(|| ColourView {
             sky: views.iter().filter(|v| *v.1).map(|v| *v.0).collect(),
             terrain: views.iter().filter(|v| !*v.1).map(|v| *v.0).collect(),
         }),
+        seen_water: Some({
+            seen.extend(views.keys().copied());
+            seen.into_iter().collect()
+        }),
     };
     crate::io::export::write_json(&out_dir.join("truth.json"), &info)?;
-    let mcfg = mapper_config(scene).to_toml()?;
-    crate::io::export::write_atomic(&out_dir.join("mapper.toml"), |w| {
+    let rig_text = toml::to_string(&scene.rig)
+        .map_err(|e| Error::invalid("rig", format!("cannot be written as TOML: {e}")))?;
+    crate::io::export::write_atomic(&out_dir.join("rig.toml"), |w| {
         w.write_all(
             format!(
-                "# The mapper config of the rig of scene {:?} (tarn simulate).\n{mcfg}",
-                scene.name
+                "# The rig the log was recorded with (tarn simulate): datasheet values and\n\
+                 # mounts, nothing of the scene. `tarn build LOG --rig` reads it.\n{rig_text}"
             )
             .as_bytes(),
         )

@@ -7,7 +7,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaterni
 use rayon::prelude::*;
 
 use super::rng::{hash, normal, unit_f64};
-use super::scene::{CameraSpec, LidarSpec, SkyKind, StereoSpec};
+use super::scene::{CameraSpec, IntensityKind, LidarSpec, SkyKind, StereoSpec};
 use super::world::{Hit, Surface, World};
 use crate::error::Result;
 use crate::geom::camera::{CameraModel, Distortion};
@@ -45,6 +45,17 @@ pub fn body_to_optical() -> Pose {
 
 /// A pinhole camera without distortion for `width` × `height` and a horizontal FOV.
 pub fn pinhole(width: usize, height: usize, hfov_deg: f64, frame: &str) -> Result<CameraModel> {
+    lens(width, height, hfov_deg, None, frame)
+}
+
+/// [`pinhole`] with plumb_bob lens distortion `[k1, k2, p1, p2, k3]` (none: a pinhole).
+pub fn lens(
+    width: usize,
+    height: usize,
+    hfov_deg: f64,
+    distortion: Option<[f64; 5]>,
+    frame: &str,
+) -> Result<CameraModel> {
     let f = 0.5 * width as f64 / (0.5 * hfov_deg.to_radians()).tan();
     CameraModel::new(
         width,
@@ -55,28 +66,41 @@ pub fn pinhole(width: usize, height: usize, hfov_deg: f64, frame: &str) -> Resul
             0.5 * (width as f64 - 1.0),
             0.5 * (height as f64 - 1.0),
         ],
-        Distortion::None,
+        distortion.map_or(Distortion::None, Distortion::PlumbBob),
         frame,
     )
 }
 
-/// How a lidar beam ended.
+/// How a lidar beam ended. `power` is the received/emitted power ratio of the return.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum LidarReturn {
     /// Dry ground or an object.
-    Solid { point: Point3<f64> },
+    Solid { point: Point3<f64>, power: f64 },
     /// The bottom under water: `point` is where an uncorrected lidar reports it.
     Bottom {
         point: Point3<f64>,
         bottom: Point3<f64>,
         lookahead: f64,
         depth: f64,
+        power: f64,
     },
     /// A mirror bounce off water to a solid beyond: `point` lies on the original ray at the
     /// total path length.
-    Specular { point: Point3<f64> },
+    Specular { point: Point3<f64>, power: f64 },
     /// Nothing detectable came back.
     None,
+}
+
+impl LidarReturn {
+    /// Where the lidar reports the return and its power ratio (`None`: no return).
+    pub fn reported(&self) -> Option<(Point3<f64>, f64)> {
+        match *self {
+            LidarReturn::Solid { point, power }
+            | LidarReturn::Bottom { point, power, .. }
+            | LidarReturn::Specular { point, power } => Some((point, power)),
+            LidarReturn::None => None,
+        }
+    }
 }
 
 /// The lidar as the renderer needs it.
@@ -129,28 +153,63 @@ impl Lidar {
         Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
     }
 
-    fn lambert(&self, albedo: f64, cos: f64, range: f64) -> f64 {
-        let area = std::f64::consts::PI * 0.25 * self.spec.aperture_m.powi(2);
-        albedo / std::f64::consts::PI * cos.max(0.0) * area / (range * range)
+    /// Aperture area (m²).
+    fn aperture_area(&self) -> f64 {
+        std::f64::consts::PI * 0.25 * self.spec.aperture_m.powi(2)
+    }
+
+    /// Received/emitted power ratio from a surface of albedo ρ whose backscatter falls as
+    /// cosᵐ θ (`m` = 1: Lambertian) at incidence cosine `cos`, `range` away:
+    /// (ρ/π)·cosᵐθ·A_r/r².
+    pub fn backscatter(&self, albedo: f64, m: f64, cos: f64, range: f64) -> f64 {
+        albedo / std::f64::consts::PI * cos.max(0.0).powf(m) * self.aperture_area()
+            / (range * range)
+    }
+
+    /// The per-return channel of the rig's convention for a return of power ratio `power`
+    /// at measured range `range`: raw `intensity` = 10⁴·π·P/A_r (10⁴·ρ·cosᵐθ/r² on dry
+    /// ground: it falls with range² and incidence); `reflectivity` = 100·π·P·r²/A_r, capped
+    /// at 255 (range-corrected, not incidence-corrected: 100·ρ·cosᵐθ). `None` without one.
+    pub fn intensity_of(&self, power: f64, range: f64) -> Option<f64> {
+        let k = std::f64::consts::PI * power / self.aperture_area();
+        match self.spec.intensity {
+            IntensityKind::None => None,
+            IntensityKind::Raw => Some(1e4 * k),
+            IntensityKind::Reflectivity => Some((100.0 * k * range * range).min(255.0)),
+        }
     }
 
     /// Traces one beam from `o` along unit `d` (map frame), without noise.
     pub fn trace(&self, w: &World, o: &Point3<f64>, d: &Vector3<f64>) -> Result<LidarReturn> {
-        let max = self.spec.max_range_m;
-        let Some(hit) = w.cast(o, d, max) else {
-            return Ok(LidarReturn::None);
-        };
+        match w.cast(o, d, self.spec.max_range_m) {
+            Some(hit) => self.trace_hit(w, o, d, &hit),
+            None => Ok(LidarReturn::None),
+        }
+    }
+
+    /// How a beam that first meets `hit` ends.
+    fn trace_hit(
+        &self,
+        w: &World,
+        o: &Point3<f64>,
+        d: &Vector3<f64>,
+        hit: &Hit,
+    ) -> Result<LidarReturn> {
         match hit.surface {
             Surface::Solid { .. } => {
-                let alb = w.materials[hit.material].spec.lidar;
-                let ok = self.lambert(alb, hit.normal.dot(&-d), hit.t) >= self.min_power_ratio;
-                Ok(if ok {
-                    LidarReturn::Solid { point: hit.point }
+                let m = &w.materials[hit.material].spec;
+                let power =
+                    self.backscatter(m.lidar, m.backscatter_exponent, hit.normal.dot(&-d), hit.t);
+                Ok(if power >= self.min_power_ratio {
+                    LidarReturn::Solid {
+                        point: hit.point,
+                        power,
+                    }
                 } else {
                     LidarReturn::None
                 })
             }
-            Surface::Water { body } => self.trace_water(w, o, d, &hit, body),
+            Surface::Water { body } => self.trace_water(w, o, d, hit, body),
         }
     }
 
@@ -185,13 +244,15 @@ impl Lidar {
                     sensitivity: Sensitivity::MinPowerRatio(self.min_power_ratio),
                     solid_angle: SolidAngleForm::Exact,
                 })?;
-                if model.return_ratio(lookahead, depth)? >= self.min_power_ratio {
+                let power = model.return_ratio(lookahead, depth)?;
+                if power >= self.min_power_ratio {
                     let point = apparent_bottom_point(*o, bot.point, level, N_WATER)?;
                     return Ok(LidarReturn::Bottom {
                         point,
                         bottom: bot.point,
                         lookahead,
                         depth,
+                        power,
                     });
                 }
             }
@@ -202,18 +263,22 @@ impl Lidar {
             let fr = fresnel(cos_i.clamp(0.0, 1.0).acos(), N_WATER)?;
             let refl = 0.5 * (fr.r_s + fr.r_p);
             let total = hit.t + EPS + s.t;
-            let p =
-                refl * self.lambert(w.materials[s.material].spec.lidar, s.normal.dot(&-r), total);
-            if p >= self.min_power_ratio {
+            let m = &w.materials[s.material].spec;
+            let power =
+                refl * self.backscatter(m.lidar, m.backscatter_exponent, s.normal.dot(&-r), total);
+            if power >= self.min_power_ratio {
                 return Ok(LidarReturn::Specular {
                     point: o + d * total,
+                    power,
                 });
             }
         }
         Ok(LidarReturn::None)
     }
 
-    /// One organized scan (rings × columns, ring 0 lowest on row 0) in the lidar frame.
+    /// One organized scan (rings × columns, ring 0 lowest on row 0) in the lidar frame,
+    /// with the rig's `intensity` or `reflectivity` channel (NaN for no return; 5 %
+    /// multiplicative noise when `noise`).
     pub fn scan(
         &self,
         w: &World,
@@ -221,31 +286,68 @@ impl Lidar {
         frame: u64,
         noise: bool,
     ) -> Result<PointCloud> {
+        Ok(self.scan_with_water(w, lidar_to_map, frame, noise)?.0)
+    }
+
+    /// [`Lidar::scan`], and the map (x, y) of every beam that met water first.
+    pub fn scan_with_water(
+        &self,
+        w: &World,
+        lidar_to_map: &Pose,
+        frame: u64,
+        noise: bool,
+    ) -> Result<(PointCloud, Vec<[f64; 2]>)> {
         let (rows, cols) = (self.spec.rings, self.spec.columns);
         let o = lidar_to_map.translation.vector.into();
         let map_to_lidar = lidar_to_map.inverse();
         let seed = w.scene.seed;
-        let xyz = (0..rows * cols)
+        let nan = ([f32::NAN; 3], f32::NAN);
+        let pts = (0..rows * cols)
             .into_par_iter()
-            .map(|i| -> Result<[f32; 3]> {
+            .map(|i| -> Result<(([f32; 3], f32), Option<[f64; 2]>)> {
                 let (r, c) = (i / cols, i % cols);
                 let d = lidar_to_map.rotation * self.beam(r, c);
-                let p = match self.trace(w, &o, &d)? {
-                    LidarReturn::Solid { point }
-                    | LidarReturn::Bottom { point, .. }
-                    | LidarReturn::Specular { point } => point,
-                    LidarReturn::None => return Ok([f32::NAN; 3]),
+                let Some(hit) = w.cast(&o, &d, self.spec.max_range_m) else {
+                    return Ok((nan, None));
+                };
+                let water = matches!(hit.surface, Surface::Water { .. })
+                    .then(|| [hit.point.x, hit.point.y]);
+                let Some((p, power)) = self.trace_hit(w, &o, &d, &hit)?.reported() else {
+                    return Ok((nan, water));
                 };
                 let mut q = map_to_lidar * p;
+                let mut range = q.coords.norm();
                 if noise && self.spec.range_noise_m > 0.0 {
-                    let range = q.coords.norm();
                     let e = self.spec.range_noise_m * normal(hash(seed, &[21, frame, i as u64]));
-                    q = Point3::from(q.coords * ((range + e).max(0.0) / range));
+                    let noisy = (range + e).max(0.0);
+                    q = Point3::from(q.coords * (noisy / range));
+                    range = noisy;
                 }
-                Ok([q.x as f32, q.y as f32, q.z as f32])
+                let mut v = self.intensity_of(power, range).unwrap_or(f64::NAN);
+                if noise {
+                    v *= (1.0 + 0.05 * normal(hash(seed, &[22, frame, i as u64]))).max(0.0);
+                }
+                if self.spec.intensity == IntensityKind::Reflectivity {
+                    v = v.round().clamp(0.0, 255.0);
+                }
+                Ok((([q.x as f32, q.y as f32, q.z as f32], v as f32), water))
             })
             .collect::<Result<Vec<_>>>()?;
-        PointCloud::organized(rows, cols, xyz)
+        let mut water = Vec::new();
+        let mut xyz = Vec::with_capacity(pts.len());
+        let mut channel = Vec::with_capacity(pts.len());
+        for ((p, v), wat) in pts {
+            xyz.push(p);
+            channel.push(v);
+            water.extend(wat);
+        }
+        let mut cloud = PointCloud::organized(rows, cols, xyz)?;
+        match self.spec.intensity {
+            IntensityKind::None => {}
+            IntensityKind::Raw => cloud.intensity = Some(channel),
+            IntensityKind::Reflectivity => cloud.reflectivity = Some(channel),
+        }
+        Ok((cloud, water))
     }
 }
 
@@ -475,23 +577,55 @@ pub fn water_views(
 #[derive(Debug, Clone)]
 pub struct Stereo {
     pub spec: StereoSpec,
+    /// The left camera as its raw image and CameraInfo show it (with the lens distortion).
     pub camera: CameraModel,
+    /// The rectified left camera (the same K, no distortion): the cloud's grid.
+    pub rectified: CameraModel,
     /// base_link → left optical frame.
     pub optical_mount: Pose,
 }
 
+/// Frame of the right camera of the stereo pair (its CameraInfo's header).
+pub const RIGHT_CAMERA_FRAME: &str = "camera_right_optical";
+
 impl Stereo {
     pub fn new(spec: &StereoSpec) -> Result<Stereo> {
+        let frame = "camera_left_optical";
         Ok(Stereo {
-            camera: pinhole(
+            camera: lens(
                 spec.width,
                 spec.height,
                 spec.hfov_deg,
-                "camera_left_optical",
+                spec.distortion,
+                frame,
             )?,
+            rectified: pinhole(spec.width, spec.height, spec.hfov_deg, frame)?,
             optical_mount: mount(spec.position, spec.rpy_deg) * body_to_optical(),
             spec: spec.clone(),
         })
+    }
+
+    /// The right camera's CameraInfo as ROS stereo drivers publish it: the rectified
+    /// projection P = [f 0 cx −f·B; 0 f cy 0; 0 0 1 0], so that B = −P[0][3] / P[0][0].
+    pub fn right_info(&self, header: crate::io::ros::Header) -> crate::io::ros::CameraInfoMsg {
+        let mut m = crate::io::ros::camera_to_info(&self.camera, header);
+        m.p[3] = -self.camera.fx * self.spec.baseline_m;
+        m
+    }
+
+    /// Focal length of the disparity image (px): the camera's over the binning.
+    pub fn disparity_focal_px(&self) -> f64 {
+        self.rectified.fx / self.spec.bin as f64
+    }
+
+    /// Depth (along the optical axis) that stereo reports for a true depth `z` when the
+    /// disparity `d = f_b·B/z` (f_b the binned focal length) is off by `e` pixels:
+    /// `f_b·B/(d + e)`; `None` where the matched disparity falls below the minimum (far
+    /// ground, or noise taking it there): no match.
+    pub fn measured_depth(&self, z: f64, e: f64) -> Option<f64> {
+        let fb = self.disparity_focal_px() * self.spec.baseline_m;
+        let d = fb / z + e;
+        (d >= self.spec.min_disparity_px).then(|| fb / d)
     }
 
     /// The point stereo reports along unit ray `d` (map frame) from `o`, before noise:
@@ -515,7 +649,10 @@ impl Stereo {
         }
     }
 
-    /// The binned organized cloud in the left optical frame (NaN: no match).
+    /// The binned organized cloud in the left optical frame (NaN: no match), on the
+    /// rectified grid. Noise is in disparity ([`Stereo::measured_depth`]): Gaussian with
+    /// σ = `disparity_noise_px`, so the range error grows as z² and is skewed far; a
+    /// pixel of a material without texture finds no match with probability 1 − texture.
     pub fn cloud(
         &self,
         w: &World,
@@ -526,7 +663,6 @@ impl Stereo {
         let k = self.spec.bin;
         let (rows, cols) = (self.spec.height / k, self.spec.width / k);
         let o: Point3<f64> = optical_to_map.translation.vector.into();
-        let f = self.camera.fx;
         let seed = w.scene.seed;
         let half = 0.5 * (k as f64 - 1.0);
         let xyz = (0..rows * cols)
@@ -534,7 +670,7 @@ impl Stereo {
             .map(|i| {
                 let (r, c) = (i / cols, i % cols);
                 let (u, v) = ((k * c) as f64 + half, (k * r) as f64 + half);
-                let Some(ray) = self.camera.pixel_ray(u, v) else {
+                let Some(ray) = self.rectified.pixel_ray(u, v) else {
                     return [f32::NAN; 3];
                 };
                 let ray = ray.normalize();
@@ -542,21 +678,18 @@ impl Stereo {
                 let Some((t, mat)) = self.trace(w, &o, &d) else {
                     return [f32::NAN; 3];
                 };
-                let mut t = t;
+                let mut e = 0.0;
                 if noise {
                     let tex = w.materials[mat].spec.texture;
                     if unit_f64(hash(seed, &[41, frame, i as u64])) >= tex {
                         return [f32::NAN; 3];
                     }
-                    // Disparity noise σ_d px → depth noise z² σ_d / (f B), along the ray.
-                    let z = t * ray.z;
-                    let sz = z * z * self.spec.disparity_noise_px / (f * self.spec.baseline_m);
-                    t += sz / ray.z * normal(hash(seed, &[42, frame, i as u64]));
-                    if t <= 0.0 {
-                        return [f32::NAN; 3];
-                    }
+                    e = self.spec.disparity_noise_px * normal(hash(seed, &[42, frame, i as u64]));
                 }
-                let p = ray * t;
+                let Some(z) = self.measured_depth(t * ray.z, e) else {
+                    return [f32::NAN; 3];
+                };
+                let p = ray * (z / ray.z);
                 [p.x as f32, p.y as f32, p.z as f32]
             })
             .collect();

@@ -54,7 +54,35 @@ pub struct Scene {
     #[serde(default)]
     pub sky: SkySpec,
     pub trajectory: TrajectorySpec,
+    /// The sensors: a rig file named relative to the scene file (`rig = "rigs/small.toml"`),
+    /// or an inline table. [`Scene::load_with_rig`] renders the scene with another rig.
+    #[serde(deserialize_with = "rig_or_file")]
     pub rig: RigSpec,
+}
+
+/// `rig = "FILE"` or `[rig]` with its tables: a file name is kept in [`RigSpec::file`] for
+/// [`Scene::load`] to read.
+fn rig_or_file<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<RigSpec, D::Error> {
+    struct V;
+    impl<'de> serde::de::Visitor<'de> for V {
+        type Value = RigSpec;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a rig file name or a rig table")
+        }
+        fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<RigSpec, E> {
+            Ok(RigSpec {
+                file: Some(v.to_string()),
+                ..RigSpec::default()
+            })
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(
+            self,
+            map: A,
+        ) -> std::result::Result<RigSpec, A::Error> {
+            RigSpec::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+        }
+    }
+    d.deserialize_any(V)
 }
 
 fn d_fording() -> f64 {
@@ -93,6 +121,8 @@ pub enum FeatureKind {
     Depression,
     Mound,
     Ditch,
+    /// A raised band (`from`, `to`, `width`, `height`): a kerb beside pavement.
+    Curb,
 }
 
 /// A depression or mound (elliptic, `centre`, `radius`, `depth`/`height`, flat for
@@ -211,6 +241,15 @@ pub struct MaterialSpec {
     pub temperature_swing: f64,
     /// Truth class: ground, vegetation, obstacle or snow_ice.
     pub class: MaterialClass,
+    /// Lidar backscatter falls as cosᵐ of the incidence angle: 1 for a Lambertian surface
+    /// (grass, soil), more for smooth ones (pavement), which stop returning at grazing
+    /// incidence long before rough ground does.
+    #[serde(default = "d_one")]
+    pub backscatter_exponent: f64,
+}
+
+fn d_one() -> f64 {
+    1.0
 }
 
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
@@ -244,6 +283,12 @@ pub fn builtin_materials() -> BTreeMap<String, MaterialSpec> {
         temperature: t,
         temperature_swing: swing,
         class,
+        backscatter_exponent: 1.0,
+    };
+    // Smooth pavement: specular enough that its backscatter falls as cos^m with m > 1.
+    let smooth = |mut s: MaterialSpec, m: f64| {
+        s.backscatter_exponent = m;
+        s
     };
     [
         (
@@ -293,6 +338,34 @@ pub fn builtin_materials() -> BTreeMap<String, MaterialSpec> {
         (
             "concrete",
             m([0.55, 0.53, 0.50], 0.45, 0.45, 0.90, 289.0, 7.0, Obstacle),
+        ),
+        (
+            "pavement",
+            smooth(
+                m([0.50, 0.49, 0.46], 0.42, 0.40, 0.85, 290.0, 9.0, Ground),
+                2.5,
+            ),
+        ),
+        (
+            "asphalt",
+            smooth(
+                m([0.16, 0.16, 0.16], 0.12, 0.15, 0.80, 292.0, 12.0, Ground),
+                2.0,
+            ),
+        ),
+        (
+            "fresh_asphalt",
+            smooth(
+                m([0.05, 0.05, 0.055], 0.05, 0.07, 0.70, 294.0, 14.0, Ground),
+                2.0,
+            ),
+        ),
+        (
+            "pale_slab",
+            smooth(
+                m([0.66, 0.72, 0.80], 0.45, 0.50, 0.35, 289.0, 8.0, Ground),
+                3.0,
+            ),
         ),
     ]
     .into_iter()
@@ -350,13 +423,42 @@ pub struct TrajectorySpec {
     pub start_time: f64,
 }
 
+/// The vehicle's sensors, as their datasheets and mounts describe them: nothing in a rig
+/// belongs to a scene. A rig file (`maps/rigs/*.toml`) holds one; a scene names it
+/// (`rig = "rigs/NAME.toml"`, relative to the scene file) or carries one inline.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, Default)]
 #[serde(deny_unknown_fields)]
 pub struct RigSpec {
+    /// A name for reports (a rig file's stem when empty).
+    #[serde(default)]
+    pub name: String,
+    /// A rig file a scene names but that is not read yet (see [`Scene::load`]).
+    #[serde(skip)]
+    pub file: Option<String>,
+    #[serde(default)]
+    pub description: String,
     pub lidar: Option<LidarSpec>,
     pub stereo: Option<StereoSpec>,
+    /// A colour camera without a stereo partner (`/camera/image`).
+    pub camera: Option<CameraSpec>,
     pub swir: Option<CameraSpec>,
     pub mwir: Option<CameraSpec>,
+}
+
+/// What a lidar writes per return besides x, y, z.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum IntensityKind {
+    /// Nothing.
+    #[default]
+    None,
+    /// `intensity`: the raw return, proportional to the received power, which falls with
+    /// range² and with the surface's backscatter at its incidence
+    /// ([`crate::sim::Lidar::intensity_of`]).
+    Raw,
+    /// `reflectivity`: range-corrected, not incidence-corrected, 0–255 (Ouster's
+    /// convention: a Lambertian target of albedo ρ seen head-on reads 100·ρ).
+    Reflectivity,
 }
 
 fn d_az() -> [f64; 2] {
@@ -406,6 +508,9 @@ pub struct LidarSpec {
     /// Standard deviation of the range noise (m).
     #[serde(default = "d_range_noise")]
     pub range_noise_m: f64,
+    /// The per-return channel the lidar writes.
+    #[serde(default)]
+    pub intensity: IntensityKind,
 }
 
 fn d_bin() -> usize {
@@ -416,6 +521,9 @@ fn d_disp_noise() -> f64 {
 }
 fn d_img_noise() -> f64 {
     2.0
+}
+fn d_min_disp() -> f64 {
+    1.0
 }
 
 /// The stereo pair: the left camera gives `/camera/image`, the pair gives `/stereo/points`
@@ -431,10 +539,19 @@ pub struct StereoSpec {
     pub height: usize,
     pub hfov_deg: f64,
     pub baseline_m: f64,
+    /// Standard deviation of the disparity (pixels of the binned disparity image, whose
+    /// focal length is f / `bin`).
     #[serde(default = "d_disp_noise")]
     pub disparity_noise_px: f64,
+    /// Matches whose (noisy) disparity falls below this are lost (binned pixels).
+    #[serde(default = "d_min_disp")]
+    pub min_disparity_px: f64,
     #[serde(default = "d_bin")]
     pub bin: usize,
+    /// The left camera's lens distortion, plumb_bob [k1, k2, p1, p2, k3]: the image and its
+    /// CameraInfo carry it; the cloud is computed on the rectified (pinhole) grid.
+    #[serde(default)]
+    pub distortion: Option<[f64; 5]>,
     #[serde(default = "d_max_range")]
     pub max_range_m: f64,
     /// Standard deviation of the pixel noise (grey levels).
@@ -455,6 +572,9 @@ pub struct CameraSpec {
     /// Standard deviation of the pixel noise (grey levels; centikelvin for MWIR).
     #[serde(default = "d_img_noise")]
     pub image_noise: f64,
+    /// Lens distortion, plumb_bob [k1, k2, p1, p2, k3] (the CameraInfo carries it).
+    #[serde(default)]
+    pub distortion: Option<[f64; 5]>,
 }
 
 fn bad(what: impl Into<String>, msg: impl Into<String>) -> Error {
@@ -510,10 +630,16 @@ impl Scene {
         Ok(scene)
     }
 
-    /// Reads, parses and validates a scene file; errors name the file, and the key.
+    /// Reads, parses and validates a scene file; errors name the file, and the key. A rig
+    /// named by file is read relative to the scene file.
     pub fn load(path: &Path) -> Result<Scene> {
+        Self::load_with_rig(path, None)
+    }
+
+    /// [`Scene::load`], with the sensors of the rig file `rig` instead of the scene's own.
+    pub fn load_with_rig(path: &Path, rig: Option<&Path>) -> Result<Scene> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let scene: Scene = toml::from_str(&text).map_err(|e| {
+        let mut scene: Scene = toml::from_str(&text).map_err(|e| {
             let loc = e
                 .span()
                 .map(|s| {
@@ -523,6 +649,15 @@ impl Scene {
                 .unwrap_or_else(|| "scene".into());
             Error::format(path, loc, e.message().to_string())
         })?;
+        let named = scene.rig.file.take();
+        match (rig, named) {
+            (Some(r), _) => scene.rig = RigSpec::load(r)?,
+            (None, Some(f)) => {
+                let dir = path.parent().unwrap_or(Path::new("."));
+                scene.rig = RigSpec::load(&dir.join(f))?;
+            }
+            (None, None) => {}
+        }
         scene.validate().map_err(|e| match e {
             Error::Invalid { what, message } => Error::format(path, what, message),
             e => e,
@@ -556,6 +691,14 @@ impl Scene {
                 return Err(bad(w("lidar"), "must be > 0"));
             }
             unit(&w("texture"), m.texture)?;
+            if !(m.backscatter_exponent.is_finite()
+                && (0.5..=50.0).contains(&m.backscatter_exponent))
+            {
+                return Err(bad(
+                    w("backscatter_exponent"),
+                    format!("{} must be in 0.5..=50", m.backscatter_exponent),
+                ));
+            }
             positive(&w("temperature"), m.temperature)?;
             non_negative(&w("temperature_swing"), m.temperature_swing)?;
         }
@@ -615,7 +758,7 @@ impl Scene {
                         positive(&w("height"), need(w("height"), f.height, &kind)?)?;
                     }
                 }
-                FeatureKind::Ditch => {
+                FeatureKind::Ditch | FeatureKind::Curb => {
                     let a = need(w("from"), f.from, &kind)?;
                     let b = need(w("to"), f.to, &kind)?;
                     all_finite(&w("from"), &a)?;
@@ -624,7 +767,11 @@ impl Scene {
                         return Err(bad(w("to"), "must differ from `from`"));
                     }
                     positive(&w("width"), need(w("width"), f.width, &kind)?)?;
-                    positive(&w("depth"), need(w("depth"), f.depth, &kind)?)?;
+                    if f.kind == FeatureKind::Ditch {
+                        positive(&w("depth"), need(w("depth"), f.depth, &kind)?)?;
+                    } else {
+                        positive(&w("height"), need(w("height"), f.height, &kind)?)?;
+                    }
                 }
             }
         }
@@ -724,11 +871,59 @@ impl Scene {
         if tr.frames == Some(0) {
             return Err(bad("trajectory.frames", "must be ≥ 1"));
         }
-        let r = &self.rig;
-        if r.lidar.is_none() && r.stereo.is_none() && r.swir.is_none() && r.mwir.is_none() {
+        self.rig.validate()
+    }
+}
+
+impl RigSpec {
+    /// Reads and validates a rig file; its name defaults to the file's stem.
+    pub fn load(path: &Path) -> Result<RigSpec> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let mut rig: RigSpec = toml::from_str(&text).map_err(|e| {
+            let loc = e
+                .span()
+                .map(|s| {
+                    format!(
+                        "line {}",
+                        text[..s.start.min(text.len())].lines().count().max(1)
+                    )
+                })
+                .unwrap_or_else(|| "rig".into());
+            Error::format(path, loc, e.message().to_string())
+        })?;
+        if rig.name.is_empty() {
+            rig.name = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+        }
+        rig.validate().map_err(|e| match e {
+            Error::Invalid { what, message } => Error::format(path, what, message),
+            e => e,
+        })?;
+        Ok(rig)
+    }
+
+    /// Checks every value; the error names the key (`rig.lidar.rings`).
+    pub fn validate(&self) -> Result<()> {
+        let r = self;
+        if let Some(f) = &r.file {
             return Err(bad(
                 "rig",
-                "configures no sensor (lidar, stereo, swir, mwir)",
+                format!(
+                    "names the rig file {f:?}, which was not read: load the scene from its file"
+                ),
+            ));
+        }
+        if r.lidar.is_none()
+            && r.stereo.is_none()
+            && r.camera.is_none()
+            && r.swir.is_none()
+            && r.mwir.is_none()
+        {
+            return Err(bad(
+                "rig",
+                "configures no sensor (lidar, stereo, camera, swir, mwir)",
             ));
         }
         if let Some(l) = &r.lidar {
@@ -775,8 +970,18 @@ impl Scene {
                    width: usize,
                    height: usize,
                    hfov: f64,
-                   noise: f64|
+                   noise: f64,
+                   distortion: &Option<[f64; 5]>|
          -> Result<()> {
+            if let Some(d) = distortion {
+                all_finite(&w("distortion"), d)?;
+                if d.iter().any(|k| k.abs() > 1.0) {
+                    return Err(bad(
+                        w("distortion"),
+                        format!("{d:?}: plumb_bob coefficients beyond ±1 are not a lens"),
+                    ));
+                }
+            }
             all_finite(&w("position"), pos)?;
             all_finite(&w("rpy_deg"), rpy)?;
             if width == 0 || height == 0 || width > 4096 || height > 4096 {
@@ -800,9 +1005,11 @@ impl Scene {
                 s.height,
                 s.hfov_deg,
                 s.image_noise,
+                &s.distortion,
             )?;
             positive(&w("baseline_m"), s.baseline_m)?;
             non_negative(&w("disparity_noise_px"), s.disparity_noise_px)?;
+            positive(&w("min_disparity_px"), s.min_disparity_px)?;
             if s.bin == 0 || s.width % s.bin != 0 || s.height % s.bin != 0 {
                 return Err(bad(
                     w("bin"),
@@ -814,7 +1021,13 @@ impl Scene {
             }
             positive(&w("max_range_m"), s.max_range_m)?;
         }
-        for (name, c) in [("swir", &r.swir), ("mwir", &r.mwir)] {
+        if r.stereo.is_some() && r.camera.is_some() {
+            return Err(bad(
+                "rig.camera",
+                "the stereo pair's left camera is the colour camera: give one of stereo, camera",
+            ));
+        }
+        for (name, c) in [("camera", &r.camera), ("swir", &r.swir), ("mwir", &r.mwir)] {
             if let Some(c) = c {
                 let w = |k: &str| format!("rig.{name}.{k}");
                 cam(
@@ -825,6 +1038,7 @@ impl Scene {
                     c.height,
                     c.hfov_deg,
                     c.image_noise,
+                    &c.distortion,
                 )?;
             }
         }

@@ -228,7 +228,7 @@ fn flat_ground_range_is_height_over_sine_of_elevation() {
         let e = deg.to_radians();
         let d = Vector3::new(0.0, -e.cos(), -e.sin());
         match l.trace(&w, &o, &d).unwrap() {
-            LidarReturn::Solid { point } => {
+            LidarReturn::Solid { point, .. } => {
                 let r = (point - o).norm();
                 assert!(
                     (r - h / e.sin()).abs() < 2e-4,
@@ -297,6 +297,7 @@ fn bottom_returns_exactly_where_the_optics_model_says() {
                     bottom,
                     lookahead,
                     depth: dd,
+                    ..
                 } => {
                     assert!(
                         expect,
@@ -339,7 +340,7 @@ fn specular_bounce_lands_on_the_original_ray_at_the_total_path() {
     let e = (1.7f64 / 12.0).atan();
     let d = Vector3::new(e.cos(), 0.0, -e.sin());
     match l.trace(&w, &o, &d).unwrap() {
-        LidarReturn::Specular { point } => {
+        LidarReturn::Specular { point, .. } => {
             // Mirror the point about the water level: it lies on the building face x = 28.5.
             let mirrored = Point3::new(point.x, point.y, 2.0 * -0.2 - point.z);
             let real_dir = Vector3::new(d.x, d.y, -d.z);
@@ -596,7 +597,7 @@ proptest::proptest! {
         let p = o + d * (h / e.sin());
         proptest::prop_assume!(w.terrain.contains(p.x, p.y) && look < l.spec.dry_limit_m);
         match l.trace(&w, &o, &d).unwrap() {
-            LidarReturn::Solid { point } => {
+            LidarReturn::Solid { point, .. } => {
                 let r = (point - o).norm();
                 proptest::prop_assert!((r - h / e.sin()).abs() < 2e-4, "{} vs {}", r, h / e.sin());
             }
@@ -684,4 +685,274 @@ fn swir_water_is_dark_at_moderate_incidence_and_bright_at_grazing() {
     let (w_noon, g_noon) = water_and_ground(12.0, "clear");
     let (w_night, g_night) = water_and_ground(0.5, "clear");
     assert!(lum(&g_night) < 0.1 * lum(&g_noon) && lum(&w_night) < lum(&w_noon));
+}
+
+/// A flat scene (no water) with a wall of `material` facing the camera `wall_x` m ahead:
+/// stereo at the origin looking along +x, level.
+fn wall_scene(wall_x: f64, sigma_d: f64, bin: usize) -> Scene {
+    Scene::from_toml_str(&format!(
+        r#"
+name = "wall"
+seed = 3
+[terrain]
+origin = [-5.0, -40.0]
+size = [{size}, 80.0]
+resolution = 1.0
+material = "soil"
+[[objects]]
+kind = "building"
+position = [{bx}, 0.0]
+size = [2.0, 60.0, 30.0]
+[trajectory]
+waypoints = [[0.0, 0.0], [1.0, 0.0]]
+speed = 1.0
+frames = 1
+[rig.stereo]
+position = [0.0, 0.0, 1.5]
+width = 160
+height = 120
+hfov_deg = 60.0
+baseline_m = 0.12
+disparity_noise_px = {sigma_d}
+bin = {bin}
+"#,
+        size = wall_x + 20.0,
+        bx = wall_x + 1.0,
+    ))
+    .unwrap()
+}
+
+/// Stereo noise is Gaussian in disparity, not in range: the depths of a flat wall at z
+/// have their 15.9 % and 84.1 % quantiles at f_b·B/(d + σ_d) and f_b·B/(d − σ_d) with
+/// d = f_b·B/z (f_b the binned focal length), so the far tail is longer than the near
+/// one; and past the depth where d falls under the minimum disparity nothing matches.
+#[test]
+fn stereo_noise_is_gaussian_in_disparity() {
+    for (wall, sigma_d, bin) in [(5.0, 0.25, 2), (10.0, 0.25, 1), (8.0, 0.5, 1)] {
+        let scene = wall_scene(wall, sigma_d, bin);
+        let w = World::build(&scene).unwrap();
+        let s = Stereo::new(scene.rig.stereo.as_ref().unwrap()).unwrap();
+        let pose = crate::sim::pose_of(&trajectory(&w)[0]) * s.optical_mount;
+        let fb = s.disparity_focal_px() * 0.12;
+        assert!((fb - s.rectified.fx / bin as f64 * 0.12).abs() < 1e-12);
+        let mut z: Vec<f64> = Vec::new();
+        for frame in 0..40 {
+            let c = s.cloud(&w, &pose, frame, true).unwrap();
+            // Points on the wall's face (the optical frame's z is the depth).
+            z.extend(
+                c.xyz
+                    .iter()
+                    .filter(|p| p[0].is_finite() && p[1] < -0.5)
+                    .map(|p| p[2] as f64),
+            );
+        }
+        assert!(z.len() > 2000, "{} wall points", z.len());
+        z.sort_by(f64::total_cmp);
+        let q = |p: f64| z[((z.len() - 1) as f64 * p) as usize];
+        let d = fb / wall;
+        let (near, far) = (fb / (d + sigma_d), fb / (d - sigma_d));
+        let (q16, q50, q84) = (q(0.1587), q(0.5), q(0.8413));
+        assert!((q50 / wall - 1.0).abs() < 0.01, "median {q50} for {wall}");
+        assert!((q16 / near - 1.0).abs() < 0.02, "{q16} vs {near}");
+        assert!((q84 / far - 1.0).abs() < 0.02, "{q84} vs {far}");
+        assert!(
+            q84 - q50 > q50 - q16,
+            "far tail {q84} not longer than near {q16}"
+        );
+        // No depth beyond the minimum disparity's.
+        assert!(z.iter().all(|&v| v <= fb / s.spec.min_disparity_px + 1e-6));
+    }
+    // A wall beyond f_b·B / d_min (8.3 m for f_b = 69.3 px, B = 0.12 m) gives no match
+    // without noise.
+    let scene = wall_scene(40.0, 0.0, 2);
+    let w = World::build(&scene).unwrap();
+    let s = Stereo::new(scene.rig.stereo.as_ref().unwrap()).unwrap();
+    let fb = s.disparity_focal_px() * 0.12;
+    assert!(fb / s.spec.min_disparity_px < 40.0);
+    let pose = crate::sim::pose_of(&trajectory(&w)[0]) * s.optical_mount;
+    let c = s.cloud(&w, &pose, 0, false).unwrap();
+    assert!(c
+        .xyz
+        .iter()
+        .filter(|p| p[0].is_finite())
+        .all(|p| (p[2] as f64) <= fb / s.spec.min_disparity_px + 1e-3));
+    assert!(s.measured_depth(fb, -0.01).is_none() && s.measured_depth(fb, 0.0).is_some());
+}
+
+/// A flat lot of `material` under a lidar at 2 m writing `intensity` (`raw` or
+/// `reflectivity`), noise off.
+fn lot(material: &str, intensity: &str) -> World {
+    World::build(
+        &Scene::from_toml_str(&format!(
+            r#"
+name = "lot"
+seed = 5
+[terrain]
+origin = [-80.0, -80.0]
+size = [160.0, 160.0]
+resolution = 2.0
+material = "{material}"
+[trajectory]
+waypoints = [[0.0, 0.0], [1.0, 0.0]]
+speed = 1.0
+frames = 1
+[rig.lidar]
+position = [0.0, 0.0, 2.0]
+rings = 40
+elevation_deg = [-40.0, -0.5]
+columns = 8
+dry_limit_m = 40.0
+intensity = "{intensity}"
+"#
+        ))
+        .unwrap(),
+    )
+    .unwrap()
+}
+
+/// The lidar's per-return channel follows the backscatter law (ρ/π)·cosᵐθ·A/r²: raw
+/// intensity 10⁴·ρ·cosᵐθ/r² falls with range² and incidence; reflectivity 100·ρ·cosᵐθ is
+/// range-corrected but still falls with incidence. Smooth pavement (m = 2.5) stops
+/// returning nearer than Lambertian grass of lower albedo.
+#[test]
+fn lidar_intensity_conventions_follow_the_backscatter_law() {
+    let mut farthest = Vec::new();
+    for (material, rho, m) in [("grass", 0.35, 1.0), ("pavement", 0.40, 2.5)] {
+        for conv in ["raw", "reflectivity"] {
+            let w = lot(material, conv);
+            let spec = w.scene.rig.lidar.as_ref().unwrap();
+            assert_eq!(
+                w.materials[w.material(material).unwrap()]
+                    .spec
+                    .backscatter_exponent,
+                m
+            );
+            let l = Lidar::new(spec).unwrap();
+            let pose = crate::sim::pose_of(&trajectory(&w)[0]) * l.mount;
+            let c = l.scan(&w, &pose, 0, false).unwrap();
+            let chan = if conv == "raw" {
+                assert!(c.reflectivity.is_none());
+                c.intensity.as_ref().unwrap()
+            } else {
+                assert!(c.intensity.is_none());
+                c.reflectivity.as_ref().unwrap()
+            };
+            let mut far: f64 = 0.0;
+            let mut n = 0;
+            for (p, v) in c.xyz.iter().zip(chan) {
+                if !p[0].is_finite() {
+                    assert!(v.is_nan());
+                    continue;
+                }
+                let r = (p[0] as f64).hypot(p[1] as f64).hypot(p[2] as f64);
+                let cos = 2.0 / r; // level ground, sensor 2 m above it
+                let law = rho * cos.powf(m);
+                let expect = if conv == "raw" {
+                    1e4 * law / (r * r)
+                } else {
+                    (100.0 * law).round().min(255.0)
+                };
+                let tol = if conv == "raw" { 1e-4 * expect } else { 1.0 };
+                assert!(
+                    ((*v as f64) - expect).abs() <= tol + 1e-9,
+                    "{material} {conv}: {v} vs {expect} at {r} m"
+                );
+                far = far.max(r);
+                n += 1;
+            }
+            assert!(n > 50, "{material}: {n} returns");
+            farthest.push(far);
+        }
+    }
+    // Grass returns out to about its dry limit; smooth pavement stops well before.
+    assert!(
+        farthest[0] > 30.0 && farthest[2] < 0.75 * farthest[0],
+        "{farthest:?}"
+    );
+}
+
+/// A rig file is datasheet values and mounts: it cannot carry a scene's water (the parser
+/// refuses the keys), the mapper config comes from the rig alone, and two scenes with
+/// different water, clarity and fording depth rendered with one rig give the same
+/// rig.toml, and no mapper config.
+#[test]
+fn a_rig_cannot_carry_scene_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = dir.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        "[lidar]\nposition = [0.0, 0.0, 1.5]\nrings = 8\nelevation_deg = [-20.0, 0.0]\ncolumns = 32\ndry_limit_m = 25.0\nattenuation = 0.8\n",
+    )
+    .unwrap();
+    let e = RigSpec::load(&rig).unwrap_err().to_string();
+    assert!(e.contains("attenuation"), "{e}");
+    std::fs::write(
+        &rig,
+        "[lidar]\nposition = [0.0, 0.0, 1.5]\nrings = 8\nelevation_deg = [-20.0, 0.0]\ncolumns = 32\ndry_limit_m = 25.0\n[[water]]\nkind = \"level\"\n",
+    )
+    .unwrap();
+    assert!(RigSpec::load(&rig).is_err());
+    std::fs::write(
+        &rig,
+        "[lidar]\nposition = [0.0, 0.0, 1.5]\nrings = 8\nelevation_deg = [-20.0, 0.0]\ncolumns = 32\ndry_limit_m = 25.0\n[stereo]\nposition = [0.0, 0.0, 1.5]\nwidth = 32\nheight = 24\nhfov_deg = 60.0\nbaseline_m = 0.2\n",
+    )
+    .unwrap();
+    let mut outs = Vec::new();
+    for (i, (att, level, fording)) in [(0.8, -0.2, 0.3), (3.0, -0.1, 0.5)].iter().enumerate() {
+        let t = scene_text(0.5, "")
+            .replacen("attenuation = 0.8", &format!("attenuation = {att}"), 1)
+            .replacen("level = -0.2", &format!("level = {level}"), 1)
+            .replacen(
+                "seed = 7",
+                &format!("seed = 7\nfording_depth = {fording}"),
+                1,
+            );
+        let p = dir.path().join(format!("scene{i}.toml"));
+        std::fs::write(&p, t).unwrap();
+        let scene = Scene::load_with_rig(&p, Some(&rig)).unwrap();
+        let out = dir.path().join(format!("sim{i}"));
+        simulate(&scene, &out, SimOptions { noise: false }).unwrap();
+        assert!(!out.join("mapper.toml").exists());
+        let cfg = mapper_config(&RigSpec::load(&out.join("rig.toml")).unwrap());
+        assert_eq!(cfg.lidar.as_ref().unwrap().attenuation_per_m, None);
+        assert_eq!(cfg.vehicle, crate::water::Vehicle::default());
+        outs.push((std::fs::read(out.join("rig.toml")).unwrap(), cfg));
+    }
+    assert!(outs[0].0 == outs[1].0, "rig.toml differs between scenes");
+    assert_eq!(outs[0].1, outs[1].1);
+}
+
+/// The stereo pair's right CameraInfo carries the baseline as ROS drivers publish it
+/// (P[0][3] = −f·B), and the frame reader recovers it; the left camera's lens distortion
+/// reaches the log.
+#[test]
+fn the_log_carries_the_baseline_and_the_distortion() {
+    let dir = tempfile::tempdir().unwrap();
+    let t = scene_text(0.5, "").replacen(
+        "baseline_m = 0.12",
+        "baseline_m = 0.12\ndistortion = [-0.1, 0.02, 0.0, 0.0, 0.0]",
+        1,
+    );
+    simulate(
+        &Scene::from_toml_str(&t).unwrap(),
+        dir.path(),
+        SimOptions { noise: false },
+    )
+    .unwrap();
+    let frames: Vec<_> = crate::io::frames::FrameStream::open(
+        dir.path().join("log.mcap"),
+        &crate::io::frames::LogConfig::default(),
+    )
+    .unwrap()
+    .map(|f| f.unwrap())
+    .collect();
+    assert_eq!(frames.len(), 2);
+    for f in &frames {
+        assert!((f.stereo_baseline_m.unwrap() - 0.12).abs() < 1e-12);
+        let cam = f.image.as_ref().unwrap().camera.as_ref().unwrap();
+        assert_eq!(
+            cam.distortion,
+            crate::geom::camera::Distortion::PlumbBob([-0.1, 0.02, 0.0, 0.0, 0.0])
+        );
+    }
 }

@@ -499,13 +499,17 @@ impl World {
                         z += f.height.unwrap_or(0.0) * p;
                     }
                 }
-                FeatureKind::Ditch => {
+                FeatureKind::Ditch | FeatureKind::Curb => {
                     let (a, b) = (f.from.unwrap_or_default(), f.to.unwrap_or_default());
                     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
                     let l2 = dx * dx + dy * dy;
                     let s = (((x - a[0]) * dx + (y - a[1]) * dy) / l2).clamp(0.0, 1.0);
                     let d = (x - a[0] - s * dx).hypot(y - a[1] - s * dy);
-                    z -= f.depth.unwrap_or(0.0) * rim(d / (0.5 * f.width.unwrap_or(1.0)), f.flat);
+                    let p = rim(d / (0.5 * f.width.unwrap_or(1.0)), f.flat);
+                    z += match f.kind {
+                        FeatureKind::Ditch => -f.depth.unwrap_or(0.0) * p,
+                        _ => f.height.unwrap_or(0.0) * p,
+                    };
                 }
             }
         }
@@ -537,7 +541,7 @@ impl World {
                     let r = f.radius.unwrap_or([1.0, 1.0]);
                     ((x - c[0]) / r[0]).hypot((y - c[1]) / r[1]) < 1.0
                 }
-                FeatureKind::Ditch => {
+                FeatureKind::Ditch | FeatureKind::Curb => {
                     let (a, b) = (f.from.unwrap_or_default(), f.to.unwrap_or_default());
                     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
                     let l2 = dx * dx + dy * dy;

@@ -17,6 +17,10 @@ pub struct BenchArgs {
     /// Scene to simulate when no log is given.
     #[arg(long, default_value = "maps/default.toml")]
     pub scene: PathBuf,
+    /// Rig to simulate the scene with (maps/rigs/*.toml; e.g. full_frame.toml for the full
+    /// sensor sizes) instead of the one it names.
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
     /// Repetitions of every stage (medians are reported).
     #[arg(long, default_value_t = 7)]
     pub reps: usize,
@@ -44,6 +48,7 @@ pub fn run_bench(a: &BenchArgs) -> anyhow::Result<()> {
         reps: a.reps,
         log: a.log.clone(),
         scene: a.scene.clone(),
+        rig: a.rig.clone(),
         ..BenchOptions::default()
     };
     if !a.cloud_points.is_empty() {

@@ -9,14 +9,11 @@ use tarn::build::{
     build_file, build_log, check_output_dir, BuildConfig, BuildReport, LogBuildConfig,
     LogBuildReport, WaterSummary,
 };
-use tarn::classify::color::RuleClassifier;
-use tarn::classify::gmm::ColorModel;
-use tarn::classify::lut::ColorLut;
-use tarn::classify::thermal::{MwirConfig, SwirConfig};
 use tarn::grid::{GridConfig, RangeNoise};
 use tarn::io::frames::LogConfig;
-use tarn::mapper::MapperConfig;
-use tarn::project::{FrameLabelConfig, MwirLabelConfig};
+use tarn::mapper::{LidarConfig, MapperConfig, StereoConfig};
+use tarn::project::{LabelSensor, LabelsConfig};
+use tarn::sim::RigSpec;
 
 #[derive(Args)]
 pub struct BuildArgs {
@@ -25,36 +22,42 @@ pub struct BuildArgs {
     /// Output directory (created if needed; files are replaced atomically).
     #[arg(long)]
     pub out: PathBuf,
-    /// Cell size, metres [default: 0.10, or the mapper config's].
+    /// Configuration (.toml, or JSON): the fields of tarn::mapper::MapperConfig. In a file a
+    /// sensor whose section ([lidar], [stereo], [labels]) is absent is off; every option
+    /// below can be set there, and an option given here overrides the file. Without it a
+    /// log is built with every sensor it carries.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The rig's datasheet (maps/rigs/*.toml, or the rig.toml `tarn simulate` writes):
+    /// lidar wavelength, sensitivity, aperture and range noise; stereo disparity noise,
+    /// minimum disparity and baseline. Applied over the config.
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
+    /// Cell size, metres [default: 0.10, or the config's].
     #[arg(long)]
     pub resolution: Option<f64>,
-    /// (cloud) Elevation noise of the input points, metres (one σ).
-    #[arg(long, default_value_t = 0.02)]
-    pub noise_sigma: f64,
-    /// (cloud) Largest window side, cells; larger clouds are built in blocks.
-    #[arg(long, default_value_t = 2048)]
-    pub max_window_cells: usize,
-    /// (log) Side of the rolling window around the vehicle, cells [default: 400, or the
-    /// mapper config's].
+    /// (cloud) Elevation noise of the input points, metres (one σ) [default: 0.02].
+    #[arg(long)]
+    pub noise_sigma: Option<f64>,
+    /// (cloud) Largest window side, cells; larger clouds are built in blocks [default: 2048].
+    #[arg(long)]
+    pub max_window_cells: Option<usize>,
+    /// (log) Side of the rolling window around the vehicle, cells [default: 400].
     #[arg(long)]
     pub window_cells: Option<usize>,
     /// (log) Topic whose clouds make frames (default: lidar, or stereo if the log has no lidar).
     #[arg(long)]
     pub frame_topic: Option<String>,
-    /// (log) Mapper configuration (.toml, or JSON): grid, fusion, vehicle, lidar and stereo
-    /// sections, fields of tarn::mapper::MapperConfig, all optional. `tarn simulate` writes
-    /// the one of its rig as DIR/mapper.toml.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
     /// (log) Which water cues run: all, none, or a list of lidar, reflectivity, stereo,
     /// mirror [default: the config's; all without a config].
     #[arg(long)]
     pub cues: Option<String>,
-    /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
+    /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional;
+    /// the config's [log] section does the same).
     #[arg(long)]
     pub log_config: Option<PathBuf>,
-    /// (log) Image sensors whose labels go into the map's water evidence: any of colour,
-    /// swir, mwir (comma-separated). The map is then exported with water.
+    /// (log) Image sensors whose labels go into the map's water evidence: none, or any of
+    /// colour, swir, mwir [default: the config's; colour and swir without a config].
     #[arg(long, value_delimiter = ',')]
     pub labels: Vec<String>,
     /// (log) Colour model (JSON from `tarn train-color`), compiled into a 6-bit lookup
@@ -64,20 +67,20 @@ pub struct BuildArgs {
     /// (log) Local solar hour of the log (0..24), for the MWIR labels.
     #[arg(long)]
     pub hour: Option<f64>,
-    /// (log) Label every n-th pixel in x and y.
-    #[arg(long, default_value_t = 2)]
-    pub label_stride: usize,
+    /// (log) Label every n-th pixel in x and y [default: 2].
+    #[arg(long)]
+    pub label_stride: Option<usize>,
     /// (log) Also label every row of pixels whose ground footprint is wider than a map
     /// cell, whatever the stride.
     #[arg(long)]
     pub label_wide_rows: bool,
-    /// (log) Pixels whose hit is farther than this do not vote, metres.
-    #[arg(long, default_value_t = 40.0)]
-    pub label_max_range: f64,
+    /// (log) Pixels whose hit is farther than this do not vote, metres [default: 40].
+    #[arg(long)]
+    pub label_max_range: Option<f64>,
     /// (log) Cells whose elevation σ exceeds this (metres) are holes to the label ray march
-    /// (far stereo-only cells); `inf` keeps every cell.
-    #[arg(long, default_value_t = 0.1)]
-    pub label_surface_max_std: f64,
+    /// (far stereo-only cells); `inf` keeps every cell [default: 0.1].
+    #[arg(long)]
+    pub label_surface_max_std: Option<f64>,
     /// (log) Publish the window's hazard map after every frame, as the vehicle does, and
     /// time it (the `water` stage); without it the water stage runs once at the end. The
     /// map is the same.
@@ -88,76 +91,85 @@ pub struct BuildArgs {
     pub json: bool,
 }
 
-/// The label configuration of `--labels`, `--colour-model`, `--hour`.
-fn label_config(a: &BuildArgs) -> anyhow::Result<Option<FrameLabelConfig>> {
-    if a.labels.is_empty() {
-        anyhow::ensure!(
-            a.colour_model.is_none() && a.hour.is_none(),
-            "--colour-model and --hour need --labels"
-        );
-        return Ok(None);
-    }
-    let mut cfg = FrameLabelConfig {
-        ray_stride: a.label_stride,
-        wide_rows: a.label_wide_rows,
-        max_range: a.label_max_range,
-        surface_max_std: a.label_surface_max_std,
-        ..FrameLabelConfig::default()
-    };
-    for l in &a.labels {
-        match l.trim() {
-            "colour" | "color" => {
-                cfg.colour = Some(match &a.colour_model {
-                    Some(p) => ColorLut::compile(&ColorModel::load(p)?, 6)?,
-                    None => ColorLut::compile(&RuleClassifier::default(), 8)?,
-                })
-            }
-            "swir" => cfg.swir = Some(SwirConfig::default()),
-            "mwir" => {
-                let hour = a
-                    .hour
-                    .context("--labels mwir needs --hour (local solar hour of the log)")?;
-                cfg.mwir = Some(MwirLabelConfig {
-                    classifier: MwirConfig::default(),
-                    hour,
-                })
-            }
-            other => anyhow::bail!("--labels: unknown sensor {other:?} (colour, swir, mwir)"),
-        }
-    }
-    anyhow::ensure!(
-        cfg.colour.is_some() || a.colour_model.is_none(),
-        "--colour-model needs --labels colour"
-    );
-    cfg.validate()?;
-    Ok(Some(cfg))
-}
-
 impl BuildArgs {
     /// The arguments of `tarn build INPUT --out OUT` with every default.
     pub fn defaults(input: PathBuf, out: PathBuf) -> Self {
         BuildArgs {
             input,
             out,
+            config: None,
+            rig: None,
             resolution: None,
-            noise_sigma: 0.02,
-            max_window_cells: 2048,
+            noise_sigma: None,
+            max_window_cells: None,
             window_cells: None,
             frame_topic: None,
-            config: None,
             cues: None,
             log_config: None,
             labels: Vec::new(),
             colour_model: None,
             hour: None,
-            label_stride: 2,
+            label_stride: None,
             label_wide_rows: false,
-            label_max_range: 40.0,
-            label_surface_max_std: 0.1,
+            label_max_range: None,
+            label_surface_max_std: None,
             per_frame_maps: false,
             json: false,
         }
     }
+}
+
+/// The label options over the config's `[labels]` (which they create when absent).
+fn apply_label_args(a: &BuildArgs, cfg: &mut MapperConfig) -> anyhow::Result<()> {
+    let given = !a.labels.is_empty()
+        || a.colour_model.is_some()
+        || a.hour.is_some()
+        || a.label_stride.is_some()
+        || a.label_wide_rows
+        || a.label_max_range.is_some()
+        || a.label_surface_max_std.is_some();
+    if !given {
+        return Ok(());
+    }
+    if a.labels.len() == 1 && a.labels[0].trim() == "none" {
+        cfg.labels = None;
+        return Ok(());
+    }
+    let l = cfg.labels.get_or_insert_with(|| LabelsConfig {
+        sensors: Vec::new(),
+        ..LabelsConfig::default()
+    });
+    if !a.labels.is_empty() {
+        l.sensors = a
+            .labels
+            .iter()
+            .map(|s| s.parse::<LabelSensor>())
+            .collect::<Result<_, _>>()
+            .context("--labels")?;
+    }
+    if let Some(p) = &a.colour_model {
+        l.colour_model = Some(p.clone());
+    }
+    if let Some(h) = a.hour {
+        l.hour = Some(h);
+    }
+    if let Some(v) = a.label_stride {
+        l.stride = v;
+    }
+    if a.label_wide_rows {
+        l.wide_rows = true;
+    }
+    if let Some(v) = a.label_max_range {
+        l.max_range_m = v;
+    }
+    if let Some(v) = a.label_surface_max_std {
+        l.surface_max_std_m = v;
+    }
+    anyhow::ensure!(
+        !l.sensors.is_empty(),
+        "label options given, but no sensor to label with (--labels colour,swir,mwir)"
+    );
+    Ok(())
 }
 
 fn progress_bar(template: &str) -> ProgressBar {
@@ -177,17 +189,14 @@ fn is_log(p: &Path) -> bool {
 pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     check_output_dir(&a.out)?;
     if !is_log(&a.input) {
-        if a.config.is_some() || a.cues.is_some() || a.log_config.is_some() {
+        if a.cues.is_some() || a.log_config.is_some() || a.rig.is_some() {
             anyhow::bail!(
-                "--config, --cues and --log-config are for logs (.mcap); {} is a cloud",
+                "--cues, --rig and --log-config are for logs (.mcap); {} is a cloud",
                 a.input.display()
             );
         }
-        let grid = GridConfig {
-            resolution: a.resolution.unwrap_or(0.10),
-            ..GridConfig::default()
-        };
-        let r = run_cloud(a, grid)?;
+        let cfg = mapper_config(a)?;
+        let r = run_cloud(a, &cfg)?;
         if a.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
@@ -207,12 +216,39 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     }
 }
 
-/// The mapper config of `tarn build LOG`: the file's (or the default), then the options.
+/// The config of `tarn build`: the file's (or every sensor), the rig's datasheet values,
+/// then the options.
 pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
     let mut cfg = match &a.config {
         Some(p) => MapperConfig::load(p)?,
-        None => MapperConfig::default(),
+        None => MapperConfig::every_sensor(),
     };
+    if let Some(p) = &a.rig {
+        let rig = RigSpec::load(p)?;
+        let d = tarn::sim::mapper_config(&rig);
+        // The rig says which sensors exist and their datasheet values; the config keeps its
+        // cue choices and everything else.
+        cfg.lidar = match (d.lidar, cfg.lidar.take()) {
+            (Some(r), Some(c)) => Some(LidarConfig {
+                wavelength_nm: r.wavelength_nm,
+                dry_limit_m: r.dry_limit_m,
+                albedo: r.albedo,
+                aperture_diameter_m: r.aperture_diameter_m,
+                noise: r.noise,
+                ..c
+            }),
+            _ => None,
+        };
+        cfg.stereo = match (d.stereo, cfg.stereo.take()) {
+            (Some(r), Some(c)) => Some(StereoConfig {
+                disparity_noise_px: r.disparity_noise_px,
+                min_disparity_px: r.min_disparity_px,
+                baseline_m: r.baseline_m,
+                ..c
+            }),
+            _ => None,
+        };
+    }
     if let Some(r) = a.resolution {
         cfg.grid.resolution = r;
     }
@@ -222,29 +258,42 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
     if let Some(c) = &a.cues {
         cfg.set_cues(c)?;
     }
-    cfg.labels = label_config(a)?;
+    if let Some(v) = a.noise_sigma {
+        cfg.build.noise_sigma_m = v;
+    }
+    if let Some(v) = a.max_window_cells {
+        cfg.build.max_window_cells = v;
+    }
+    if a.per_frame_maps {
+        cfg.build.per_frame_maps = true;
+    }
+    if let Some(p) = &a.log_config {
+        let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
+        cfg.log = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a log config", p.display()))?;
+        cfg.log
+            .validate()
+            .with_context(|| format!("{}: bad log config", p.display()))?;
+    }
+    if let Some(t) = &a.frame_topic {
+        cfg.log.frame_topic = t.clone();
+    }
+    apply_label_args(a, &mut cfg)?;
     cfg.validate()?;
     Ok(cfg)
 }
 
 /// Builds a log with a progress bar (frames and bytes); returns the report.
 pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
-    let log = match &a.log_config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
-            let c: LogConfig = serde_json::from_str(&text)
-                .with_context(|| format!("{}: not a log config", p.display()))?;
-            c.validate()
-                .with_context(|| format!("{}: bad log config", p.display()))?;
-            c
-        }
-        None => LogConfig::default(),
-    };
+    let mapper = mapper_config(a)?;
+    // The frame topic is chosen from the log unless it was named.
+    let frame_topic = (mapper.log.frame_topic != LogConfig::default().frame_topic)
+        .then(|| mapper.log.frame_topic.clone());
     let cfg = LogBuildConfig {
-        mapper: mapper_config(a)?,
-        log,
-        frame_topic: a.frame_topic.clone(),
-        per_frame_maps: a.per_frame_maps,
+        log: mapper.log.clone(),
+        frame_topic,
+        per_frame_maps: mapper.build.per_frame_maps,
+        mapper,
     };
     let bar =
         progress_bar("{spinner} mapping {bar:40} {binary_bytes}/{binary_total_bytes} ({eta})");
@@ -256,11 +305,14 @@ pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
     r.with_context(|| format!("building {}", a.input.display()))
 }
 
-pub fn run_cloud(a: &BuildArgs, grid: GridConfig) -> anyhow::Result<BuildReport> {
+pub fn run_cloud(a: &BuildArgs, mapper: &MapperConfig) -> anyhow::Result<BuildReport> {
     let cfg = BuildConfig {
-        grid,
-        noise: RangeNoise::constant(a.noise_sigma),
-        max_window_cells: a.max_window_cells,
+        grid: GridConfig {
+            resolution: mapper.grid.resolution,
+            ..GridConfig::default()
+        },
+        noise: RangeNoise::constant(mapper.build.noise_sigma_m),
+        max_window_cells: mapper.build.max_window_cells,
     };
     let bar = progress_bar("{spinner} fusing {bar:40} {human_pos}/{human_len} points ({eta})");
     let report = build_file(&a.input, &a.out, &cfg, &mut |done, total| {

@@ -32,13 +32,10 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
         "  {} frames: {} lidar returns, {} stereo points; truth {} cells, {} water",
         s.frames, s.lidar_returns, s.stereo_points, s.truth_cells, s.water_cells
     );
+    // What a user has: the log, and the rig's datasheet (nothing of the scene); every
+    // sensor the log carries, with the default settings.
     let mut args = BuildArgs::defaults(sim_dir.join("log.mcap"), out.to_path_buf());
-    args.config = Some(sim_dir.join("mapper.toml"));
-    // The default scene's pond reflects the sky: only the colour camera sees it (stereo
-    // finds no match on it, and it lies beyond the lidar's no-return interval). An 80 m
-    // window keeps the far shore's votes.
-    args.labels = vec!["colour".into()];
-    args.window_cells = Some(800);
+    args.rig = Some(sim_dir.join("rig.toml"));
     // The vehicle's view: the hazard map published after every frame, and its latency.
     args.per_frame_maps = true;
     println!(

@@ -10,9 +10,12 @@ use tarn::sim::{simulate, Scene, SimOptions};
 pub struct SimulateArgs {
     /// Scene file (TOML, see maps/README.md).
     pub scene: PathBuf,
-    /// Output directory: log.mcap, truth.ply, truth.json, scene.ply.
+    /// Output directory: log.mcap, truth.ply, truth.json, scene.ply, rig.toml.
     #[arg(long)]
     pub out: PathBuf,
+    /// Render with this rig (maps/rigs/*.toml) instead of the one the scene names.
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
     /// Exact geometry: no range, disparity or pixel noise and no stereo dropout.
     #[arg(long)]
     pub no_noise: bool,
@@ -22,7 +25,7 @@ pub struct SimulateArgs {
 }
 
 pub fn run_simulate(a: &SimulateArgs) -> anyhow::Result<()> {
-    let scene = Scene::load(&a.scene)?;
+    let scene = Scene::load_with_rig(&a.scene, a.rig.as_deref())?;
     let r = simulate(&scene, &a.out, SimOptions { noise: !a.no_noise })
         .with_context(|| format!("simulating {}", a.scene.display()))?;
     if a.json {

@@ -92,6 +92,7 @@ fn frame() -> Frame {
         }),
         swir: None,
         mwir: None,
+        stereo_baseline_m: None,
     }
 }
 

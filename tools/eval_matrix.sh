@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# The accuracy matrix: every scene in maps/ rendered with every rig in maps/rigs/, built as a
+# user would build it (`tarn build LOG --rig RIG`: the log and the rig's datasheet, every
+# sensor the log carries, default settings, nothing from the scene), and scored against the
+# simulator's truth by range band from the vehicle's path. Writes docs/accuracy.md.
+#
+#   tools/eval_matrix.sh                      # every scene × every rig
+#   SCENES="default dry_paved" RIGS="small" tools/eval_matrix.sh   # a part of it
+#   TARN_BIN=target/debug/tarn tools/eval_matrix.sh                # skip the release build
+#   OUT=out/matrix DOC=docs/accuracy.md       # where runs and the table go (defaults)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if [ -z "${TARN_BIN:-}" ]; then
+  cargo build --release --bin tarn >&2
+  TARN_BIN=target/release/tarn
+fi
+OUT="${OUT:-out/matrix}"
+DOC="${DOC:-docs/accuracy.md}"
+SCENES="${SCENES:-default pond_bush fig4_reflections puddles stream_slope reservoir_night snow_ice dry_decoys dry_paved vertical_scanner}"
+RIGS="${RIGS:-small wide lidar_camera stereo_camera}"
+start=$(date +%s)
+for rig in $RIGS; do
+  for scene in $SCENES; do
+    dir="$OUT/$rig/$scene"
+    mkdir -p "$OUT/$rig"
+    echo "matrix: $scene with $rig" >&2
+    "$TARN_BIN" simulate "maps/$scene.toml" --rig "maps/rigs/$rig.toml" --out "$dir/sim" --json \
+      > "$dir.sim.json"
+    "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --out "$dir/map" --json \
+      > "$dir.build.json"
+    "$TARN_BIN" eval "$dir/map" --truth "$dir/sim" --json > "$dir.eval.json"
+  done
+done
+secs=$(( $(date +%s) - start ))
+commit=$(git rev-parse --short HEAD)
+git diff --quiet HEAD -- src maps || commit="$commit (with uncommitted changes)"
+python3 tools/matrix_table.py "$OUT" "$commit" "$secs" "$SCENES" "$RIGS" > "$DOC"
+echo "matrix: wrote $DOC in $secs s" >&2
