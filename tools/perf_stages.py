@@ -6,8 +6,8 @@ sample in the ingest called by a cue counts as ingest); samples in no stage are
 "other" (allocator, kernel, thread pool), with their leaf shown.
 
     perf record -F 999 --call-graph dwarf,16384 -o perf.data \
-        target/release/tarn build LOG.mcap --out DIR --config MAPPER.toml \
-        --labels colour --per-frame-maps
+        target/release/tarn build LOG.mcap --out DIR --rig RIG.toml \
+        --per-frame-maps
     perf script -i perf.data > perf.txt
     python3 tools/perf_stages.py perf.txt
 """
