@@ -412,6 +412,7 @@ mod tests {
             class_counts: [0; 6],
             topics: Vec::new(),
             colour_view: None,
+            seen_water: None,
         };
         // Recall by what the camera saw: cell 12 seen as sky, 13 (water too) only as
         // terrain, 14 never; the map calls 12 and 14 water.

@@ -392,6 +392,7 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             sky: views.iter().filter(|v| *v.1).map(|v| *v.0).collect(),
             terrain: views.iter().filter(|v| !*v.1).map(|v| *v.0).collect(),
         }),
+        seen_water: None,
     };
     crate::io::export::write_json(&out_dir.join("truth.json"), &info)?;
     let mcfg = mapper_config(scene).to_toml()?;

@@ -58,6 +58,11 @@ pub struct TruthInfo {
     /// What the colour camera saw of the water over the whole log, when the rig has one.
     #[serde(default)]
     pub colour_view: Option<ColourView>,
+    /// Truth cells of water (keys at `resolution`) that some sensor ray (a lidar beam, a
+    /// stereo or camera pixel) met first at the water's surface in some frame: the water
+    /// the sensors could see. `None` in truth written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seen_water: Option<Vec<[i64; 2]>>,
 }
 
 /// Truth cells of water (keys at `resolution`) as the colour camera saw them: in some frame
