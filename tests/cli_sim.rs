@@ -75,6 +75,15 @@ fn simulate_then_eval_truth_against_itself() {
     let e: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
     assert_eq!(e["all"]["water_recall"], 1.0);
     assert_eq!(e["all"]["false_positive_rate"], 0.0);
+    let bands = e["matrix_bands"].as_array().unwrap();
+    let names: Vec<_> = bands.iter().map(|b| b["range"].as_str().unwrap()).collect();
+    assert_eq!(names, ["5-10", "10-20", "20-30", "5-30"]);
+    // Part of the pond is 5-10 m from the path; truth without seen water scores the observed.
+    let b = &bands[3];
+    assert_eq!(b["seen_recall"], 1.0);
+    assert_eq!(b["seen_water_cells"], b["water_cells"]);
+    assert_eq!(b["precision"], 1.0);
+    assert_eq!(b["false_rate_offshore"], 0.0);
     let r = tarn(&[
         "eval",
         map.to_str().unwrap(),

@@ -11,17 +11,33 @@
 //! - depth error: RMS of map depth − true depth where the map calls water and gives a
 //!   finite depth;
 //! - terrain error: RMS of map z − true terrain over true dry ground (ground or snow/ice
-//!   cells, not objects) the map does not call water.
+//!   cells, not objects) the map does not call water;
+//! - seen recall: true water cells that some sensor saw ([`TruthInfo::seen_water`]) and the
+//!   map calls water / those seen. These are counted from the truth, binned by the truth
+//!   cell's own centre, so seen water the map has no cell for counts as missed. Truth
+//!   without `seen_water` falls back to the observed water cells (same as water recall);
+//! - off-shore false rate: like the false-positive rate, but over the dry cells farther than
+//!   [`SHORE_MARGIN_M`] from all water, so that calling the water's edge wet is not counted;
+//! - precision: map cells called water whose truth is water / map cells called water.
+//!
+//! [`evaluate_matrix_bands`] scores the range bands of the evaluation matrix
+//! ([`MATRIX_BANDS`]) and their union.
 
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use serde::Serialize;
 
+use crate::cues::BuildKeyHasher;
 use crate::error::{Error, Result};
 use crate::grid::CellKey;
 use crate::hazard::{Class, HazardMap, MapCell};
 use crate::sim::{ColourView, TruthInfo};
+
+/// Hash maps and sets of cell keys with a fast hasher (truth rasters run to millions of
+/// cells).
+type KeyMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
+type KeySet = HashSet<CellKey, BuildKeyHasher>;
 
 /// Upper edges of the range bins (m); the last bin is open.
 pub const BIN_EDGES: [f64; 4] = [5.0, 10.0, 20.0, 30.0];
@@ -48,10 +64,41 @@ pub struct BinMetrics {
     pub terrain_rms_m: Option<f64>,
     /// Dry truth cells whose map z is more than [`SUNK_M`] below the true terrain.
     pub sunk_cells: usize,
+    /// True water cells of the truth that some sensor saw ([`TruthInfo::seen_water`]), in
+    /// the bin by the distance of their own centre to the path, whether or not the map has
+    /// a cell there. Truth without `seen_water`: `water_cells` (the observed water).
+    pub seen_water_cells: usize,
+    /// Of `seen_water_cells`, those whose map cell (the one containing the truth cell's
+    /// centre) is called water. Truth without `seen_water`: `water_detected`.
+    pub seen_water_detected: usize,
+    /// `seen_water_detected / seen_water_cells`.
+    pub seen_recall: Option<f64>,
+    /// Observed cells whose truth cell is off shore: not water, and farther than
+    /// [`SHORE_MARGIN_M`] from the centre of every true water cell.
+    pub dry_offshore_cells: usize,
+    /// Of `dry_offshore_cells`, those called water.
+    pub false_water_offshore: usize,
+    /// `false_water_offshore / dry_offshore_cells`.
+    pub false_rate_offshore: Option<f64>,
+    /// Observed cells called water that have a truth cell.
+    pub called_water: usize,
+    /// Of `called_water`, those whose truth cell is water.
+    pub called_true: usize,
+    /// `called_true / called_water`.
+    pub precision: Option<f64>,
 }
 
 /// How far below the true terrain a dry cell's map z must be to count as sunk (m).
 pub const SUNK_M: f64 = 0.15;
+
+/// How far (m) the centre of a dry truth cell must be from the centre of every true water
+/// cell for the cell to be off shore. Nearer cells are the water's edge, where a map cell
+/// may straddle the shoreline and calling it water is no real false alarm.
+pub const SHORE_MARGIN_M: f64 = 0.5;
+
+/// The range bands of the evaluation matrix (m from the path, `[lo, hi)`);
+/// [`evaluate_matrix_bands`] scores them and their union.
+pub const MATRIX_BANDS: [(f64, f64); 3] = [(5.0, 10.0), (10.0, 20.0), (20.0, 30.0)];
 
 #[derive(Debug, Clone, Default)]
 struct Acc {
@@ -62,13 +109,22 @@ struct Acc {
 }
 
 impl Acc {
-    fn add(&mut self, cell: &MapCell, truth: Option<&MapCell>) {
+    /// One observed map cell, its truth cell and whether that is off shore.
+    fn add(&mut self, cell: &MapCell, truth: Option<&MapCell>, offshore: bool) {
         self.m.observed_cells += 1;
         let Some(t) = truth else {
             self.m.outside_truth += 1;
             return;
         };
         let called = cell.class == Class::Water;
+        if called {
+            self.m.called_water += 1;
+            self.m.called_true += usize::from(t.class == Class::Water);
+        }
+        if t.class != Class::Water && offshore {
+            self.m.dry_offshore_cells += 1;
+            self.m.false_water_offshore += usize::from(called);
+        }
         if t.class == Class::Water {
             self.m.water_cells += 1;
             if called {
@@ -94,10 +150,25 @@ impl Acc {
         }
     }
 
-    fn finish(mut self) -> BinMetrics {
+    /// One seen true-water truth cell, called water by the map or not.
+    fn add_seen(&mut self, called: bool) {
+        self.m.seen_water_cells += 1;
+        self.m.seen_water_detected += usize::from(called);
+    }
+
+    /// The rates and errors; `seen_recorded` false (truth without `seen_water`) takes the
+    /// seen water from the observed water.
+    fn finish(mut self, seen_recorded: bool) -> BinMetrics {
         let rms = |s: f64, n: usize| (n > 0).then(|| (s / n as f64).sqrt());
+        if !seen_recorded {
+            self.m.seen_water_cells = self.m.water_cells;
+            self.m.seen_water_detected = self.m.water_detected;
+        }
         self.m.water_recall = ratio(self.m.water_detected, self.m.water_cells);
         self.m.false_positive_rate = ratio(self.m.false_water, self.m.dry_cells);
+        self.m.seen_recall = ratio(self.m.seen_water_detected, self.m.seen_water_cells);
+        self.m.false_rate_offshore = ratio(self.m.false_water_offshore, self.m.dry_offshore_cells);
+        self.m.precision = ratio(self.m.called_true, self.m.called_water);
         self.m.surface_rms_m = rms(self.surface2, self.m.surface_cells);
         self.m.depth_rms_m = rms(self.depth2, self.m.depth_cells);
         self.m.terrain_rms_m = rms(self.terrain2, self.m.terrain_cells);
@@ -147,7 +218,7 @@ impl ViewCount {
 }
 
 impl ColourViewRecall {
-    fn of(map: &HazardMap, index: &HashMap<CellKey, &MapCell>, res: f64, v: &ColourView) -> Self {
+    fn of(map: &HazardMap, index: &KeyMap<&MapCell>, res: f64, v: &ColourView) -> Self {
         let sky: HashSet<[i64; 2]> = v.sky.iter().copied().collect();
         let terrain: HashSet<[i64; 2]> = v.terrain.iter().copied().collect();
         let mut r = ColourViewRecall::default();
@@ -199,18 +270,21 @@ impl EvalReport {
     pub fn markdown(&self) -> String {
         let f = |v: Option<f64>, d: usize| v.map_or("–".to_string(), |v| format!("{v:.d$}"));
         let mut s = String::from(
-            "| range (m) | observed | water | recall | dry | false-positive rate | surface RMS (m) | depth RMS (m) | terrain RMS (m) |\n\
-             | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+            "| range (m) | observed | water | recall | seen recall | dry | false-positive rate | off-shore false rate | precision | surface RMS (m) | depth RMS (m) | terrain RMS (m) |\n\
+             | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
         );
         for b in self.bins.iter().chain(std::iter::once(&self.all)) {
             s.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 b.range,
                 b.observed_cells,
                 b.water_cells,
                 f(b.water_recall, 3),
+                f(b.seen_recall, 3),
                 b.dry_cells,
                 f(b.false_positive_rate, 4),
+                f(b.false_rate_offshore, 4),
+                f(b.precision, 3),
                 f(b.surface_rms_m, 3),
                 f(b.depth_rms_m, 3),
                 f(b.terrain_rms_m, 3)
@@ -250,53 +324,260 @@ fn bin_name(i: usize) -> String {
     }
 }
 
+/// The bin of a distance to the path: its index in [`BIN_EDGES`], or the open last bin.
+fn bin_of(d: f64) -> usize {
+    BIN_EDGES
+        .iter()
+        .position(|&e| d < e)
+        .unwrap_or(BIN_EDGES.len())
+}
+
+/// The truth cells within [`SHORE_MARGIN_M`] of the centre of a true water cell: the water
+/// mask dilated by a disc. A dense array over the truth raster's bounding box, or a hash
+/// set when the truth is sparse (a box over four times its cells).
+enum Shore {
+    Dense {
+        lo: CellKey,
+        width: i64,
+        height: i64,
+        /// One flag per cell of the box, row by row.
+        near: Vec<bool>,
+    },
+    Sparse(KeySet),
+}
+
+impl Shore {
+    fn new(truth: &HazardMap) -> Self {
+        let res = truth.resolution;
+        let water: KeySet = truth
+            .cells
+            .iter()
+            .filter(|c| c.class == Class::Water)
+            .map(|c| c.key)
+            .collect();
+        // Offsets whose centres are within the margin (a hair of slack for rounding).
+        let r = (SHORE_MARGIN_M / res).ceil() as i64;
+        let disc: Vec<(i64, i64)> = (-r..=r)
+            .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+            .filter(|&(dx, dy)| (dx as f64).hypot(dy as f64) * res <= SHORE_MARGIN_M + 1e-9)
+            .collect();
+        let mut s = match truth.cells.first() {
+            None => Shore::Sparse(KeySet::default()),
+            Some(first) => {
+                let (lo, hi) = truth
+                    .cells
+                    .iter()
+                    .fold((first.key, first.key), |(lo, hi), c| {
+                        (
+                            CellKey::new(lo.x.min(c.key.x), lo.y.min(c.key.y)),
+                            CellKey::new(hi.x.max(c.key.x), hi.y.max(c.key.y)),
+                        )
+                    });
+                let (width, height) = (hi.x - lo.x + 1, hi.y - lo.y + 1);
+                if width.saturating_mul(height) <= 4 * truth.cells.len() as i64 {
+                    Shore::Dense {
+                        lo,
+                        width,
+                        height,
+                        near: vec![false; (width * height) as usize],
+                    }
+                } else {
+                    Shore::Sparse(KeySet::default())
+                }
+            }
+        };
+        // The water cell nearest a dry cell has a neighbour (the step towards the dry
+        // cell) that is not water, else that neighbour would be nearer: only water cells
+        // on a boundary need stamping.
+        let boundary = |k: &&CellKey| {
+            [(1, 0), (-1, 0), (0, 1), (0, -1)]
+                .iter()
+                .any(|(dx, dy)| !water.contains(&CellKey::new(k.x + dx, k.y + dy)))
+        };
+        for k in water.iter().filter(boundary) {
+            for (dx, dy) in &disc {
+                s.mark(CellKey::new(k.x + dx, k.y + dy));
+            }
+        }
+        s
+    }
+
+    /// The index of `k` in a dense box of `width` × `height` from `lo`, if it is inside.
+    fn slot(lo: CellKey, width: i64, height: i64, k: CellKey) -> Option<usize> {
+        let (x, y) = (k.x.checked_sub(lo.x)?, k.y.checked_sub(lo.y)?);
+        ((0..width).contains(&x) && (0..height).contains(&y)).then(|| (y * width + x) as usize)
+    }
+
+    fn mark(&mut self, k: CellKey) {
+        match self {
+            Shore::Dense {
+                lo,
+                width,
+                height,
+                near,
+            } => {
+                if let Some(i) = Shore::slot(*lo, *width, *height, k) {
+                    near[i] = true;
+                }
+            }
+            Shore::Sparse(set) => {
+                set.insert(k);
+            }
+        }
+    }
+
+    /// Whether the centre of truth cell `k` is within [`SHORE_MARGIN_M`] of a water cell's.
+    fn near(&self, k: CellKey) -> bool {
+        match self {
+            Shore::Dense {
+                lo,
+                width,
+                height,
+                near,
+            } => Shore::slot(*lo, *width, *height, k).is_some_and(|i| near[i]),
+            Shore::Sparse(set) => set.contains(&k),
+        }
+    }
+}
+
+/// One observed map cell ready to score.
+struct Scored<'a> {
+    cell: &'a MapCell,
+    /// The truth cell containing the map cell's centre.
+    truth: Option<&'a MapCell>,
+    /// The truth cell is off shore (see [`BinMetrics::dry_offshore_cells`]).
+    offshore: bool,
+    /// Distance of the map cell's centre to the path (m).
+    d: f64,
+}
+
+/// What every bin and band is scored from, computed once per map and truth.
+struct Scorer<'a> {
+    /// Truth cells by key (at the truth's resolution).
+    index: KeyMap<&'a MapCell>,
+    cells: Vec<Scored<'a>>,
+    /// The seen true-water truth cells: distance of the centre to the path, and whether
+    /// the map calls the cell containing that centre water. `None` without
+    /// [`TruthInfo::seen_water`].
+    seen: Option<Vec<(f64, bool)>>,
+}
+
+impl<'a> Scorer<'a> {
+    fn new(map: &'a HazardMap, truth: &'a HazardMap, info: &TruthInfo) -> Result<Self> {
+        if truth.resolution.is_nan() || truth.resolution <= 0.0 {
+            return Err(Error::invalid(
+                "truth",
+                format!("resolution {} must be > 0", truth.resolution),
+            ));
+        }
+        let res = truth.resolution;
+        let index: KeyMap<&MapCell> = truth.cells.iter().map(|c| (c.key, c)).collect();
+        let path: Vec<[f64; 2]> = info.trajectory.iter().map(|p| [p.x, p.y]).collect();
+        let shore = Shore::new(truth);
+        let cells = map
+            .cells
+            .iter()
+            .map(|c| {
+                let key = CellKey::new((c.x / res).floor() as i64, (c.y / res).floor() as i64);
+                let t = index.get(&key).copied();
+                Scored {
+                    cell: c,
+                    truth: t,
+                    offshore: t.is_some_and(|t| t.class != Class::Water && !shore.near(key)),
+                    d: distance_to_path(&path, c.x, c.y),
+                }
+            })
+            .collect();
+        let seen = match &info.seen_water {
+            None => None,
+            Some(keys) => {
+                let mres = map.resolution;
+                if !(mres > 0.0 && mres.is_finite()) {
+                    return Err(Error::invalid(
+                        "map",
+                        format!("resolution {mres} must be > 0"),
+                    ));
+                }
+                // A map cell is called water when any cell of the map with its key is.
+                let mut called: KeyMap<bool> = KeyMap::default();
+                for c in &map.cells {
+                    *called.entry(c.key).or_default() |= c.class == Class::Water;
+                }
+                let keys: KeySet = keys.iter().map(|k| CellKey::new(k[0], k[1])).collect();
+                Some(
+                    keys.into_iter()
+                        .filter(|k| index.get(k).is_some_and(|t| t.class == Class::Water))
+                        .map(|k| {
+                            let (x, y) = ((k.x as f64 + 0.5) * res, (k.y as f64 + 0.5) * res);
+                            let mk =
+                                CellKey::new((x / mres).floor() as i64, (y / mres).floor() as i64);
+                            (
+                                distance_to_path(&path, x, y),
+                                called.get(&mk).copied().unwrap_or(false),
+                            )
+                        })
+                        .collect(),
+                )
+            }
+        };
+        Ok(Scorer { index, cells, seen })
+    }
+
+    /// The metrics of the cells (map cells by their centre, seen truth cells by theirs)
+    /// whose distance to the path `keep` accepts.
+    fn score(&self, keep: impl Fn(f64) -> bool) -> BinMetrics {
+        let mut acc = Acc::default();
+        for s in self.cells.iter().filter(|s| keep(s.d)) {
+            acc.add(s.cell, s.truth, s.offshore);
+        }
+        for &(_, called) in self.seen.iter().flatten().filter(|(d, _)| keep(*d)) {
+            acc.add_seen(called);
+        }
+        acc.finish(self.seen.is_some())
+    }
+
+    /// The metrics of the band `[lo, hi)` m, named "lo-hi".
+    fn band(&self, lo: f64, hi: f64) -> BinMetrics {
+        let mut m = self.score(|d| d >= lo && d < hi);
+        m.range = format!("{lo}-{hi}");
+        m
+    }
+}
+
 /// Scores `map` against the truth raster and the trajectory of `info`.
 pub fn evaluate(map: &HazardMap, truth: &HazardMap, info: &TruthInfo) -> Result<EvalReport> {
-    if truth.resolution.is_nan() || truth.resolution <= 0.0 {
-        return Err(Error::invalid(
-            "truth",
-            format!("resolution {} must be > 0", truth.resolution),
-        ));
-    }
-    let res = truth.resolution;
-    let index: HashMap<CellKey, &MapCell> = truth.cells.iter().map(|c| (c.key, c)).collect();
-    let path: Vec<[f64; 2]> = info.trajectory.iter().map(|p| [p.x, p.y]).collect();
-    let mut bins = vec![Acc::default(); BIN_EDGES.len() + 1];
-    let mut all = Acc::default();
-    for c in &map.cells {
-        let key = CellKey::new((c.x / res).floor() as i64, (c.y / res).floor() as i64);
-        let t = index.get(&key).copied();
-        let d = distance_to_path(&path, c.x, c.y);
-        let b = BIN_EDGES
-            .iter()
-            .position(|&e| d < e)
-            .unwrap_or(BIN_EDGES.len());
-        bins[b].add(c, t);
-        all.add(c, t);
-    }
+    let s = Scorer::new(map, truth, info)?;
     Ok(EvalReport {
         scene: info.scene.clone(),
         map_resolution: map.resolution,
-        truth_resolution: res,
-        bins: bins
-            .into_iter()
-            .enumerate()
-            .map(|(i, a)| {
-                let mut m = a.finish();
+        truth_resolution: truth.resolution,
+        bins: (0..=BIN_EDGES.len())
+            .map(|i| {
+                let mut m = s.score(|d| bin_of(d) == i);
                 m.range = bin_name(i);
                 m
             })
             .collect(),
         all: {
-            let mut m = all.finish();
+            let mut m = s.score(|_| true);
             m.range = "all".into();
             m
         },
         colour_view: info
             .colour_view
             .as_ref()
-            .map(|v| ColourViewRecall::of(map, &index, res, v)),
+            .map(|v| ColourViewRecall::of(map, &s.index, truth.resolution, v)),
     })
+}
+
+fn check_band(lo: f64, hi: f64) -> Result<()> {
+    if !(lo >= 0.0 && hi > lo) {
+        return Err(Error::invalid(
+            "range band",
+            format!("{lo}-{hi} m must satisfy 0 ≤ lo < hi"),
+        ));
+    }
+    Ok(())
 }
 
 /// Scores the cells whose distance to the path is in `[lo, hi)` m, like one bin of
@@ -308,32 +589,24 @@ pub fn evaluate_band(
     lo: f64,
     hi: f64,
 ) -> Result<BinMetrics> {
-    if truth.resolution.is_nan() || truth.resolution <= 0.0 {
-        return Err(Error::invalid(
-            "truth",
-            format!("resolution {} must be > 0", truth.resolution),
-        ));
-    }
-    if !(lo >= 0.0 && hi > lo) {
-        return Err(Error::invalid(
-            "range band",
-            format!("{lo}-{hi} m must satisfy 0 ≤ lo < hi"),
-        ));
-    }
-    let res = truth.resolution;
-    let index: HashMap<CellKey, &MapCell> = truth.cells.iter().map(|c| (c.key, c)).collect();
-    let path: Vec<[f64; 2]> = info.trajectory.iter().map(|p| [p.x, p.y]).collect();
-    let mut acc = Acc::default();
-    for c in &map.cells {
-        let d = distance_to_path(&path, c.x, c.y);
-        if d >= lo && d < hi {
-            let key = CellKey::new((c.x / res).floor() as i64, (c.y / res).floor() as i64);
-            acc.add(c, index.get(&key).copied());
-        }
-    }
-    let mut m = acc.finish();
-    m.range = format!("{lo}-{hi}");
-    Ok(m)
+    check_band(lo, hi)?;
+    Ok(Scorer::new(map, truth, info)?.band(lo, hi))
+}
+
+/// Scores the bands of the evaluation matrix: the three [`MATRIX_BANDS`] ("5-10",
+/// "10-20", "20-30") and then their union ("5-30"), each like [`evaluate_band`].
+pub fn evaluate_matrix_bands(
+    map: &HazardMap,
+    truth: &HazardMap,
+    info: &TruthInfo,
+) -> Result<Vec<BinMetrics>> {
+    let s = Scorer::new(map, truth, info)?;
+    let all = (MATRIX_BANDS[0].0, MATRIX_BANDS[MATRIX_BANDS.len() - 1].1);
+    Ok(MATRIX_BANDS
+        .iter()
+        .chain(std::iter::once(&all))
+        .map(|&(lo, hi)| s.band(lo, hi))
+        .collect())
 }
 
 /// Reads `MAPDIR/map.ply`, `TRUTHDIR/truth.ply` and `TRUTHDIR/truth.json`.
@@ -356,6 +629,9 @@ pub fn evaluate_dirs(map_dir: &Path, truth_dir: &Path) -> Result<EvalReport> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::hazard::Hazard;
+    use crate::sim::TruthPose;
+    use proptest::prelude::*;
 
     #[test]
     fn distance_to_a_polyline() {
@@ -368,8 +644,6 @@ mod tests {
 
     #[test]
     fn a_band_scores_only_its_cells_and_counts_sunk_ones() {
-        use crate::hazard::Hazard;
-        use crate::sim::{TruthInfo, TruthPose};
         let cell = |kx: i64, z: f64, class: Class| MapCell {
             key: CellKey::new(kx, 0),
             x: (kx as f64 + 0.5) * 1.0,
@@ -440,6 +714,298 @@ mod tests {
         assert_eq!(b.sunk_cells, 1);
         assert_eq!(b.range, "5-25");
         assert!(evaluate_band(&map, &truth, &info, 5.0, 5.0).is_err());
+    }
+
+    /// A cell at key (kx, ky) of a grid of `res` m cells, z 0.
+    fn cell(res: f64, kx: i64, ky: i64, class: Class) -> MapCell {
+        MapCell {
+            key: CellKey::new(kx, ky),
+            x: (kx as f64 + 0.5) * res,
+            y: (ky as f64 + 0.5) * res,
+            z: 0.0,
+            elevation_std: 0.0,
+            water: 0.0,
+            depth: 0.0,
+            class,
+            hazard: Hazard::Free,
+            hits: 1,
+            below: 0,
+        }
+    }
+
+    /// A raster of `nx` × `ny` cells of `res` m from key (0, 0); `water` says which are.
+    fn raster(res: f64, nx: i64, ny: i64, water: impl Fn(i64, i64) -> bool) -> HazardMap {
+        let cells = (0..ny)
+            .flat_map(|ky| (0..nx).map(move |kx| (kx, ky)))
+            .map(|(kx, ky)| {
+                let class = if water(kx, ky) {
+                    Class::Water
+                } else {
+                    Class::Ground
+                };
+                cell(res, kx, ky, class)
+            })
+            .collect();
+        HazardMap::new(res, cells)
+    }
+
+    /// Truth with a trajectory through `path` and the given seen water.
+    fn info(res: f64, path: &[[f64; 2]], seen: Option<Vec<[i64; 2]>>) -> TruthInfo {
+        TruthInfo {
+            scene: "t".into(),
+            description: String::new(),
+            seed: 0,
+            resolution: res,
+            fording_depth_m: 0.3,
+            origin: [0.0, 0.0],
+            size: [1.0, 1.0],
+            trajectory: path
+                .iter()
+                .map(|p| TruthPose {
+                    stamp: 0.0,
+                    x: p[0],
+                    y: p[1],
+                    z: 0.0,
+                    yaw: 0.0,
+                })
+                .collect(),
+            water_bodies: Vec::new(),
+            class_counts: [0; 6],
+            topics: Vec::new(),
+            colour_view: None,
+            seen_water: seen,
+        }
+    }
+
+    fn set_class(map: &mut HazardMap, kx: i64, ky: i64, class: Class) {
+        let c = map.cells.iter_mut().find(|c| c.key == CellKey::new(kx, ky));
+        c.unwrap().class = class;
+    }
+
+    #[test]
+    fn seen_water_the_map_lacks_counts_as_missed() {
+        // 1 m cells along x, the path at the origin: cell k is k + 0.5 m away. Water 12..=15.
+        let truth = raster(1.0, 40, 1, |kx, _| (12..=15).contains(&kx));
+        let mut map = truth.clone();
+        map.cells.retain(|c| c.key.x != 14);
+        set_class(&mut map, 15, 0, Class::Ground);
+        // Seen: the four water cells (14 twice), a dry cell and one outside the truth; the
+        // last two are no water and do not count.
+        let seen = vec![
+            [12, 0],
+            [13, 0],
+            [14, 0],
+            [15, 0],
+            [14, 0],
+            [30, 0],
+            [99, 0],
+        ];
+        let info = info(1.0, &[[0.0, 0.5]], Some(seen));
+        let b = evaluate_band(&map, &truth, &info, 10.0, 20.0).unwrap();
+        assert_eq!((b.seen_water_cells, b.seen_water_detected), (4, 2));
+        assert_eq!(b.seen_recall, Some(0.5));
+        // Recall over the observed water does not see the missing cell.
+        assert_eq!((b.water_cells, b.water_detected), (3, 2));
+        assert_eq!(b.water_recall, Some(2.0 / 3.0));
+        assert_eq!(
+            (b.called_water, b.called_true, b.precision),
+            (2, 2, Some(1.0))
+        );
+        let r = evaluate(&map, &truth, &info).unwrap();
+        assert_eq!(r.bins[2].range, "10-20");
+        assert_eq!(r.bins[2].seen_recall, Some(0.5));
+        assert_eq!(r.all.seen_water_cells, 4);
+        assert_eq!(
+            (r.bins[3].seen_water_cells, r.bins[3].seen_recall),
+            (0, None)
+        );
+        assert_eq!((r.bins[3].called_water, r.bins[3].precision), (0, None));
+    }
+
+    #[test]
+    fn water_called_at_the_shore_is_not_off_shore() {
+        // 0.5 m cells, 60 × 3; water at (30..=33, 1). Within 0.5 m of it (the shore): the
+        // dry cells beside it in x and y, not the diagonal ones (0.71 m).
+        let truth = raster(0.5, 60, 3, |kx, ky| ky == 1 && (30..=33).contains(&kx));
+        let mut map = truth.clone();
+        set_class(&mut map, 29, 1, Class::Water); // shore, beside
+        set_class(&mut map, 30, 0, Class::Water); // shore, below
+        set_class(&mut map, 29, 0, Class::Water); // diagonal: off shore
+        set_class(&mut map, 50, 1, Class::Water); // far: off shore
+        map.cells.push(cell(0.5, 200, 1, Class::Water)); // outside the truth: not scored
+        let r = evaluate(&map, &truth, &info(0.5, &[[0.0, 0.75]], None)).unwrap();
+        let m = &r.all;
+        assert_eq!(m.outside_truth, 1);
+        assert_eq!((m.dry_cells, m.false_water), (176, 4));
+        // 10 shore cells: 2 beside, 4 above and 4 below.
+        assert_eq!((m.dry_offshore_cells, m.false_water_offshore), (166, 2));
+        assert_eq!(m.false_rate_offshore, Some(2.0 / 166.0));
+        // Precision: 4 true water of the 8 cells called water that have truth.
+        assert_eq!((m.called_water, m.called_true), (8, 4));
+        assert_eq!(m.precision, Some(0.5));
+    }
+
+    #[test]
+    fn the_shore_is_a_disc_of_half_a_metre() {
+        // 0.25 m cells: the margin is two cells along an axis, one diagonally.
+        let truth = raster(0.25, 20, 20, |kx, ky| (kx, ky) == (10, 10));
+        let s = Shore::new(&truth);
+        let near = |dx: i64, dy: i64| s.near(CellKey::new(10 + dx, 10 + dy));
+        assert!(near(2, 0) && near(0, -2) && near(1, 1) && near(-1, 1));
+        assert!(!near(2, 1) && !near(3, 0) && !near(2, 2) && !near(-1, -2));
+        // Outside the raster nothing is near.
+        assert!(!s.near(CellKey::new(-1, -1)) && !s.near(CellKey::new(i64::MIN, 0)));
+        // A sparse truth (two far cells) gives the same answers.
+        let mut sparse = truth.clone();
+        sparse.cells.retain(|c| c.key.x == 10 || c.key.y == 10);
+        sparse.cells.push(cell(0.25, 1000, 1000, Class::Ground));
+        let s2 = Shore::new(&sparse);
+        assert!(matches!(s2, Shore::Sparse(_)));
+        assert!(s2.near(CellKey::new(12, 10)) && !s2.near(CellKey::new(13, 10)));
+    }
+
+    /// Truth of 0.5 m cells, 80 × 2, water at x 10–13 m (keys 20..=25); a map of 1 m cells
+    /// calling water at x 10–12 m (keys 10 and 11, not 12); the path the line x = 0.5 m.
+    fn two_resolutions(seen: bool) -> (HazardMap, HazardMap, TruthInfo) {
+        let truth = raster(0.5, 80, 2, |kx, _| (20..=25).contains(&kx));
+        let map = raster(1.0, 40, 1, |kx, _| kx == 10 || kx == 11);
+        let seen = seen.then(|| {
+            (20..=25)
+                .flat_map(|kx| (0..2).map(move |ky| [kx, ky]))
+                .collect()
+        });
+        let path = [[0.5, -100.0], [0.5, 100.0]];
+        (map, truth, info(0.5, &path, seen))
+    }
+
+    #[test]
+    fn truth_cells_are_banded_by_their_own_centres() {
+        let (map, truth, info) = two_resolutions(true);
+        // Truth key 20 (centre 10.25 m, 9.75 m from the path) is in 5-10 though its map
+        // cell (key 10, centre 10.5 m, 10 m away) is in 10-20; the map calls it water.
+        let b = evaluate_band(&map, &truth, &info, 5.0, 10.0).unwrap();
+        assert_eq!((b.seen_water_cells, b.seen_water_detected), (2, 2));
+        assert_eq!((b.water_cells, b.water_recall), (0, None));
+        // Keys 21..=25 are 10.25–12.25 m away; 24 and 25 are in map cell 12, not water.
+        let b = evaluate_band(&map, &truth, &info, 10.0, 20.0).unwrap();
+        assert_eq!((b.seen_water_cells, b.seen_water_detected), (10, 6));
+        assert_eq!(b.seen_recall, Some(0.6));
+        // Map cells 10, 11, 12 meet truth keys 21, 23, 25 (their centres' cells).
+        assert_eq!((b.water_cells, b.water_detected), (3, 2));
+        let r = evaluate(&map, &truth, &info).unwrap();
+        assert_eq!(
+            (r.bins[1].range.as_str(), r.bins[1].seen_water_cells),
+            ("5-10", 2)
+        );
+        assert_eq!(r.bins[2].seen_water_detected, 6);
+        assert_eq!((r.all.seen_water_cells, r.all.seen_water_detected), (12, 8));
+    }
+
+    #[test]
+    fn without_seen_water_seen_recall_is_the_observed_recall() {
+        let (map, truth, info) = two_resolutions(false);
+        let r = evaluate(&map, &truth, &info).unwrap();
+        let mut bins = r.bins.clone();
+        bins.push(r.all.clone());
+        bins.extend(evaluate_matrix_bands(&map, &truth, &info).unwrap());
+        for b in &bins {
+            assert_eq!(b.seen_water_cells, b.water_cells, "{}", b.range);
+            assert_eq!(b.seen_water_detected, b.water_detected, "{}", b.range);
+            assert_eq!(b.seen_recall, b.water_recall, "{}", b.range);
+        }
+        assert_eq!(r.all.seen_recall, Some(2.0 / 3.0));
+    }
+
+    #[test]
+    fn matrix_bands_are_the_three_bands_and_their_union() {
+        let (map, truth, info) = two_resolutions(true);
+        let m = evaluate_matrix_bands(&map, &truth, &info).unwrap();
+        let names: Vec<_> = m.iter().map(|b| b.range.as_str()).collect();
+        assert_eq!(names, ["5-10", "10-20", "20-30", "5-30"]);
+        for (b, &(lo, hi)) in m.iter().zip(&MATRIX_BANDS) {
+            assert_eq!(*b, evaluate_band(&map, &truth, &info, lo, hi).unwrap());
+        }
+        let sum = |f: fn(&BinMetrics) -> usize| m[..3].iter().map(f).sum::<usize>();
+        let u = &m[3];
+        assert_eq!(u.observed_cells, sum(|b| b.observed_cells));
+        assert_eq!(u.seen_water_cells, sum(|b| b.seen_water_cells));
+        assert_eq!(u.seen_water_detected, sum(|b| b.seen_water_detected));
+        assert_eq!(u.dry_offshore_cells, sum(|b| b.dry_offshore_cells));
+        assert_eq!(u.called_water, sum(|b| b.called_water));
+        assert_eq!((u.seen_water_cells, u.seen_water_detected), (12, 8));
+    }
+
+    /// A random case: truth of 0.5 m cells (12 × 6) with random water, a map at 0.25, 0.5
+    /// or 1 m over and around it (random cells, classes and z in quarter metres, so that
+    /// sums of squares are exact in any order), random seen water, a random path; and the
+    /// map's cells in a shuffled order.
+    fn case() -> impl Strategy<Value = (HazardMap, TruthInfo, HazardMap, HazardMap)> {
+        (
+            prop::collection::vec(any::<bool>(), 72),
+            prop::option::of(prop::collection::vec((-1i64..14, -1i64..8), 0..30)),
+            prop_oneof![Just(0.25), Just(0.5), Just(1.0)],
+            prop::collection::vec(prop::option::of((any::<bool>(), -8i8..8)), 32 * 20),
+            prop::collection::vec((-40i8..60, -40i8..40), 1..4),
+        )
+            .prop_flat_map(|(water, seen, mres, cells, path)| {
+                let truth = raster(0.5, 12, 6, |kx, ky| water[(ky * 12 + kx) as usize]);
+                let seen = seen.map(|v| v.into_iter().map(|(x, y)| [x, y]).collect());
+                let path: Vec<[f64; 2]> = path
+                    .iter()
+                    .map(|&(x, y)| [x as f64 / 4.0, y as f64 / 4.0])
+                    .collect();
+                let info = info(0.5, &path, seen);
+                // Keys over -1 .. 7 m × -1 .. 4 m at the map's resolution.
+                let (w, h) = ((8.0 / mres) as i64, (5.0 / mres) as i64);
+                let cells: Vec<MapCell> = (0..w * h)
+                    .filter_map(|i| {
+                        let (called, z) = cells[i as usize]?;
+                        let class = if called { Class::Water } else { Class::Ground };
+                        let mut c = cell(
+                            mres,
+                            i % w - (1.0 / mres) as i64,
+                            i / w - (1.0 / mres) as i64,
+                            class,
+                        );
+                        c.z = z as f64 / 4.0;
+                        Some(c)
+                    })
+                    .collect();
+                let map = HazardMap::new(mres, cells.clone());
+                let shuffled = Just(cells)
+                    .prop_shuffle()
+                    .prop_map(move |c| HazardMap::new(mres, c));
+                (Just(truth), Just(info), Just(map), shuffled)
+            })
+    }
+
+    proptest! {
+        #[test]
+        fn new_rates_are_rates_and_ignore_the_map_order((truth, info, map, shuffled) in case()) {
+            let r = evaluate(&map, &truth, &info).unwrap();
+            let m = evaluate_matrix_bands(&map, &truth, &info).unwrap();
+            for b in r.bins.iter().chain([&r.all]).chain(&m) {
+                for v in [b.seen_recall, b.false_rate_offshore, b.precision].into_iter().flatten() {
+                    prop_assert!((0.0..=1.0).contains(&v), "{b:?}");
+                }
+                prop_assert!(b.seen_water_detected <= b.seen_water_cells);
+                prop_assert!(b.false_water_offshore <= b.dry_offshore_cells);
+                prop_assert!(b.dry_offshore_cells <= b.dry_cells);
+                prop_assert!(b.called_true <= b.called_water);
+            }
+            // Off shore by brute force: every water centre farther than the margin.
+            let water: Vec<&MapCell> = truth.cells.iter().filter(|c| c.class == Class::Water).collect();
+            let offshore = map.cells.iter().filter(|c| {
+                let k = CellKey::new((c.x / 0.5).floor() as i64, (c.y / 0.5).floor() as i64);
+                truth.cells.iter().find(|t| t.key == k).is_some_and(|t| {
+                    t.class != Class::Water
+                        && water.iter().all(|w| (w.x - t.x).hypot(w.y - t.y) > SHORE_MARGIN_M)
+                })
+            });
+            prop_assert_eq!(r.all.dry_offshore_cells, offshore.count());
+            prop_assert_eq!(&evaluate(&shuffled, &truth, &info).unwrap(), &r);
+            prop_assert_eq!(&evaluate_matrix_bands(&shuffled, &truth, &info).unwrap(), &m);
+        }
     }
 
     #[test]

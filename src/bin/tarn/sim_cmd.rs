@@ -55,7 +55,8 @@ pub struct EvalArgs {
     /// Truth directory written by `tarn simulate` (truth.ply, truth.json).
     #[arg(long)]
     pub truth: PathBuf,
-    /// Print one JSON object instead of a table.
+    /// Print one JSON object instead of a table; it also holds "matrix_bands", the bands
+    /// 5-10, 10-20, 20-30 and 5-30 m of the evaluation matrix.
     #[arg(long)]
     pub json: bool,
     /// Also score this range band from the path, `LO,HI` metres (e.g. 5,25): a row
@@ -88,6 +89,9 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
         if let Some(b) = &band {
             v["band"] = serde_json::to_value(b)?;
         }
+        // The bands of the evaluation matrix (every scene by every rig), compared across runs.
+        v["matrix_bands"] =
+            serde_json::to_value(tarn::eval::evaluate_matrix_bands(&map, &truth, &info)?)?;
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
