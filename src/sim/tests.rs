@@ -954,5 +954,14 @@ fn the_log_carries_the_baseline_and_the_distortion() {
             cam.distortion,
             crate::geom::camera::Distortion::PlumbBob([-0.1, 0.02, 0.0, 0.0, 0.0])
         );
+        // A reader that ignored the distortion would be measurably off: at the image's
+        // corner the pinhole ray of the same K is more than half a degree away.
+        let pin = crate::geom::camera::CameraModel {
+            distortion: crate::geom::camera::Distortion::None,
+            ..cam.clone()
+        };
+        let (u, v) = (0.0, 0.0);
+        let (a, b) = (cam.pixel_ray(u, v).unwrap(), pin.pixel_ray(u, v).unwrap());
+        assert!(a.angle(&b).to_degrees() > 0.5, "{}", a.angle(&b).to_degrees());
     }
 }
