@@ -620,6 +620,20 @@ impl MapSnapshots {
     }
 }
 
+/// Where the online window's centre goes for a vehicle at `base_to_map`: `ahead` of the
+/// window's side in front of it, along its heading projected on the ground (the vehicle
+/// itself when the heading is vertical).
+pub fn window_centre(grid: &GridConfig, base_to_map: &crate::geom::Pose) -> (f64, f64) {
+    let c = base_to_map.translation.vector;
+    let h = base_to_map.rotation * nalgebra::Vector3::x();
+    let n = h.x.hypot(h.y);
+    if !(n > 1e-6) {
+        return (c.x, c.y);
+    }
+    let d = grid.ahead * grid.size_cells as f64 * grid.resolution / n;
+    (c.x + d * h.x, c.y + d * h.y)
+}
+
 /// The online mapper. See the module documentation.
 pub struct Mapper {
     cfg: MapperConfig,
@@ -742,14 +756,15 @@ impl Mapper {
                 "vehicle position is not finite",
             ));
         }
+        let (cx, cy) = window_centre(&self.cfg.grid, &frame.base_to_map);
         let grid = match self.grid.as_mut() {
             Some(g) => {
-                g.recenter(c.x, c.y, &mut self.global)?;
+                g.recenter(cx, cy, &mut self.global)?;
                 g
             }
             None => self
                 .grid
-                .insert(RollingGrid::new(self.cfg.grid.clone(), c.x, c.y)?),
+                .insert(RollingGrid::new(self.cfg.grid.clone(), cx, cy)?),
         };
         times.recentre = t.elapsed().as_secs_f64();
 

@@ -61,6 +61,11 @@ pub struct GridConfig {
     pub gate_min_m: f64,
     /// Fused points a cell needs before its surface is trusted to gate new points.
     pub min_support: u32,
+    /// How far ahead of the vehicle, along its heading, the online window's centre lies,
+    /// as a fraction of the window's side (0..0.5): the lookahead the water cues use
+    /// (their evidence reaches 30–45 m) stays in the window, at the cost of what lies
+    /// behind, which the offline build keeps in its tiles.
+    pub ahead: f64,
 }
 
 impl Default for GridConfig {
@@ -72,6 +77,7 @@ impl Default for GridConfig {
             gate_sigma: 3.0,
             gate_min_m: 0.15,
             min_support: 3,
+            ahead: 0.25,
         }
     }
 }
@@ -103,6 +109,15 @@ impl GridConfig {
         }
         if !self.z_ref.is_finite() {
             return bad("z_ref", format!("{}", self.z_ref));
+        }
+        if !(0.0..0.5).contains(&self.ahead) {
+            return bad(
+                "ahead",
+                format!(
+                    "{} (a fraction of the window's side, 0 ≤ ahead < 0.5)",
+                    self.ahead
+                ),
+            );
         }
         if !(self.gate_sigma.is_finite() && self.gate_sigma > 0.0) {
             return bad("gate_sigma", format!("{}", self.gate_sigma));

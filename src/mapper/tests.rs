@@ -166,13 +166,13 @@ fn without_cues_the_mapper_is_plain_ingest() {
     let mut grid: Option<RollingGrid> = None;
     let mut global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref).unwrap();
     for f in &s.frames {
-        let c = f.base_to_map.translation.vector;
+        let (cx, cy) = window_centre(&cfg.grid, &f.base_to_map);
         let g = match grid.as_mut() {
             Some(g) => {
-                g.recenter(c.x, c.y, &mut global).unwrap();
+                g.recenter(cx, cy, &mut global).unwrap();
                 g
             }
-            None => grid.insert(RollingGrid::new(cfg.grid.clone(), c.x, c.y).unwrap()),
+            None => grid.insert(RollingGrid::new(cfg.grid.clone(), cx, cy).unwrap()),
         };
         g.ingest(f.lidar.as_ref().unwrap(), &RangeNoise::LIDAR)
             .unwrap();
@@ -523,4 +523,33 @@ fn snapshots_are_the_generic_maps_of_the_window() {
     let (held, copy) = held.unwrap();
     assert!(same(&held, &copy));
     eprintln!("{bodies} bodies over the frames");
+}
+
+proptest::proptest! {
+    /// The window's centre lies `ahead` of its side in front of the vehicle along its
+    /// heading on the ground, whatever the yaw, pitch and roll (short of pointing straight
+    /// up), so the vehicle stays inside the window and the cues' lookahead with it.
+    #[test]
+    fn the_window_lies_ahead_of_the_vehicle(
+        x in -1e5f64..1e5, y in -1e5f64..1e5, yaw in -3.2f64..3.2,
+        pitch in -1.2f64..1.2, roll in -1.0f64..1.0, ahead in 0.0f64..0.49,
+    ) {
+        let grid = GridConfig { ahead, ..GridConfig::default() };
+        let pose = crate::geom::pose_xyz_rpy(x, y, 5.0, roll, pitch, yaw);
+        let (cx, cy) = window_centre(&grid, &pose);
+        let side = grid.size_cells as f64 * grid.resolution;
+        let d = (cx - x).hypot(cy - y);
+        proptest::prop_assert!((d - ahead * side).abs() < 1e-6 * (1.0 + x.abs() + y.abs()));
+        if d > 1e-3 {
+            let dir = (cy - y).atan2(cx - x);
+            let diff = (dir - yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
+            // Roll (about the vehicle's x) never turns its nose; pitch only tilts it.
+            proptest::prop_assert!(diff.abs() < 1e-6, "{} vs {}", dir, yaw);
+        }
+        // Straight up: no heading on the ground, the vehicle is the centre.
+        let up = crate::geom::pose_xyz_rpy(x, y, 0.0, 0.0, -std::f64::consts::FRAC_PI_2, yaw);
+        let (ux, uy) = window_centre(&grid, &up);
+        proptest::prop_assert!((ux - x).abs() < 1e-6 * (1.0 + x.abs()) && (uy - y).abs() < 1e-6 * (1.0 + y.abs()));
+    }
 }

@@ -962,6 +962,10 @@ fn the_log_carries_the_baseline_and_the_distortion() {
         };
         let (u, v) = (0.0, 0.0);
         let (a, b) = (cam.pixel_ray(u, v).unwrap(), pin.pixel_ray(u, v).unwrap());
-        assert!(a.angle(&b).to_degrees() > 0.5, "{}", a.angle(&b).to_degrees());
+        assert!(
+            a.angle(&b).to_degrees() > 0.5,
+            "{}",
+            a.angle(&b).to_degrees()
+        );
     }
 }
