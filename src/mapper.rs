@@ -627,7 +627,7 @@ pub fn window_centre(grid: &GridConfig, base_to_map: &crate::geom::Pose) -> (f64
     let c = base_to_map.translation.vector;
     let h = base_to_map.rotation * nalgebra::Vector3::x();
     let n = h.x.hypot(h.y);
-    if !(n > 1e-6) {
+    if n.is_nan() || n <= 1e-6 {
         return (c.x, c.y);
     }
     let d = grid.ahead * grid.size_cells as f64 * grid.resolution / n;

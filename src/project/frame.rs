@@ -66,6 +66,35 @@ pub struct FrameLabelConfig {
     /// Cells whose elevation σ exceeds this (metres) are holes to the ray march
     /// ([`GridSurface::from_grid_gated`]); infinity keeps every observed cell.
     pub surface_max_std: f64,
+    /// Check colour water against the sky it would reflect ([`reflection_check`]), reading
+    /// the image with this encoding; `None`: no check.
+    pub reflection_check: Option<Encoding>,
+}
+
+/// How an 8-bit colour image encodes radiance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Encoding {
+    /// sRGB (most cameras, and the safe assumption: read as sRGB, linear data looks
+    /// darker against its sky and the reflection check vetoes less, never more).
+    #[default]
+    Srgb,
+    /// Values proportional to radiance (the simulator's cameras).
+    Linear,
+}
+
+impl Encoding {
+    /// Linear radiance (0..1) of each 8-bit value.
+    pub fn table(self) -> [f64; 256] {
+        std::array::from_fn(|v| {
+            let c = v as f64 / 255.0;
+            match self {
+                Encoding::Linear => c,
+                Encoding::Srgb if c <= 0.04045 => c / 12.92,
+                Encoding::Srgb => ((c + 0.055) / 1.055).powf(2.4),
+            }
+        })
+    }
 }
 
 impl Default for FrameLabelConfig {
@@ -79,6 +108,7 @@ impl Default for FrameLabelConfig {
             max_range: 40.0,
             stereo_max_range: 10.0,
             surface_max_std: 0.1,
+            reflection_check: Some(Encoding::Srgb),
         }
     }
 }
@@ -153,6 +183,11 @@ pub struct LabelsConfig {
     pub max_range_m: f64,
     /// Cells whose elevation σ exceeds this are holes to the ray march (m).
     pub surface_max_std_m: f64,
+    /// Veto colour water that is brighter than a reflection of the sky it faces could be
+    /// ([`reflection_check`]).
+    pub reflection_check: bool,
+    /// How the colour camera encodes radiance (sRGB unless the camera says otherwise).
+    pub encoding: Encoding,
 }
 
 impl Default for LabelsConfig {
@@ -166,6 +201,8 @@ impl Default for LabelsConfig {
             wide_rows: f.wide_rows,
             max_range_m: f.max_range,
             surface_max_std_m: f.surface_max_std,
+            reflection_check: true,
+            encoding: Encoding::default(),
         }
     }
 }
@@ -182,6 +219,7 @@ impl LabelsConfig {
             wide_rows: self.wide_rows,
             max_range: self.max_range_m,
             surface_max_std: self.surface_max_std_m,
+            reflection_check: self.reflection_check.then_some(self.encoding),
             ..FrameLabelConfig::default()
         };
         for s in &self.sensors {
@@ -233,6 +271,9 @@ pub struct SensorLabelStats {
     /// Per-frame cell votes.
     pub cells_water: u64,
     pub cells_dry: u64,
+    /// Colour water pixels brighter than a reflection of the sky could be
+    /// ([`reflection_check`]).
+    pub reflection_vetoed: u64,
 }
 
 impl SensorLabelStats {
@@ -246,6 +287,7 @@ impl SensorLabelStats {
         self.no_hit += o.no_hit;
         self.cells_water += o.cells_water;
         self.cells_dry += o.cells_dry;
+        self.reflection_vetoed += o.reflection_vetoed;
     }
 }
 
@@ -327,6 +369,108 @@ fn apply_horizon(labels: &mut LabelImage, map_rays: &[Option<Vector3<f64>>]) {
             *l = Label::Water;
         }
     }
+}
+
+/// Relative index of water.
+const N_WATER: f64 = 1.33;
+/// Tilt (rad) a ripple may give the water's normal in the reflection check: the Fresnel
+/// reflectance is taken at the incidence this much more grazing.
+const RIPPLE_TILT: f64 = 0.03;
+/// Water's own (body) radiance is at most this fraction of the sky's, channel by channel:
+/// an assumption (the water-leaving reflectance of clear to turbid water is a few per
+/// cent to some 15 %, against a sky that is at least as bright as the light it sheds).
+const BODY_FRACTION: f64 = 0.2;
+/// Linear radiance margin for pixel noise (about 3 σ of 2 grey levels at mid-grey).
+const NOISE_MARGIN: f64 = 0.02;
+/// Channel values at or above this are saturated: the sky's radiance there is unknown.
+const SATURATED: u8 = 250;
+
+/// The sky reflection check of colour water: level water at incidence θ shows the sky in
+/// the mirror direction times its Fresnel reflectance R(θ), plus its own body colour
+/// (at most a fifth of the sky's radiance in each channel), so channel by channel a water pixel lies
+/// between `R·S − noise` and `(R + 0.2 (1 − R))·S + noise`, S the sky radiance in the
+/// mirror direction (R taken a ripple's tilt either side of θ). S comes from the same
+/// image where the mirror direction is in view and labelled sky; there both bounds hold,
+/// and a saturated sky channel, whose radiance is at least what it shows, bounds from
+/// below only. Elsewhere only the upper bound is checked, with the brightest sky pixel of
+/// the image. A water pixel outside the bounds — brighter than any reflection (sunlit
+/// pavement, a pale slab, snow) or darker in a channel than the sky it would mirror
+/// (grey pavement under a blue sky) — is not a sky reflection and becomes `Other`. An
+/// image without sky is not checked: the check says nothing where it cannot tell.
+/// Returns the pixels vetoed.
+pub fn reflection_check(
+    labels: &mut LabelImage,
+    px: &[[u8; 3]],
+    map_rays: &[Option<Vector3<f64>>],
+    camera: &CameraModel,
+    cam_to_map: &Pose,
+    encoding: Encoding,
+) -> u64 {
+    let lin = encoding.table();
+    let (w, h) = (labels.width, labels.height);
+    let sky_of =
+        |i: usize| -> [Option<f64>; 3] { px[i].map(|v| (v < SATURATED).then(|| lin[v as usize])) };
+    // The brightest sky of the image, per channel (a channel with a saturated sky pixel
+    // has no bound).
+    let mut fallback: Option<[Option<f64>; 3]> = None;
+    for (i, l) in labels.data.iter().enumerate() {
+        if *l == Label::Sky {
+            let s = sky_of(i);
+            fallback = Some(match fallback {
+                None => s,
+                Some(f) => std::array::from_fn(|c| match (f[c], s[c]) {
+                    (Some(a), Some(b)) => Some(a.max(b)),
+                    _ => None,
+                }),
+            });
+        }
+    }
+    let Some(fallback) = fallback else {
+        return 0;
+    };
+    let to_cam = cam_to_map.rotation.inverse();
+    let mut vetoed = 0;
+    for i in 0..labels.data.len() {
+        if labels.data[i] != Label::Water {
+            continue;
+        }
+        let Some(d) = map_rays[i] else { continue };
+        let cos_i = -d.z / d.norm();
+        if cos_i.is_nan() || cos_i <= 0.0 {
+            continue;
+        }
+        let theta = cos_i.min(1.0).acos();
+        let reflectance = |t: f64| {
+            crate::optics::fresnel(t.clamp(0.0, 89.9f64.to_radians()), N_WATER)
+                .map_or(1.0, |f| 0.5 * (f.r_s + f.r_p))
+        };
+        let r_hi = reflectance(theta + RIPPLE_TILT);
+        let r_lo = reflectance(theta - RIPPLE_TILT);
+        let k = r_hi + BODY_FRACTION * (1.0 - r_hi);
+        let mirror = to_cam * Vector3::new(d.x, d.y, -d.z);
+        let in_view = camera
+            .project(&Point3::from(mirror))
+            .and_then(|[u, v]| {
+                let (u, v) = (u.round(), v.round());
+                (u >= 0.0 && v >= 0.0 && (u as usize) < w && (v as usize) < h)
+                    .then(|| v as usize * w + u as usize)
+            })
+            .filter(|&j| labels.data[j] == Label::Sky);
+        let p = px[i].map(|v| lin[v as usize]);
+        let outside = match in_view {
+            Some(j) => (0..3).any(|c| {
+                let s = lin[px[j][c] as usize];
+                p[c] < r_lo * s - NOISE_MARGIN
+                    || (px[j][c] < SATURATED && p[c] > k * s + NOISE_MARGIN)
+            }),
+            None => (0..3).any(|c| fallback[c].is_some_and(|s| p[c] > k * s + NOISE_MARGIN)),
+        };
+        if outside {
+            labels.data[i] = Label::Other;
+            vetoed += 1;
+        }
+    }
+    vetoed
 }
 
 fn mono_of(img: &SensorImage) -> MonoImage {
@@ -703,6 +847,10 @@ impl FrameLabels {
                 let mut l = LabelImage::filled(w, h, Label::Other);
                 lut.classify_into(px.as_flattened(), &mut l.data)?;
                 apply_horizon(&mut l, map_rays);
+                if let Some(enc) = self.cfg.reflection_check {
+                    st.reflection_vetoed +=
+                        reflection_check(&mut l, px, map_rays, camera, cam_to_map, enc);
+                }
                 l
             }
             Cue::Swir => {

@@ -20,7 +20,8 @@ pub mod frame;
 pub mod surface;
 
 pub use frame::{
-    FrameLabelConfig, FrameLabels, FrameLabelsReport, LabelSensor, LabelsConfig, MwirLabelConfig,
+    reflection_check, Encoding, FrameLabelConfig, FrameLabels, FrameLabelsReport, LabelSensor,
+    LabelsConfig, MwirLabelConfig,
 };
 pub use surface::GridSurface;
 

@@ -304,7 +304,7 @@ impl Lidar {
         let nan = ([f32::NAN; 3], f32::NAN);
         let pts = (0..rows * cols)
             .into_par_iter()
-            .map(|i| -> Result<(([f32; 3], f32), Option<[f64; 2]>)> {
+            .map(|i| -> Result<(Return, Option<[f64; 2]>)> {
                 let (r, c) = (i / cols, i % cols);
                 let d = lidar_to_map.rotation * self.beam(r, c);
                 let Some(hit) = w.cast(&o, &d, self.spec.max_range_m) else {
@@ -350,6 +350,9 @@ impl Lidar {
         Ok((cloud, water))
     }
 }
+
+/// A reported point (lidar frame) and its intensity channel's value.
+type Return = ([f32; 3], f32);
 
 /// Sun direction (map frame, unit, towards the sun) and its elevation (rad) at `hours`:
 /// up from 6 to 18, due south (−y) at noon at 55°, rising in the east (+x).
@@ -697,9 +700,19 @@ impl Stereo {
     }
 }
 
-/// A rendered camera image in one band.
+/// An 8-bit value of linear radiance `v` (0..1) in `encoding`.
+fn encode(v: f64, encoding: crate::project::Encoding) -> u8 {
+    let e = match encoding {
+        crate::project::Encoding::Linear => v,
+        crate::project::Encoding::Srgb if v <= 0.003_130_8 => 12.92 * v,
+        crate::project::Encoding::Srgb => 1.055 * v.powf(1.0 / 2.4) - 0.055,
+    };
+    (e * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+/// A rendered camera image in one band (colour in its encoding).
 pub enum Band {
-    Rgb,
+    Rgb(crate::project::Encoding),
     Swir,
     Mwir,
 }
@@ -750,14 +763,13 @@ pub fn render_image(
     };
     let exposure = 255.0 / 0.75;
     match band {
-        Band::Rgb => Pixels::Rgb8(
+        Band::Rgb(encoding) => Pixels::Rgb8(
             rad.iter()
                 .enumerate()
                 .map(|(i, r)| {
                     [0, 1, 2].map(|c| {
-                        (r.rgb[c] * exposure + jitter(i, c as u64))
-                            .round()
-                            .clamp(0.0, 255.0) as u8
+                        let v = (r.rgb[c] * exposure + jitter(i, c as u64)).clamp(0.0, 255.0);
+                        encode(v / 255.0, encoding)
                     })
                 })
                 .collect(),

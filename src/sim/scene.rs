@@ -552,6 +552,9 @@ pub struct StereoSpec {
     /// CameraInfo carry it; the cloud is computed on the rectified (pinhole) grid.
     #[serde(default)]
     pub distortion: Option<[f64; 5]>,
+    /// How the colour image encodes radiance.
+    #[serde(default = "d_linear")]
+    pub encoding: crate::project::Encoding,
     #[serde(default = "d_max_range")]
     pub max_range_m: f64,
     /// Standard deviation of the pixel noise (grey levels).
@@ -575,6 +578,13 @@ pub struct CameraSpec {
     /// Lens distortion, plumb_bob [k1, k2, p1, p2, k3] (the CameraInfo carries it).
     #[serde(default)]
     pub distortion: Option<[f64; 5]>,
+    /// How a colour image encodes radiance (SWIR and MWIR images are linear).
+    #[serde(default = "d_linear")]
+    pub encoding: crate::project::Encoding,
+}
+
+fn d_linear() -> crate::project::Encoding {
+    crate::project::Encoding::Linear
 }
 
 fn bad(what: impl Into<String>, msg: impl Into<String>) -> Error {
@@ -876,6 +886,14 @@ impl Scene {
 }
 
 impl RigSpec {
+    /// The encoding of the colour camera (the stereo pair's left one, or the camera).
+    pub fn colour_encoding(&self) -> Option<crate::project::Encoding> {
+        self.stereo
+            .as_ref()
+            .map(|s| s.encoding)
+            .or(self.camera.as_ref().map(|c| c.encoding))
+    }
+
     /// Reads and validates a rig file; its name defaults to the file's stem.
     pub fn load(path: &Path) -> Result<RigSpec> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;

@@ -248,6 +248,9 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
             }),
             _ => None,
         };
+        if let (Some(l), Some(e)) = (cfg.labels.as_mut(), rig.colour_encoding()) {
+            l.encoding = e;
+        }
     }
     if let Some(r) = a.resolution {
         cfg.grid.resolution = r;

@@ -504,3 +504,144 @@ proptest::proptest! {
         }
     }
 }
+
+/// A level camera 2 m up looking along +x (96 × 64, no distortion), its map rays, and an
+/// image whose upper half is a sky of linear radiance `sky` and lower half `ground`,
+/// labelled sky above the horizon and water below.
+type ReflectionScene = (
+    LabelImage,
+    Vec<[u8; 3]>,
+    Vec<Option<Vector3<f64>>>,
+    CameraModel,
+    Pose,
+);
+
+fn reflection_scene(
+    sky: [f64; 3],
+    ground: impl Fn(f64) -> [f64; 3],
+    enc: Encoding,
+) -> ReflectionScene {
+    let cam = CameraModel::new(96, 64, [60.0, 60.0, 47.5, 31.5], Distortion::None, "cam").unwrap();
+    let pose = optical_pose(&pose_xyz_rpy(0.0, 0.0, 2.0, 0.0, 0.0, 0.0));
+    let rays: Vec<Option<Vector3<f64>>> = cam
+        .pixel_rays()
+        .into_iter()
+        .map(|r| r.map(|r| pose.rotation * r))
+        .collect();
+    let code = |v: f64| {
+        let v = v.clamp(0.0, 1.0);
+        let t = enc.table();
+        (0..256)
+            .min_by(|&a, &b| (t[a] - v).abs().total_cmp(&(t[b] - v).abs()))
+            .unwrap() as u8
+    };
+    let mut labels = LabelImage::filled(96, 64, Label::Other);
+    let mut px = vec![[0u8; 3]; 96 * 64];
+    for (i, r) in rays.iter().enumerate() {
+        let d = r.unwrap();
+        let c = if d.z >= 0.0 {
+            labels.data[i] = Label::Sky;
+            sky
+        } else {
+            labels.data[i] = Label::Water;
+            // The incidence on level water.
+            ground((-d.z / d.norm()).acos())
+        };
+        px[i] = c.map(code);
+    }
+    (labels, px, rays, cam, pose)
+}
+
+fn fresnel_r(theta: f64) -> f64 {
+    let f = crate::optics::fresnel(theta.min(89.9f64.to_radians()), 1.33).unwrap();
+    0.5 * (f.r_s + f.r_p)
+}
+
+/// Sky reflections pass the check at every incidence, in either encoding; sunlit grey
+/// pavement, far brighter than the reflection at steep incidence and bluish-sky-poor at
+/// every incidence, is vetoed; an image without unsaturated sky, or without sky at all,
+/// is not checked.
+#[test]
+fn the_reflection_check_knows_a_sky_reflection_from_pavement() {
+    let sky = [0.55, 0.62, 0.75];
+    for enc in [Encoding::Linear, Encoding::Srgb] {
+        // Water: R(θ)·sky plus a dark body colour.
+        let (mut l, px, rays, cam, pose) = reflection_scene(
+            sky,
+            |t| sky.map(|s| fresnel_r(t) * s + 0.03 * (1.0 - fresnel_r(t))),
+            enc,
+        );
+        let water = l.data.iter().filter(|x| **x == Label::Water).count();
+        assert!(water > 1000);
+        assert_eq!(
+            reflection_check(&mut l, &px, &rays, &cam, &pose, enc),
+            0,
+            "{enc:?}"
+        );
+        // Sunlit pavement: albedo 0.5 under a bright sun. Every pixel steeper than 80° of
+        // incidence is vetoed; at grazing incidence water reflects enough of the sky to be
+        // as bright, and some pass.
+        let (mut l, px, rays, cam, pose) = reflection_scene(sky, |_| [0.48, 0.47, 0.44], enc);
+        let v = reflection_check(&mut l, &px, &rays, &cam, &pose, enc);
+        assert!(
+            v as usize > water * 9 / 10,
+            "{enc:?}: {v} of {water} vetoed"
+        );
+        for (i, x) in l.data.iter().enumerate() {
+            let d = rays[i].unwrap();
+            if (-d.z / d.norm()).acos() < 80f64.to_radians() {
+                assert_ne!(*x, Label::Water, "{enc:?}: pixel {i}");
+            }
+        }
+    }
+    // A saturated sky bounds nothing from above: bright water pixels under it stay.
+    let (mut l, px, rays, cam, pose) =
+        reflection_scene([1.2, 1.2, 1.2], |_| [0.9, 0.9, 0.9], Encoding::Linear);
+    assert_eq!(
+        reflection_check(&mut l, &px, &rays, &cam, &pose, Encoding::Linear),
+        0
+    );
+    // No sky in the image: nothing to compare with.
+    let (mut l, px, rays, cam, pose) = reflection_scene(sky, |_| [0.9, 0.9, 0.9], Encoding::Linear);
+    for x in l.data.iter_mut().filter(|x| **x == Label::Sky) {
+        *x = Label::Unknown;
+    }
+    assert_eq!(
+        reflection_check(&mut l, &px, &rays, &cam, &pose, Encoding::Linear),
+        0
+    );
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+
+    /// The check honours its model: whatever the sky's colour and the water's body colour
+    /// (up to a fifth of the sky in each channel), in either encoding, no pixel of a level
+    /// sky-reflecting surface is vetoed.
+    #[test]
+    fn no_sky_reflection_is_vetoed(
+        s in proptest::array::uniform3(0.05f64..0.97),
+        b in proptest::array::uniform3(0.0f64..0.2),
+        srgb in proptest::bool::ANY,
+    ) {
+        let enc = if srgb { Encoding::Srgb } else { Encoding::Linear };
+        let (mut l, px, rays, cam, pose) = reflection_scene(
+            s,
+            |t| {
+                let r = fresnel_r(t);
+                [0, 1, 2].map(|c| r * s[c] + (1.0 - r) * b[c] * s[c])
+            },
+            enc,
+        );
+        proptest::prop_assert_eq!(reflection_check(&mut l, &px, &rays, &cam, &pose, enc), 0);
+    }
+}
+
+#[test]
+fn encodings_decode_to_linear_radiance() {
+    let (lin, srgb) = (Encoding::Linear.table(), Encoding::Srgb.table());
+    assert_eq!((lin[0], lin[255], srgb[0], srgb[255]), (0.0, 1.0, 0.0, 1.0));
+    assert!((srgb[128] - 0.2158605).abs() < 1e-6);
+    assert!(srgb.windows(2).all(|w| w[1] > w[0]));
+    assert!((1..255).all(|v| srgb[v] < lin[v]));
+}
