@@ -387,17 +387,16 @@ const SATURATED: u8 = 250;
 
 /// The sky reflection check of colour water: level water at incidence θ shows the sky in
 /// the mirror direction times its Fresnel reflectance R(θ), plus its own body colour
-/// (at most a fifth of the sky's radiance in each channel), so channel by channel a water pixel lies
-/// between `R·S − noise` and `(R + 0.2 (1 − R))·S + noise`, S the sky radiance in the
-/// mirror direction (R taken a ripple's tilt either side of θ). S comes from the same
-/// image where the mirror direction is in view and labelled sky; there both bounds hold,
-/// and a saturated sky channel, whose radiance is at least what it shows, bounds from
-/// below only. Elsewhere only the upper bound is checked, with the brightest sky pixel of
-/// the image. A water pixel outside the bounds — brighter than any reflection (sunlit
-/// pavement, a pale slab, snow) or darker in a channel than the sky it would mirror
-/// (grey pavement under a blue sky) — is not a sky reflection and becomes `Other`. An
-/// image without sky is not checked: the check says nothing where it cannot tell.
-/// Returns the pixels vetoed.
+/// (at most a fifth of the sky's radiance in each channel), so channel by channel a water
+/// pixel is no brighter than `(R + 0.2 (1 − R))·S + noise`, S the sky radiance in the
+/// mirror direction and R taken a ripple's tilt more grazing than θ. S comes from the same
+/// image: the pixel the mirror direction falls on where it is in view and labelled sky,
+/// else the brightest sky pixel of the image. A water pixel brighter than that (sunlit
+/// pavement, a pale slab) is not a sky reflection and becomes `Other`. A saturated sky
+/// channel, whose radiance is unknown, bounds nothing, and an image without sky is not
+/// checked: the check says nothing where it cannot tell. Read as sRGB, linear data looks
+/// darker against its sky, so an encoding assumed wrongly that way vetoes less, never
+/// more. Returns the pixels vetoed.
 pub fn reflection_check(
     labels: &mut LabelImage,
     px: &[[u8; 3]],
@@ -439,32 +438,21 @@ pub fn reflection_check(
         if cos_i.is_nan() || cos_i <= 0.0 {
             continue;
         }
-        let theta = cos_i.min(1.0).acos();
-        let reflectance = |t: f64| {
-            crate::optics::fresnel(t.clamp(0.0, 89.9f64.to_radians()), N_WATER)
-                .map_or(1.0, |f| 0.5 * (f.r_s + f.r_p))
-        };
-        let r_hi = reflectance(theta + RIPPLE_TILT);
-        let r_lo = reflectance(theta - RIPPLE_TILT);
-        let k = r_hi + BODY_FRACTION * (1.0 - r_hi);
+        let theta = (cos_i.min(1.0).acos() + RIPPLE_TILT).min(89.9f64.to_radians());
+        let r = crate::optics::fresnel(theta, N_WATER).map_or(1.0, |f| 0.5 * (f.r_s + f.r_p));
+        let k = r + BODY_FRACTION * (1.0 - r);
         let mirror = to_cam * Vector3::new(d.x, d.y, -d.z);
-        let in_view = camera
+        let sky = camera
             .project(&Point3::from(mirror))
             .and_then(|[u, v]| {
                 let (u, v) = (u.round(), v.round());
                 (u >= 0.0 && v >= 0.0 && (u as usize) < w && (v as usize) < h)
                     .then(|| v as usize * w + u as usize)
             })
-            .filter(|&j| labels.data[j] == Label::Sky);
-        let p = px[i].map(|v| lin[v as usize]);
-        let outside = match in_view {
-            Some(j) => (0..3).any(|c| {
-                let s = lin[px[j][c] as usize];
-                p[c] < r_lo * s - NOISE_MARGIN
-                    || (px[j][c] < SATURATED && p[c] > k * s + NOISE_MARGIN)
-            }),
-            None => (0..3).any(|c| fallback[c].is_some_and(|s| p[c] > k * s + NOISE_MARGIN)),
-        };
+            .filter(|&j| labels.data[j] == Label::Sky)
+            .map_or(fallback, sky_of);
+        let outside =
+            (0..3).any(|c| sky[c].is_some_and(|s| lin[px[i][c] as usize] > k * s + NOISE_MARGIN));
         if outside {
             labels.data[i] = Label::Other;
             vetoed += 1;
