@@ -259,3 +259,79 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
     );
     assert!(pd as f64 / pn as f64 > gd as f64 / gn as f64);
 }
+
+/// Missing returns on the real scan, by what lies there: each cell with no-return evidence
+/// takes the label of the nearest return within 2 m (smooth concrete stops returning long
+/// before grass does, so the cells past its last return are concrete or beyond). With the
+/// scan's own dry limit along each scan line, no cell called water through missing returns
+/// has concrete nearest; with the optics' interval alone (the configured sensitivity) they
+/// are the concrete past where it stops returning.
+#[test]
+fn rellis_missing_returns_past_where_concrete_stops_returning_say_nothing() {
+    let (cloud, labels) = load();
+    let h = estimate_sensor_height(&cloud).unwrap();
+    let o = cloud.sensor_origin_in_map();
+    // Returns by 1 m bins, for the nearest-label search.
+    let mut bins: std::collections::HashMap<(i64, i64), Vec<(f64, f64, u32)>> = Default::default();
+    for i in (0..cloud.len()).filter(|&i| cloud.is_valid(i)) {
+        let p = cloud.point_in_map(i);
+        bins.entry((p.x.floor() as i64, p.y.floor() as i64))
+            .or_default()
+            .push((p.x, p.y, labels[i]));
+    }
+    let nearest = |x: f64, y: f64| -> Option<u32> {
+        let (bx, by) = (x.floor() as i64, y.floor() as i64);
+        let mut best: Option<(f64, u32)> = None;
+        for dx in -2..=2 {
+            for dy in -2..=2 {
+                for &(px, py, l) in bins.get(&(bx + dx, by + dy)).into_iter().flatten() {
+                    let d = (px - x).hypot(py - y);
+                    if d <= 2.0 && best.is_none_or(|b| d < b.0) {
+                        best = Some((d, l));
+                    }
+                }
+            }
+        }
+        best.map(|b| b.1)
+    };
+    let f = tarn::grid::Fusion::default();
+    let mut on_concrete = Vec::new();
+    for scan_dry_limit in [false, true] {
+        let model = LidarCueModel::new(
+            ouster(h),
+            BeamModel::default(),
+            LidarCueConfig {
+                scan_dry_limit,
+                ..LidarCueConfig::default()
+            },
+            None,
+        )
+        .unwrap();
+        let out = model.run(&cloud, RES, 0.0).unwrap();
+        let mut by_label: std::collections::BTreeMap<u32, usize> = Default::default();
+        let mut lookahead = Vec::new();
+        for (k, e) in out.evidence.iter() {
+            if e.noret > 0 && e.water_probability(&f) > 0.5 {
+                let (x, y) = ((k.x as f64 + 0.5) * RES, (k.y as f64 + 0.5) * RES);
+                let l = nearest(x, y).unwrap_or(0);
+                *by_label.entry(l).or_default() += 1;
+                if l == CONCRETE {
+                    lookahead.push((x - o.x).hypot(y - o.y));
+                }
+            }
+        }
+        lookahead.sort_by(f64::total_cmp);
+        eprintln!(
+            "scan dry limit {scan_dry_limit}: {} missing beams as evidence, {} past the scan's dry limit; \
+             cells called water through them by nearest label {by_label:?}; on concrete at \
+             {:.1}–{:.1} m",
+            out.stats.noret,
+            out.stats.noret_beyond_dry,
+            lookahead.first().unwrap_or(&0.0),
+            lookahead.last().unwrap_or(&0.0)
+        );
+        on_concrete.push(by_label.get(&CONCRETE).copied().unwrap_or(0));
+    }
+    assert!(on_concrete[0] > 0, "{on_concrete:?}");
+    assert_eq!(on_concrete[1], 0, "{on_concrete:?}");
+}

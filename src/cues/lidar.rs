@@ -175,6 +175,11 @@ pub struct LidarCueConfig {
     /// downhill) is not taken for the bottom of water; water lies level, so its bottom
     /// returns still fall below.
     pub max_ground_slope: f64,
+    /// The scan's own dry limit: a missing beam is no-return evidence only where dry
+    /// ground along its scan line (its azimuth) returned from at least as far. Smooth or dark ground stops returning long before the configured
+    /// sensitivity says (pavement at grazing incidence), and there a missing return says
+    /// nothing about water. Off: the optics' interval alone.
+    pub scan_dry_limit: bool,
 }
 
 impl Default for LidarCueConfig {
@@ -186,6 +191,7 @@ impl Default for LidarCueConfig {
             depth_tolerance_m: 0.05,
             specular_min_depth_m: 0.5,
             max_ground_slope: 0.08,
+            scan_dry_limit: true,
         }
     }
 }
@@ -227,6 +233,9 @@ pub struct LidarCueStats {
     pub noret_lookahead_mm: Option<[u64; 2]>,
     /// Ground returns inside the diagnostic interval.
     pub diag_ret: u64,
+    /// Missing beams inside the interval but farther than dry ground along their scan line
+    /// returned from ([`LidarCueConfig::scan_dry_limit`]): no evidence.
+    pub noret_beyond_dry: u64,
     pub bottom: u64,
     pub specular: u64,
     /// Below-level returns neither bottom nor deep enough to be specular.
@@ -380,9 +389,21 @@ impl LidarCueModel {
         let lines = scan_lines(cloud, &dirs);
         let o = cloud.sensor_origin_in_map();
         let level0 = o.z - self.optics.config().height_m;
-        let events: Vec<Vec<Event>> = lines
+        let walked: Vec<(Vec<Event>, f64)> = lines
             .par_iter()
             .map(|line| self.walk(cloud, &dirs, line, o, level0))
+            .collect();
+        // The scan's own dry limit per line: the farthest lookahead its dry ground returned
+        // from (a vertical scanner's one line likewise).
+        let dry_limit: Vec<f64> = walked
+            .iter()
+            .map(|w| {
+                if self.cfg.scan_dry_limit {
+                    w.1
+                } else {
+                    f64::INFINITY
+                }
+            })
             .collect();
 
         let mut ev = EvidenceMap::new(resolution, z_ref);
@@ -399,10 +420,18 @@ impl LidarCueModel {
             ..LidarCueStats::default()
         };
         let mut samples: Vec<ReflectivitySample> = Vec::new();
-        for e in events.iter().flatten() {
+        let events = walked
+            .iter()
+            .zip(&dry_limit)
+            .flat_map(|((ev, _), limit)| ev.iter().map(move |e| (e, *limit)));
+        for (e, limit) in events {
             match *e {
                 Event::MissingCast => stats.missing_cast += 1,
                 Event::Unexplained => stats.unexplained += 1,
+                Event::NoRet { d, .. } if d > limit => {
+                    stats.missing_cast += 1;
+                    stats.noret_beyond_dry += 1;
+                }
                 Event::NoRet { x, y, level, d } => {
                     stats.missing_cast += 1;
                     stats.noret += 1;
@@ -488,7 +517,7 @@ impl LidarCueModel {
         line: &[u32],
         o: Point3<f64>,
         level0: f64,
-    ) -> Vec<Event> {
+    ) -> (Vec<Event>, f64) {
         let cfg = &self.cfg;
         let g_max = cfg.max_ground_slope;
         // The local ground: `level` at lookahead `d_level`, falling or rising with `slope`
@@ -502,6 +531,8 @@ impl LidarCueModel {
         // noise does not tilt it by the 6 % it would between two returns 25 cm apart.
         let mut recent = SlopeWindow::new((0.0, level0));
         let mut out = Vec::new();
+        // The farthest lookahead dry ground returned from along this line.
+        let mut far = 0.0f64;
         for &s in line {
             let s = s as usize;
             if cloud.is_valid(s) {
@@ -560,6 +591,7 @@ impl LidarCueModel {
                     }
                     level = p.z;
                     d_level = d;
+                    far = far.max(d);
                     let diag = self.in_interval(d);
                     // A ground return outside the interval matters only to the
                     // reflectivity cue: no event (and no allocation) without it.
@@ -595,7 +627,7 @@ impl LidarCueModel {
                 }
             }
         }
-        out
+        (out, far)
     }
 }
 

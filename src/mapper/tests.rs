@@ -67,9 +67,10 @@ fn cues_put_water_evidence_at_the_pond() {
     // The lidar is 1.8 m above base_link, which the simulator puts on the terrain.
     let h = reps[0].lidar_height_m.unwrap();
     assert!((h - 1.8).abs() < 0.1, "height {h}");
+    // The lidar cue ran on every frame (diagnostic returns, specular returns off the pond).
     assert!(reps
         .iter()
-        .any(|r| r.cues.lidar.is_some_and(|l| l.noret > 0)));
+        .all(|r| r.cues.lidar.is_some_and(|l| l.diag_ret > 0)));
     let map = HazardMap::with_water(&tiles, &cfg.fusion, 0.3);
     // Cells the evidence makes more likely water than not lie at the pond (centre (22, 6),
     // radius about 7 × 5 m).
@@ -125,7 +126,7 @@ fn offline_build_is_the_online_map() {
         assert!(a.depth == b.depth || (a.depth.is_nan() && b.depth.is_nan()));
     }
     let counts = r.cue_counts;
-    assert!(counts.lidar_noret > 0 && counts.evidence_cells > 0);
+    assert!(counts.lidar_diag_ret > 0 && counts.evidence_cells > 0);
     assert_eq!(r.stage_latency_ms.len(), StageTimes::NAMES.len());
     // The offline build skips the per-frame water stage; the map above, with it on in the
     // online mapper, is the same.

@@ -969,3 +969,61 @@ fn the_log_carries_the_baseline_and_the_distortion() {
         );
     }
 }
+
+/// Smooth pavement stops returning at grazing incidence long before the lidar's
+/// configured sensitivity says (15 m against 40 m here): missing returns past where it
+/// stopped are no-return evidence of water unless the cue takes its dry limit from the
+/// scan itself, and then they say nothing. Grass, which returns out to the configured
+/// limit, leaves no missing beam inside the interval either way.
+#[test]
+fn missing_returns_past_the_scans_own_dry_limit_say_nothing() {
+    use crate::cues::{BeamModel, LidarCueConfig, LidarCueModel};
+    let mut noret = Vec::new();
+    for material in ["pavement", "grass"] {
+        let w = lot(material, "none");
+        let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
+        let pose = crate::sim::pose_of(&trajectory(&w)[0]) * l.mount;
+        let mut cloud = l.scan(&w, &pose, 0, false).unwrap();
+        cloud.frame_to_map = pose;
+        // The beams' directions as a datasheet gives them (whole rings go missing here).
+        let dirs: Vec<[f32; 3]> = (0..cloud.rows * cloud.cols)
+            .map(|i| {
+                let b = l.beam(i / cloud.cols, i % cloud.cols);
+                [b.x as f32, b.y as f32, b.z as f32]
+            })
+            .collect();
+        for scan_dry_limit in [false, true] {
+            let cue = LidarCueModel::new(
+                LidarModelConfig {
+                    height_m: 2.0,
+                    attenuation: Attenuation::PureWater {
+                        wavelength_nm: 905.0,
+                    },
+                    albedo: 0.3,
+                    aperture_diameter_m: 0.0254,
+                    n_water: N_WATER,
+                    sensitivity: Sensitivity::DryLimit(40.0),
+                    solid_angle: SolidAngleForm::Exact,
+                },
+                BeamModel::Directions(dirs.clone()),
+                LidarCueConfig {
+                    scan_dry_limit,
+                    ..LidarCueConfig::default()
+                },
+                None,
+            )
+            .unwrap();
+            let out = cue.run(&cloud, 0.1, 0.0).unwrap();
+            noret.push((
+                material,
+                scan_dry_limit,
+                out.stats.noret,
+                out.stats.noret_beyond_dry,
+            ));
+        }
+    }
+    assert!(noret[0].2 > 20, "{noret:?}");
+    assert_eq!(noret[1].2, 0, "{noret:?}");
+    assert_eq!(noret[1].3, noret[0].2, "{noret:?}");
+    assert_eq!((noret[2].2, noret[3].2), (0, 0), "{noret:?}");
+}
