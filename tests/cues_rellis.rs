@@ -272,7 +272,8 @@ fn rellis_missing_returns_past_where_concrete_stops_returning_say_nothing() {
     let h = estimate_sensor_height(&cloud).unwrap();
     let o = cloud.sensor_origin_in_map();
     // Returns by 1 m bins, for the nearest-label search.
-    let mut bins: std::collections::HashMap<(i64, i64), Vec<(f64, f64, u32)>> = Default::default();
+    type Bins = std::collections::HashMap<(i64, i64), Vec<(f64, f64, u32)>>;
+    let mut bins: Bins = Default::default();
     for i in (0..cloud.len()).filter(|&i| cloud.is_valid(i)) {
         let p = cloud.point_in_map(i);
         bins.entry((p.x.floor() as i64, p.y.floor() as i64))
