@@ -97,6 +97,17 @@ pub struct MapCell {
     pub below: u32,
 }
 
+/// The depth written for a cell outside every water body: 0 (dry) where its water
+/// probability is below one half, else unknown (NaN): evidence says water, but no body
+/// gives it a surface, so its depth is not known to be 0.
+fn dry_depth(water: f32) -> f32 {
+    if water < 0.5 {
+        0.0
+    } else {
+        f32::NAN
+    }
+}
+
 /// What a map record keeps of an observed cell, whatever its class.
 #[derive(Debug, Clone, Copy)]
 struct Seen {
@@ -351,7 +362,7 @@ impl<'a> CellRule<'a> {
                 self.max_step_m,
                 self.max_grad,
             );
-            return Some(c.record(self.res, z, 0.0, class, hazard));
+            return Some(c.record(self.res, z, dry_depth(c.water), class, hazard));
         }
         if let Some(&(z, depth)) = self.water.get(&c.key) {
             let hazard = if depth.is_finite() && depth as f64 <= self.fording_depth_m {
@@ -362,7 +373,13 @@ impl<'a> CellRule<'a> {
             return Some(c.record(self.res, z, depth, Class::Water, hazard));
         }
         let z = level_mm().map(|mm| self.z_ref + mm * 1e-3)?;
-        Some(c.record(self.res, z, 0.0, Class::Unknown, Hazard::Free))
+        Some(c.record(
+            self.res,
+            z,
+            dry_depth(c.water),
+            Class::Unknown,
+            Hazard::Free,
+        ))
     }
 }
 

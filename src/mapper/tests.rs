@@ -127,6 +127,16 @@ fn offline_build_is_the_online_map() {
     }
     let counts = r.cue_counts;
     assert!(counts.lidar_diag_ret > 0 && counts.evidence_cells > 0);
+    // Water probability, class and depth agree cell by cell: outside the water bodies a
+    // cell is dry (depth 0) below one half, of unknown depth (NaN) from it up.
+    for c in offline
+        .cells
+        .iter()
+        .filter(|c| c.class != crate::hazard::Class::Water)
+    {
+        assert_eq!(c.depth.is_nan(), c.water >= 0.5, "{c:?}");
+        assert!(c.depth.is_nan() || c.depth == 0.0, "{c:?}");
+    }
     assert_eq!(r.stage_latency_ms.len(), StageTimes::NAMES.len());
     // The offline build skips the per-frame water stage; the map above, with it on in the
     // online mapper, is the same.
