@@ -33,6 +33,6 @@ for rig in $RIGS; do
 done
 secs=$(( $(date +%s) - start ))
 commit=$(git rev-parse --short HEAD)
-git diff --quiet HEAD -- src maps || commit="$commit (with uncommitted changes)"
+git diff --quiet HEAD -- src maps/rigs $(ls maps/*.toml) || commit="$commit (with uncommitted changes)"
 python3 tools/matrix_table.py "$OUT" "$commit" "$secs" "$SCENES" "$RIGS" > "$DOC"
 echo "matrix: wrote $DOC in $secs s" >&2
