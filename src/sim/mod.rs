@@ -343,45 +343,17 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             )?;
             write_s += tw.elapsed().as_secs_f64();
         }
-        if let (Some((model, m)), Some(spec)) = (&camera, &rig.camera) {
-            let tr = Instant::now();
-            let opt = base * m;
-            let px = render_image(
-                &w,
-                &light,
-                model,
-                &opt,
-                Band::Rgb(spec.encoding),
-                spec.image_noise,
-                f,
-                opts.noise,
-            );
-            for (x, y, sky) in water_views(&w, model, &opt, 120.0) {
-                *views.entry(key(x, y)).or_default() |= sky;
-            }
-            render_s += tr.elapsed().as_secs_f64();
-            rep.image_pixels += (model.width * model.height) as u64;
-            let tw = Instant::now();
-            let img = Image {
-                width: model.width,
-                height: model.height,
-                pixels: px,
-                frame_id: CAMERA_FRAME.into(),
-                stamp: p.stamp,
-            };
-            log.write_image("/camera/image", &img, header(p.stamp, CAMERA_FRAME), ns)?;
-            log.write_camera(
+        // The single cameras: colour (without a stereo partner), SWIR, MWIR.
+        for (cam, topic, info, frame, spec) in [
+            (
+                &camera,
+                "/camera/image",
                 "/camera/camera_info",
-                model,
-                header(p.stamp, CAMERA_FRAME),
-                ns,
-            )?;
-            write_s += tw.elapsed().as_secs_f64();
-        }
-        for (cam, band, topic, info, frame, spec) in [
+                CAMERA_FRAME,
+                &rig.camera,
+            ),
             (
                 &swir,
-                Band::Swir,
                 "/swir/image",
                 "/swir/camera_info",
                 SWIR_FRAME,
@@ -389,7 +361,6 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             ),
             (
                 &mwir,
-                Band::Mwir,
                 "/mwir/image",
                 "/mwir/camera_info",
                 MWIR_FRAME,
@@ -399,12 +370,23 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             let (Some((model, m)), Some(spec)) = (cam, spec) else {
                 continue;
             };
+            let band = match frame {
+                SWIR_FRAME => Band::Swir,
+                MWIR_FRAME => Band::Mwir,
+                _ => Band::Rgb(spec.encoding),
+            };
             let tr = Instant::now();
+            let opt = base * m;
+            if matches!(band, Band::Rgb(_)) {
+                for (x, y, sky) in water_views(&w, model, &opt, 120.0) {
+                    *views.entry(key(x, y)).or_default() |= sky;
+                }
+            }
             let px = render_image(
                 &w,
                 &light,
                 model,
-                &(base * m),
+                &opt,
                 band,
                 spec.image_noise,
                 f,
