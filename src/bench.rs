@@ -5,7 +5,7 @@
 //! frame run on a frame from the middle of the log, with a grid already holding the frames
 //! before it (the steady state of a mapper). The full frame is the median
 //! [`crate::mapper::Mapper::update`] over the log (`frame_ms_method` says so), with the
-//! colour camera's labels when the log has one: the frame of issue 9 includes colour
+//! colour camera's labels when the log has one: a full frame includes colour
 //! classification and projection.
 //!
 //! A stage is one entry of `Stages`: adding one (water surfaces, labels) is one line.

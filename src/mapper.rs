@@ -10,8 +10,8 @@
 //! 3. **stereo** — the stereo reflection cue ([`crate::cues::stereo_reflections`], with the
 //!    mirror-image check when configured and the frame has a camera image) and the ingest of
 //!    the corrected cloud; without the cue the raw cloud is ingested;
-//! 4. **labels** — image classification projected onto the map: not built here yet (see
-//!    [`Mapper::update`]); the stage is timed so that its cost shows when it lands;
+//! 4. **labels** — the colour, SWIR and MWIR images configured in `labels`, classified and
+//!    projected onto the map as votes ([`crate::project::FrameLabels`]);
 //! 5. **water** — the hazard map of the window, published as the new snapshot.
 //!
 //! The cue work is [`crate::cues::FrameCues`]'s; the mapper only decides what runs. A sensor

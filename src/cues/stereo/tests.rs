@@ -272,10 +272,8 @@ fn still_pond_reflections_find_the_water_and_put_trees_back_above_it() {
         "{sym} m from {} pairs",
         out.pairs
     );
-    // Recall of the water cells seen reflecting an object, 5–25 m. The target is
-    // 90 %. Measured 1.000 of 3934 cells since the points up a water column are judged
-    // against the level and the cells between consecutive crossings get evidence (0.957
-    // before); the test pins 0.95.
+    // Recall of the water cells seen reflecting an object, 5–25 m: 1.000 of 3934 cells
+    // when measured; the test pins 0.95.
     let recall = hit as f64 / seen.len() as f64;
     eprintln!(
         "stereo reflection recall {recall:.3} of {} cells",
