@@ -83,7 +83,10 @@ fn simulate_then_eval_truth_against_itself() {
     let b = &bands[3];
     assert_eq!(b["seen_recall"], 1.0);
     let seen = b["seen_water_cells"].as_u64().unwrap();
-    assert!(seen > 0 && seen <= b["water_cells"].as_u64().unwrap(), "{b}");
+    assert!(
+        seen > 0 && seen <= b["water_cells"].as_u64().unwrap(),
+        "{b}"
+    );
     assert_eq!(b["precision"], 1.0);
     assert_eq!(b["false_rate_offshore"], 0.0);
     let r = tarn(&[

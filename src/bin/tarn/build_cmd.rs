@@ -11,7 +11,7 @@ use tarn::build::{
 };
 use tarn::grid::{GridConfig, RangeNoise};
 use tarn::io::frames::LogConfig;
-use tarn::mapper::{LidarConfig, MapperConfig, StereoConfig};
+use tarn::mapper::MapperConfig;
 use tarn::project::{LabelSensor, LabelsConfig};
 use tarn::sim::RigSpec;
 
@@ -224,33 +224,7 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
         None => MapperConfig::every_sensor(),
     };
     if let Some(p) = &a.rig {
-        let rig = RigSpec::load(p)?;
-        let d = tarn::sim::mapper_config(&rig);
-        // The rig says which sensors exist and their datasheet values; the config keeps its
-        // cue choices and everything else.
-        cfg.lidar = match (d.lidar, cfg.lidar.take()) {
-            (Some(r), Some(c)) => Some(LidarConfig {
-                wavelength_nm: r.wavelength_nm,
-                dry_limit_m: r.dry_limit_m,
-                albedo: r.albedo,
-                aperture_diameter_m: r.aperture_diameter_m,
-                noise: r.noise,
-                ..c
-            }),
-            _ => None,
-        };
-        cfg.stereo = match (d.stereo, cfg.stereo.take()) {
-            (Some(r), Some(c)) => Some(StereoConfig {
-                disparity_noise_px: r.disparity_noise_px,
-                min_disparity_px: r.min_disparity_px,
-                baseline_m: r.baseline_m,
-                ..c
-            }),
-            _ => None,
-        };
-        if let (Some(l), Some(e)) = (cfg.labels.as_mut(), rig.colour_encoding()) {
-            l.encoding = e;
-        }
+        tarn::sim::apply_rig(&mut cfg, &RigSpec::load(p)?);
     }
     if let Some(r) = a.resolution {
         cfg.grid.resolution = r;
