@@ -33,7 +33,7 @@ pub struct LogConfig {
     pub image_topic: String,
     pub camera_info_topic: String,
     /// The right camera of the stereo pair: its projection gives the baseline
-    /// (P[0][3] = −f·B).
+    /// (`P[0][3] = −f·B`).
     pub right_camera_info_topic: String,
     pub swir_topic: String,
     pub swir_info_topic: String,
@@ -101,7 +101,7 @@ impl LogConfig {
 }
 
 /// The baseline (m) of a stereo pair from its right camera's rectified projection:
-/// ROS stereo drivers publish P[0][3] = −f·B (f = P[0][0]).
+/// ROS stereo drivers publish `P[0][3] = −f·B` (`f = P[0][0]`).
 pub fn stereo_baseline(right: &CameraInfoMsg) -> std::result::Result<f64, String> {
     let (f, tx) = (right.p[0], right.p[3]);
     let b = -tx / f;
