@@ -1,5 +1,5 @@
-"""Writes docs/cues.md from the runs of tools/eval_cue_tables.sh (and the fused runs of
-tools/eval_matrix.sh).
+"""Writes docs/cues.md from the runs of tools/eval_matrix.sh: each cue family alone, and
+all fused.
 
 Usage: cue_table.py OUT COMMIT SECONDS "SCENES" "RIGS" > docs/cues.md
 """
@@ -31,11 +31,11 @@ def cell(b, key, scale=100.0, digits=1):
 
 print("# Each cue alone, and all fused")
 print()
-print(f"Measured at commit {commit}; the cue runs took {secs} s on the 2-core build machine.")
+print(f"Measured at commit {commit}; the cue runs (after the matrix's) took {secs} s on the 2-core build machine.")
 print("Regenerate with:")
 print()
 print("```bash")
-print("tools/eval_matrix.sh && tools/eval_cue_tables.sh")
+print("tools/eval_matrix.sh")
 print("```")
 print()
 print("The logs of the accuracy matrix ([accuracy.md](accuracy.md)) built again with one cue")

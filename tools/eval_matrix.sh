@@ -2,7 +2,9 @@
 # The accuracy matrix: every scene in maps/ rendered with every rig in maps/rigs/, built as a
 # user would build it (`tarn build LOG --rig RIG`: the log and the rig's datasheet, every
 # sensor the log carries, default settings, nothing from the scene), and scored against the
-# simulator's truth by range band from the vehicle's path. Writes docs/accuracy.md.
+# simulator's truth by range band from the vehicle's path. Writes docs/accuracy.md. Then
+# each log is built again with one cue family at a time (the lidar cues, the stereo cues,
+# the image labels) and scored the same way: docs/cues.md.
 #
 #   tools/eval_matrix.sh                      # every scene × every rig
 #   SCENES="default dry_paved" RIGS="small" tools/eval_matrix.sh   # a part of it
@@ -16,6 +18,7 @@ if [ -z "${TARN_BIN:-}" ]; then
 fi
 OUT="${OUT:-out/matrix}"
 DOC="${DOC:-docs/accuracy.md}"
+CUES_DOC="${CUES_DOC:-docs/cues.md}"
 SCENES="${SCENES:-default pond_bush fig4_reflections puddles stream_slope reservoir_night snow_ice dry_decoys dry_paved vertical_scanner}"
 RIGS="${RIGS:-small wide lidar_camera stereo_camera}"
 start=$(date +%s)
@@ -32,7 +35,24 @@ for rig in $RIGS; do
   done
 done
 secs=$(( $(date +%s) - start ))
+# Each cue family alone (a family the rig has no sensor for is left out).
+for rig in $RIGS; do
+  for scene in $SCENES; do
+    dir="$OUT/$rig/$scene"
+    for set in "lidar:lidar:none" "stereo:stereo,mirror:none" "labels:none:colour,swir"; do
+      name=${set%%:*}; rest=${set#*:}; cues=${rest%%:*}; labels=${rest#*:}
+      if ! "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --cues "$cues" \
+          --labels "$labels" --out "$dir/$name" --json > "$dir.$name.build.json" 2> "$dir.$name.err"; then
+        rm -f "$dir.$name.build.json" "$dir.$name.eval.json"
+        continue
+      fi
+      "$TARN_BIN" eval "$dir/$name" --truth "$dir/sim" --json > "$dir.$name.eval.json"
+    done
+  done
+done
+cue_secs=$(( $(date +%s) - start - secs ))
 commit=$(git rev-parse --short HEAD)
 git diff --quiet HEAD -- src maps/rigs $(ls maps/*.toml) || commit="$commit (with uncommitted changes)"
 python3 tools/matrix_table.py "$OUT" "$commit" "$secs" "$SCENES" "$RIGS" > "$DOC"
-echo "matrix: wrote $DOC in $secs s" >&2
+python3 tools/cue_table.py "$OUT" "$commit" "$cue_secs" "$SCENES" "$RIGS" > "$CUES_DOC"
+echo "matrix: wrote $DOC in $secs s and $CUES_DOC in $cue_secs s more" >&2
