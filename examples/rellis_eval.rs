@@ -25,6 +25,9 @@ fn row(name: &str, c: &Confusion) {
 }
 
 fn main() {
+    if !available() {
+        return;
+    }
     let r = load();
     let t = Instant::now();
     let cfg = TrainConfig::default();

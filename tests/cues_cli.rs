@@ -17,6 +17,10 @@ fn tarn(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn rellis_scan_json_report() {
+    if !std::path::Path::new(PLY).exists() {
+        eprintln!("skipped: {PLY} is absent (shared test data, kept beside the repository)");
+        return;
+    }
     let out = tarn(&[PLY, "--rings", "64", "--dry-limit-m", "40", "--json"]);
     assert!(
         out.status.success(),

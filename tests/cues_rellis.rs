@@ -23,6 +23,15 @@ const MUD: u32 = 33;
 const CONCRETE: u32 = 23;
 const RES: f64 = 0.1;
 
+/// Whether the RELLIS-3D frame is beside the repository; a message says so when not.
+fn available() -> bool {
+    let ok = Path::new(DIR).join("000104.label").exists();
+    if !ok {
+        eprintln!("skipped: {DIR} is absent (shared test data, kept beside the repository)");
+    }
+    ok
+}
+
 /// The organized scan (64 rings × 2048) with reflectivity, and its labels in the same order.
 fn load() -> (PointCloud, Vec<u32>) {
     let raw = tarn::io::ply::read(Path::new(&format!("{DIR}frame000104-1581624663_170.ply")))
@@ -88,6 +97,9 @@ fn auc_lower(pos: &[f64], neg: &[f64]) -> f64 {
 
 #[test]
 fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_puddles() {
+    if !available() {
+        return;
+    }
     let (cloud, labels) = load();
     let h = estimate_sensor_height(&cloud).expect("a ground ring");
     eprintln!("estimated sensor height {h:.3} m");
@@ -268,6 +280,9 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
 /// are the concrete past where it stops returning.
 #[test]
 fn rellis_missing_returns_past_where_concrete_stops_returning_say_nothing() {
+    if !available() {
+        return;
+    }
     let (cloud, labels) = load();
     let h = estimate_sensor_height(&cloud).unwrap();
     let o = cloud.sensor_origin_in_map();

@@ -14,6 +14,9 @@ use tarn::classify::Label;
 
 #[test]
 fn calibration_direction_is_lidar_to_camera() {
+    if !available() {
+        return;
+    }
     let r = load();
     let right = lidar_pixels(&r, &r.lidar_to_cam);
     let wrong = lidar_pixels(&r, &r.lidar_to_cam.inverse());
@@ -47,6 +50,9 @@ fn calibration_direction_is_lidar_to_camera() {
 
 #[test]
 fn colour_classifiers_on_the_right_half() {
+    if !available() {
+        return;
+    }
     let r = load();
     let rule = RuleClassifier::default().classify(&r.rgb);
     let c_rule = score_right(&rule, &r.ids);
@@ -112,6 +118,9 @@ fn colour_classifiers_on_the_right_half() {
 
 #[test]
 fn image_water_projected_onto_the_scan() {
+    if !available() {
+        return;
+    }
     let r = load();
     let model = train(&r, &TrainConfig::default());
     let mut labels = ColorLut::compile(&model, 6).unwrap().classify(&r.rgb);

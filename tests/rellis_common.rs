@@ -71,6 +71,19 @@ pub fn lidar_to_camera() -> Pose {
 /// utils/lidar2img.ipynb uses for this camera.
 pub const DIST: [f64; 5] = [-0.134313, -0.025905, 0.002181, 0.00084, 0.0];
 
+/// Whether the RELLIS-3D frame is beside the repository (`../shared/data`); where it is
+/// not, a message says so and the test that asked skips.
+pub fn available() -> bool {
+    let ok = dir().join("000104.label").exists();
+    if !ok {
+        eprintln!(
+            "skipped: {} is absent (shared test data, kept beside the repository)",
+            dir().display()
+        );
+    }
+    ok
+}
+
 pub fn load() -> Rellis {
     let d = dir();
     let rgb = image::open(d.join("frame000104-1581624663_149.jpg"))

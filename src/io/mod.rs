@@ -85,6 +85,19 @@ pub fn organize_column_major(cloud: &PointCloud, rings: usize) -> Result<PointCl
     Ok(out)
 }
 
+/// The shared test data a test reads in place (`../shared/data`, beside the repository):
+/// `None`, with a message saying so, where it is absent, and the test skips.
+#[cfg(test)]
+pub(crate) fn test_data(path: &str) -> Option<&Path> {
+    let p = Path::new(path);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipped: {path} is absent (shared test data, kept beside the repository)");
+        None
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
