@@ -53,6 +53,5 @@ done
 cue_secs=$(( $(date +%s) - start - secs ))
 commit=$(git rev-parse --short HEAD)
 git diff --quiet HEAD -- src maps/rigs $(ls maps/*.toml) || commit="$commit (with uncommitted changes)"
-python3 tools/matrix_table.py "$OUT" "$commit" "$secs" "$SCENES" "$RIGS" > "$DOC"
-python3 tools/cue_table.py "$OUT" "$commit" "$cue_secs" "$SCENES" "$RIGS" > "$CUES_DOC"
+python3 tools/matrix_table.py "$OUT" "$commit" "$secs" "$cue_secs" "$SCENES" "$RIGS" "$DOC" "$CUES_DOC"
 echo "matrix: wrote $DOC in $secs s and $CUES_DOC in $cue_secs s more" >&2
