@@ -334,7 +334,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         let mut fl = FrameLabels::new(cfg)?;
         let mut gl = grid.clone();
         st.add("labels_colour", true, move || {
-            fl.apply(frame, &mut gl).map(|_| ())
+            fl.apply(frame, &mut gl, None).map(|_| ())
         });
     }
     {

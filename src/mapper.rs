@@ -770,6 +770,7 @@ impl Mapper {
 
         // 2. lidar
         let t = Instant::now();
+        let mut reach = None;
         if let (Some(l), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
             if l.cues && self.cues.cfg.lidar.is_none() {
                 if let Some(h) = estimate_sensor_height(cloud) {
@@ -782,7 +783,7 @@ impl Mapper {
                 }
             }
             if self.cues.cfg.lidar.is_some() {
-                self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
+                reach = self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
             } else {
                 rep.lidar_ingest = Some(grid.ingest(cloud, &l.noise)?);
             }
@@ -810,7 +811,7 @@ impl Mapper {
         // 4. labels: colour, SWIR and MWIR classification projected onto the map as votes.
         let t = Instant::now();
         if let Some(fl) = self.labels.as_mut() {
-            rep.labels = Some(fl.apply(frame, grid)?);
+            rep.labels = Some(fl.apply(frame, grid, reach.as_ref())?);
         }
         times.labels = t.elapsed().as_secs_f64();
 

@@ -7,7 +7,7 @@
 
 use serde::Serialize;
 
-use super::lidar::{LidarCueModel, LidarCueStats};
+use super::lidar::{DryReach, LidarCueModel, LidarCueStats};
 use super::stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig};
 use crate::error::Result;
 use crate::grid::{IngestStats, RangeNoise, RollingGrid};
@@ -76,13 +76,14 @@ impl FrameCues {
     }
 
     /// The lidar half of [`FrameCues::apply`]: runs only when a lidar cue model is
-    /// configured and the frame has a lidar cloud.
+    /// configured and the frame has a lidar cloud. Returns the scan's dry reach
+    /// ([`DryReach`]) for the image labels that follow.
     pub fn apply_lidar(
         &self,
         frame: &Frame,
         grid: &mut RollingGrid,
         rep: &mut FrameCuesReport,
-    ) -> Result<()> {
+    ) -> Result<Option<DryReach>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(model), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
             let out = model.run(cloud, res, z_ref)?;
@@ -91,8 +92,9 @@ impl FrameCues {
             let batch = out.evidence.into_batch();
             rep.evidence_cells += batch.len();
             rep.evidence_dropped += grid.apply_evidence(&batch);
+            return Ok(out.reach);
         }
-        Ok(())
+        Ok(None)
     }
 
     /// The stereo half of [`FrameCues::apply`]: runs only when the stereo cue is configured

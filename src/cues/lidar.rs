@@ -34,7 +34,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::reflectivity::{ReflectivityConfig, ReflectivitySample};
+use super::reflectivity::{normalised_reflectivity, ReflectivityConfig, ReflectivitySample};
 use super::EvidenceMap;
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
@@ -256,6 +256,68 @@ pub struct LidarCues {
     /// The scan's dark threshold (the `dark_quantile` of its ground returns' normalised
     /// reflectivity) when the reflectivity cue ran.
     pub reflectivity_threshold: Option<f64>,
+    /// How far dry ground returned along each azimuth of this scan
+    /// ([`LidarCueConfig::scan_dry_limit`]; `None` when that is off).
+    pub reach: Option<DryReach>,
+}
+
+/// How far dry ground returned along each azimuth of one scan: the farthest lookahead of a
+/// ground return per azimuth bin, from the sensor's position. A cell that no sensor saw
+/// (a hole in the map) inside that reach is a hole where dry ground would have returned,
+/// which water explains; a hole beyond it is explained by range alone (smooth or dark ground
+/// at grazing incidence stops returning) and says nothing of water.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DryReach {
+    origin: [f64; 2],
+    /// Farthest ground-return lookahead per azimuth bin (m); 0 where no line returned.
+    bins: Vec<f32>,
+}
+
+impl DryReach {
+    /// Azimuth bins over the full turn (0.5° each).
+    pub const BINS: usize = 720;
+
+    /// From each scan line's azimuth (rad, map frame) and the farthest lookahead its dry
+    /// ground returned from. Each bin holds the farthest of its lines; lines with a
+    /// non-finite azimuth or reach are ignored.
+    pub fn new(origin: [f64; 2], lines: impl IntoIterator<Item = (f64, f64)>) -> Self {
+        let mut bins = vec![0f32; Self::BINS];
+        for (az, far) in lines {
+            if let (Some(b), true) = (Self::bin(az), far.is_finite() && far > 0.0) {
+                bins[b] = bins[b].max(far as f32);
+            }
+        }
+        DryReach { origin, bins }
+    }
+
+    fn bin(az: f64) -> Option<usize> {
+        if !az.is_finite() {
+            return None;
+        }
+        let t = az.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU;
+        Some(((t * Self::BINS as f64) as usize).min(Self::BINS - 1))
+    }
+
+    /// The reach (m) towards map point (x, y): the farthest of its bin and the two beside
+    /// it (a column between two scan lines is seen by both), 0 where none returned.
+    pub fn reach_towards(&self, x: f64, y: f64) -> f64 {
+        let (dx, dy) = (x - self.origin[0], y - self.origin[1]);
+        let Some(b) = Self::bin(dy.atan2(dx)) else {
+            return 0.0;
+        };
+        let n = Self::BINS;
+        [(b + n - 1) % n, b, (b + 1) % n]
+            .iter()
+            .map(|&i| self.bins[i])
+            .fold(0f32, f32::max) as f64
+    }
+
+    /// Whether map point (x, y) lies within the reach of dry ground along its azimuth,
+    /// with `margin` metres of slack.
+    pub fn covers(&self, x: f64, y: f64, margin: f64) -> bool {
+        let d = crate::geom::hypot(x - self.origin[0], y - self.origin[1]);
+        d <= self.reach_towards(x, y) + margin
+    }
 }
 
 /// A lidar sensor's cue model: the optics for its height, wavelength and water clarity,
@@ -502,12 +564,86 @@ impl LidarCueModel {
                 reference = Some(r.threshold);
             }
         }
+        let reach = self.cfg.scan_dry_limit.then(|| {
+            let az = lines.iter().map(|line| {
+                line.iter()
+                    .find_map(|&s| dirs[s as usize])
+                    .map_or(f64::NAN, |u| u.y.atan2(u.x))
+            });
+            DryReach::new([o.x, o.y], az.zip(walked.iter().map(|w| w.1)))
+        });
         Ok(LidarCues {
             evidence: ev,
             corrected,
             stats,
             reflectivity_threshold: reference,
+            reach,
         })
+    }
+
+    /// The optics' loss through the shallowest water at lookahead `d`:
+    /// [`LidarWaterModel::return_ratio`] at zero depth over
+    /// [`LidarWaterModel::dry_ratio`] (Fresnel transmission in and out, and the steeper
+    /// refracted beam on the bottom). NaN where the optics give none.
+    fn shallowest_loss(&self, d: f64) -> f64 {
+        match (self.optics.return_ratio(d, 0.0), self.optics.dry_ratio(d)) {
+            (Ok(w), Ok(g)) if g > 0.0 => w / g,
+            _ => f64::NAN,
+        }
+    }
+
+    /// Whether raw point `p`, below the level `level`, lies no deeper than the optics can
+    /// see the bottom of water from where its beam meets the water.
+    fn could_be_bottom(&self, o: Point3<f64>, p: Point3<f64>, level: f64) -> bool {
+        let u = (p - o).normalize();
+        let c = o + u * ((o.z - level) / -u.z);
+        let d_c = crate::geom::hypot(c.x - o.x, c.y - o.y);
+        self.optics
+            .correct_bottom_return(o, p, level)
+            .is_ok_and(|q| level - q.z <= self.max_visible_depth(d_c) + self.cfg.depth_tolerance_m)
+    }
+
+    /// Whether a return below the level at `level` is brighter than any bottom under water
+    /// there could be: its normalised reflectivity above the brightest of the line's recent
+    /// dry ground (`bright`) times the optics' loss through the water (Fresnel transmission
+    /// in and out, absorption along the path: [`LidarWaterModel::return_ratio`] over
+    /// [`LidarWaterModel::dry_ratio`] at the depth the return would have). Water cannot
+    /// make a return brighter, so such a return is dry ground below the level. Says nothing
+    /// without a strength channel or recent ground to compare with.
+    #[allow(clippy::too_many_arguments)]
+    fn too_bright_for_water(
+        &self,
+        cloud: &PointCloud,
+        slot: usize,
+        cos_inc: f64,
+        range: f64,
+        level: f64,
+        o: Point3<f64>,
+        bright: &VecDeque<f64>,
+        channel: &ReflectivityConfig,
+    ) -> bool {
+        let Some(brightest) = bright.iter().copied().reduce(f64::max) else {
+            return false;
+        };
+        let Some(v) = normalised_reflectivity(cloud, slot, cos_inc, range, channel) else {
+            return false;
+        };
+        let p = cloud.point_in_map(slot);
+        let Ok(q) = self.optics.correct_bottom_return(o, p, level) else {
+            return false;
+        };
+        let depth = level - q.z;
+        // Lookahead where the beam meets the water.
+        let u = (p - o).normalize();
+        let c = o + u * ((o.z - level) / -u.z);
+        let d = crate::geom::hypot(c.x - o.x, c.y - o.y);
+        let (Ok(wet), Ok(dry)) = (
+            self.optics.return_ratio(d, depth.max(0.0)),
+            self.optics.dry_ratio(d),
+        ) else {
+            return false;
+        };
+        dry > 0.0 && v > brightest * (wet / dry)
     }
 
     fn walk(
@@ -533,6 +669,11 @@ impl LidarCueModel {
         let mut out = Vec::new();
         // The farthest lookahead dry ground returned from along this line.
         let mut far = 0.0f64;
+        // Normalised reflectivity of the line's last ground returns (`BRIGHT_WINDOW`): the
+        // brightest is what the bottom of water there could at most return, before the
+        // water's losses.
+        let channel = self.reflectivity.unwrap_or_default();
+        let mut bright: VecDeque<f64> = VecDeque::with_capacity(BRIGHT_WINDOW);
         for &s in line {
             let s = s as usize;
             if cloud.is_valid(s) {
@@ -540,6 +681,7 @@ impl LidarCueModel {
                 let v = p - o;
                 let range = v.norm();
                 let d = crate::geom::hypot(v.x, v.y);
+                let cos_inc = if range > 0.0 { -v.z / range } else { 0.0 };
                 let run = (d - d_level).max(0.0);
                 // Only a falling slope is followed: ground rising ahead moves the level up
                 // through the above-gate anyway, while a rising slope carried over a long
@@ -547,7 +689,15 @@ impl LidarCueModel {
                 let expected = level + slope.unwrap_or(0.0).min(0.0) * run;
                 let slack = if slope.is_some() { 0.0 } else { g_max * run };
                 let dz = p.z - expected;
-                if dz < -(cfg.below_gate_m + slack) && v.z < 0.0 && o.z > level {
+                let below = dz < -(cfg.below_gate_m + slack) && v.z < 0.0 && o.z > level;
+                // A return below the level that could be the bottom of water there but is
+                // brighter than any bottom under water could be is dry ground.
+                let dry_below = below
+                    && self.could_be_bottom(o, p, level)
+                    && self.too_bright_for_water(
+                        cloud, s, cos_inc, range, level, o, &bright, &channel,
+                    );
+                if below && !dry_below {
                     // Below the level: bottom or specular.
                     let u = v / range;
                     let t = (o.z - level) / -u.z;
@@ -582,9 +732,11 @@ impl LidarCueModel {
                             mirrored: Point3::new(p.x, p.y, 2.0 * level - p.z),
                         });
                     }
-                } else if dz <= cfg.above_gate_m + slack {
-                    // Ground. The slope of the recent ground, once it spans enough
-                    // lookahead to measure one, clamped to what ground does.
+                } else if dry_below || dz <= cfg.above_gate_m + slack {
+                    // Ground (or a return below the level as bright as dry ground, which no
+                    // water covers: the far side of a kerb, the floor of a dry ditch). The
+                    // slope of the recent ground, once it spans enough lookahead to measure
+                    // one, clamped to what ground does.
                     recent.push((d, p.z));
                     if let Some(g) = recent.slope() {
                         slope = Some(g.clamp(-g_max, g_max));
@@ -592,13 +744,25 @@ impl LidarCueModel {
                     level = p.z;
                     d_level = d;
                     far = far.max(d);
-                    let diag = self.in_interval(d);
+                    let r = normalised_reflectivity(cloud, s, cos_inc, range, &channel);
+                    // Brighter than the bottom of even the shallowest water there could
+                    // return: a return water would not give, as one inside the interval.
+                    let dry_bright = r.is_some_and(|r| {
+                        let brightest = bright.iter().copied().fold(f64::NAN, f64::max);
+                        r > brightest * self.shallowest_loss(d)
+                    });
+                    if let Some(r) = r {
+                        if bright.len() == BRIGHT_WINDOW {
+                            bright.pop_front();
+                        }
+                        bright.push_back(r);
+                    }
+                    let diag = self.in_interval(d) || dry_bright;
                     // A ground return outside the interval matters only to the
                     // reflectivity cue: no event (and no allocation) without it.
                     if !diag && self.reflectivity.is_none() {
                         continue;
                     }
-                    let cos_inc = if range > 0.0 { -v.z / range } else { 0.0 };
                     out.push(Event::Ground {
                         slot: s,
                         x: p.x,
@@ -630,6 +794,10 @@ impl LidarCueModel {
         (out, far)
     }
 }
+
+/// Ground returns along a scan line whose brightest bounds a bottom return
+/// ([`LidarCueModel::too_bright_for_water`]).
+const BRIGHT_WINDOW: usize = 16;
 
 /// What one slot of a scan line contributed.
 #[derive(Debug, Clone, Copy)]
@@ -872,3 +1040,48 @@ pub fn estimate_sensor_height(cloud: &PointCloud) -> Option<f64> {
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+mod reach_tests {
+    use super::DryReach;
+    use proptest::prelude::*;
+
+    #[test]
+    fn reach_is_per_azimuth_and_wraps_around() {
+        let r = DryReach::new(
+            [100.0, -50.0],
+            [
+                (0.0, 20.0),
+                (std::f64::consts::FRAC_PI_2, 8.0),
+                // Just below +π and just above −π: the same direction, two ends of the bins.
+                (std::f64::consts::PI - 1e-4, 12.0),
+                (f64::NAN, 99.0),
+                (1.0, f64::INFINITY),
+            ],
+        );
+        assert_eq!(r.reach_towards(115.0, -50.0), 20.0);
+        assert_eq!(r.reach_towards(100.0, -40.0), 8.0);
+        assert_eq!(r.reach_towards(90.0, -50.0 - 1e-6), 12.0);
+        assert!(r.covers(119.0, -50.0, 0.0) && !r.covers(121.0, -50.0, 0.5));
+        // No line returned towards −y: nothing there is covered.
+        assert_eq!(r.reach_towards(100.0, -60.0), 0.0);
+        assert!(!r.covers(100.0, -51.0, 0.2));
+    }
+
+    proptest! {
+        /// Whatever the lines, the reach towards any point is finite, non-negative, and at
+        /// least that of a line pointing straight at it.
+        #[test]
+        fn reach_bounds(
+            lines in prop::collection::vec((-10.0f64..10.0, -1e3f64..1e3), 0..50),
+            x in -1e6f64..1e6, y in -1e6f64..1e6,
+        ) {
+            let r = DryReach::new([0.0, 0.0], lines.iter().copied());
+            let got = r.reach_towards(x, y);
+            prop_assert!(got.is_finite() && got >= 0.0);
+            let az = y.atan2(x);
+            let direct = DryReach::new([0.0, 0.0], [(az, 5.0)]);
+            prop_assert!(direct.reach_towards(x, y) == 5.0 || x == 0.0 && y == 0.0);
+        }
+    }
+}

@@ -26,6 +26,7 @@ use crate::classify::horizon::GroundGeometry;
 use crate::classify::lut::ColorLut;
 use crate::classify::thermal::{classify_mwir, classify_swir, MwirConfig, SwirConfig};
 use crate::classify::{Label, LabelImage, MonoImage};
+use crate::cues::DryReach;
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{pose_is_finite, PointCloud, Pose};
@@ -274,6 +275,9 @@ pub struct SensorLabelStats {
     /// Colour water pixels brighter than a reflection of the sky could be
     /// ([`reflection_check`]).
     pub reflection_vetoed: u64,
+    /// Water pixels whose ray crossed a hole in the map beyond the lidar's dry reach
+    /// ([`crate::cues::DryReach`]): a hole that range alone explains places no vote.
+    pub beyond_reach: u64,
 }
 
 impl SensorLabelStats {
@@ -288,6 +292,7 @@ impl SensorLabelStats {
         self.cells_water += o.cells_water;
         self.cells_dry += o.cells_dry;
         self.reflection_vetoed += o.reflection_vetoed;
+        self.beyond_reach += o.beyond_reach;
     }
 }
 
@@ -598,7 +603,7 @@ const HOLE_LEVEL_WINDOW: usize = 8;
 /// below its banks, on the near bank. It moves along its ray to where the ray meets the
 /// tightened level.
 fn tighten_hole_levels(
-    per_row: &mut [(Vec<Option<Hit>>, [u64; 3])],
+    per_row: &mut [(Vec<Option<Hit>>, [u64; 4])],
     nc: usize,
     origin: Point3<f64>,
 ) {
@@ -736,7 +741,12 @@ impl FrameLabels {
 
     /// Classifies the frame's configured images, projects the labels and adds one vote per
     /// cell and sensor to `grid`'s evidence.
-    pub fn apply(&mut self, frame: &Frame, grid: &mut RollingGrid) -> Result<FrameLabelsReport> {
+    pub fn apply(
+        &mut self,
+        frame: &Frame,
+        grid: &mut RollingGrid,
+        reach: Option<&DryReach>,
+    ) -> Result<FrameLabelsReport> {
         let mut rep = FrameLabelsReport::default();
         let any = self.cfg.colour.is_some() || self.cfg.swir.is_some() || self.cfg.mwir.is_some();
         if !any {
@@ -779,7 +789,7 @@ impl FrameLabels {
                         None
                     };
                     rep.dropped += self.run(
-                        cue, img, cam, &pose, stereo, ground_z, &surface, grid, &mut st,
+                        cue, img, cam, &pose, stereo, ground_z, &surface, reach, grid, &mut st,
                     )?;
                 }
             }
@@ -803,6 +813,7 @@ impl FrameLabels {
         stereo: Option<&PointCloud>,
         ground_z: f64,
         surface: &GridSurface,
+        reach: Option<&DryReach>,
         grid: &mut RollingGrid,
         st: &mut SensorLabelStats,
     ) -> Result<u64> {
@@ -880,10 +891,10 @@ impl FrameLabels {
         };
         // Per sampled pixel: its hit, whether it is water (`None`: no vote), and the water
         // level it gives (see `tighten_hole_levels`).
-        let mut per_row: Vec<(Vec<Option<Hit>>, [u64; 3])> = rows
+        let mut per_row: Vec<(Vec<Option<Hit>>, [u64; 4])> = rows
             .par_iter()
             .map(|&y| {
-                let mut n = [0u64; 3]; // via point, via ray, no hit
+                let mut n = [0u64; 4]; // via point, via ray, no hit, beyond reach
                 let hits = cols
                     .iter()
                     .map(|&x| {
@@ -908,6 +919,13 @@ impl FrameLabels {
                                 .cast_through_holes(&origin, &d, max_range)
                                 .map(|h| (d, h))
                         });
+                        // A hole beyond the dry reach is explained by range alone.
+                        if let (Some((_, (p, _, Some(_)))), Some(r)) = (cast, reach) {
+                            if !r.covers(p.x, p.y, 2.0 * surface.resolution()) {
+                                n[3] += 1;
+                                return None;
+                            }
+                        }
                         match cast {
                             // Only water is placed where the ray crosses a hole's rim level:
                             // whatever else a pixel there shows (a bank the map has not
@@ -989,6 +1007,7 @@ impl FrameLabels {
             st.via_point += n[0];
             st.via_ray += n[1];
             st.no_hit += n[2];
+            st.beyond_reach += n[3];
         }
         for l in &labels.data {
             match l {

@@ -1027,3 +1027,73 @@ fn missing_returns_past_the_scans_own_dry_limit_say_nothing() {
     assert_eq!(noret[1].3, noret[0].2, "{noret:?}");
     assert_eq!((noret[2].2, noret[3].2), (0, 0), "{noret:?}");
 }
+
+/// Beyond a dry kerb the ground lies below the kerb's top, where the bottom of water
+/// dammed by it could be. With no strength channel the cue cannot tell, and takes those
+/// returns for bottom returns; with raw intensity they are as bright as the dry ground
+/// before the kerb, brighter than any bottom under water could return, and are ground.
+#[test]
+fn returns_beyond_a_kerb_as_bright_as_dry_ground_are_not_bottom_returns() {
+    use crate::cues::{BeamModel, LidarCueConfig, LidarCueModel};
+    let mut bottoms = Vec::new();
+    for intensity in ["none", "raw"] {
+        let w = World::build(
+            &Scene::from_toml_str(&format!(
+                r#"
+name = "kerb"
+seed = 5
+[terrain]
+origin = [-40.0, -40.0]
+size = [80.0, 80.0]
+resolution = 0.05
+material = "grass"
+[[terrain.features]]
+kind = "curb"
+from = [4.0, -40.0]
+to = [4.0, 40.0]
+width = 0.3
+height = 0.15
+flat = 0.7
+material = "pavement"
+[trajectory]
+waypoints = [[0.0, 0.0], [1.0, 0.0]]
+speed = 1.0
+frames = 1
+[rig.lidar]
+position = [0.0, 0.0, 2.0]
+rings = 64
+elevation_deg = [-40.0, -2.0]
+columns = 90
+dry_limit_m = 40.0
+intensity = "{intensity}"
+"#
+            ))
+            .unwrap(),
+        )
+        .unwrap();
+        let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
+        let pose = crate::sim::pose_of(&trajectory(&w)[0]) * l.mount;
+        let mut cloud = l.scan(&w, &pose, 0, false).unwrap();
+        cloud.frame_to_map = pose;
+        let cue = LidarCueModel::new(
+            LidarModelConfig {
+                height_m: 2.0,
+                attenuation: Attenuation::PureWater {
+                    wavelength_nm: 905.0,
+                },
+                albedo: 0.3,
+                aperture_diameter_m: 0.0254,
+                n_water: N_WATER,
+                sensitivity: Sensitivity::DryLimit(40.0),
+                solid_angle: SolidAngleForm::Exact,
+            },
+            BeamModel::default(),
+            LidarCueConfig::default(),
+            None,
+        )
+        .unwrap();
+        bottoms.push(cue.run(&cloud, 0.1, 0.0).unwrap().stats.bottom);
+    }
+    assert!(bottoms[0] > 10, "{bottoms:?}");
+    assert_eq!(bottoms[1], 0, "{bottoms:?}");
+}

@@ -109,7 +109,7 @@ fn colour_cfg(stride: usize) -> FrameLabelConfig {
 fn sky_reflections_vote_for_the_pond_cells() {
     let mut g = ground_grid();
     let mut fl = FrameLabels::new(colour_cfg(1)).unwrap();
-    let rep = fl.apply(&frame(), &mut g).unwrap();
+    let rep = fl.apply(&frame(), &mut g, None).unwrap();
     let st = rep.colour.unwrap();
     assert!(rep.swir.is_none() && rep.mwir.is_none());
     assert_eq!((st.frames, st.via_point), (1, 0));
@@ -130,7 +130,7 @@ fn sky_reflections_vote_for_the_pond_cells() {
     }
     assert!(water_votes > 50 && wrong == 0, "{water_votes} {wrong}");
     // A second frame makes the pond cells water under the fusion rule.
-    fl.apply(&frame(), &mut g).unwrap();
+    fl.apply(&frame(), &mut g, None).unwrap();
     let f = Fusion::default();
     let pond_water = g
         .observed()
@@ -150,8 +150,8 @@ fn results_do_not_depend_on_threads_or_cached_rays() {
         pool.install(|| {
             let mut g = ground_grid();
             let mut fl = FrameLabels::new(colour_cfg(2)).unwrap();
-            fl.apply(&frame(), &mut g).unwrap();
-            fl.apply(&frame(), &mut g).unwrap();
+            fl.apply(&frame(), &mut g, None).unwrap();
+            fl.apply(&frame(), &mut g, None).unwrap();
             g.observed().map(|(k, c)| (k, c.ev)).collect::<Vec<_>>()
         })
     };
@@ -164,7 +164,7 @@ fn unconfigured_or_missing_sensors_do_nothing() {
     let before: Vec<_> = g.observed().collect();
     let mut none = FrameLabels::new(FrameLabelConfig::default()).unwrap();
     assert_eq!(
-        none.apply(&frame(), &mut g).unwrap(),
+        none.apply(&frame(), &mut g, None).unwrap(),
         FrameLabelsReport::default()
     );
     // SWIR configured, but the frame has no SWIR image: skipped and counted.
@@ -173,7 +173,7 @@ fn unconfigured_or_missing_sensors_do_nothing() {
         ..FrameLabelConfig::default()
     })
     .unwrap();
-    let rep = swir.apply(&frame(), &mut g).unwrap();
+    let rep = swir.apply(&frame(), &mut g, None).unwrap();
     assert_eq!(rep.swir.unwrap().frames_skipped, 1);
     assert_eq!(g.observed().collect::<Vec<_>>(), before);
     // A colour image without CameraInfo, or whose CameraInfo gives another size: skipped
@@ -188,7 +188,7 @@ fn unconfigured_or_missing_sensors_do_nothing() {
     ] {
         let mut f = frame();
         spoil(&mut f);
-        let rep = colour.apply(&f, &mut g).unwrap();
+        let rep = colour.apply(&f, &mut g, None).unwrap();
         let st = rep.colour.unwrap();
         assert_eq!((st.frames, st.frames_skipped, st.cells_water), (0, 1, 0));
         assert_eq!(g.observed().collect::<Vec<_>>(), before);
@@ -243,7 +243,7 @@ fn cached_horizon_equals_the_classifier_horizon() {
 
 /// Sampled pixels on an `nr` × `nc` grid: hole-placed water (upper bound `level`, lower
 /// bound `floor`; kind 0 a hole with a far rim, 3 an open one), other water, or no hit.
-fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<Hit>>, [u64; 3])> {
+fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<Hit>>, [u64; 4])> {
     (0..nr)
         .map(|r| {
             let hits = (0..nc)
@@ -261,7 +261,7 @@ fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<
                     }
                 })
                 .collect();
-            (hits, [0; 3])
+            (hits, [0; 4])
         })
         .collect()
 }
@@ -652,4 +652,34 @@ fn encodings_decode_to_linear_radiance() {
     assert!((srgb[128] - 0.2158605).abs() < 1e-6);
     assert!(srgb.windows(2).all(|w| w[1] > w[0]));
     assert!((1..255).all(|v| srgb[v] < lin[v]));
+}
+
+/// The pond is a hole 4–6 m ahead. A lidar whose dry ground returned to 8 m along every
+/// azimuth makes it a hole where dry ground would have returned: its votes stand. One whose
+/// ground stopped returning at 3 m explains the hole by range alone: no vote is placed there.
+#[test]
+fn holes_beyond_the_lidars_dry_reach_take_no_vote() {
+    use crate::cues::DryReach;
+    let lines = |far: f64| (0..720).map(move |b| (b as f64 * std::f64::consts::TAU / 720.0, far));
+    let mut votes = Vec::new();
+    for far in [8.0, 3.0] {
+        let mut g = ground_grid();
+        let mut fl = FrameLabels::new(colour_cfg(1)).unwrap();
+        let reach = DryReach::new([0.0, 0.0], lines(far));
+        let st = fl
+            .apply(&frame(), &mut g, Some(&reach))
+            .unwrap()
+            .colour
+            .unwrap();
+        let pond_votes = g
+            .observed()
+            .filter(|(k, c)| {
+                let (x, y) = g.centre_of(*k);
+                pond(x, y) && c.ev.colour_water > 0
+            })
+            .count();
+        votes.push((far, pond_votes, st.beyond_reach));
+    }
+    assert!(votes[0].1 > 50 && votes[0].2 == 0, "{votes:?}");
+    assert!(votes[1].1 == 0 && votes[1].2 > 50, "{votes:?}");
 }
