@@ -256,8 +256,33 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
     let thr = out.reflectivity_threshold.expect("a threshold");
     // The decoy budget: under 0.3 % of the dry cells called water by all cues fused.
     assert!((called_all as f64) < 0.003 * dry.len() as f64);
+    let law = out.reflectivity_law.expect("a fitted law");
+    eprintln!("the scan's fitted channel law: {law:?}");
+    // Residuals from the fitted law, by label; and how well they separate puddles.
+    let resid = |label: u32| -> Vec<f64> {
+        let refl = cloud.reflectivity.as_ref().unwrap();
+        (0..cloud.len())
+            .filter(|&i| cloud.is_valid(i) && labels[i] == label)
+            .filter_map(|i| {
+                let v = cloud.point_in_map(i) - o;
+                let (r, c) = (v.norm(), -v.z / v.norm());
+                let x = refl[i] as f64;
+                (x > 0.0
+                    && r >= cfg.min_range_m
+                    && r <= cfg.max_range_m
+                    && c >= cfg.min_cos_incidence)
+                    .then(|| law.residual(x, r))
+            })
+            .collect()
+    };
+    let (p, g, m) = (resid(PUDDLE), resid(GRASS), resid(MUD));
+    let (ag, am) = (auc_lower(&p, &g), auc_lower(&p, &m));
+    eprintln!(
+        "reflectivity against the scan's fitted law: AUC puddle darker than grass {ag:.3}, than mud {am:.3}"
+    );
+    assert!(ag > 0.55 && am > 0.55, "AUC {ag} {am}");
     let dark_of = |label: u32| {
-        let v = by(label, Channel::Auto);
+        let v = resid(label);
         (v.iter().filter(|&&x| x < thr).count(), v.len())
     };
     let (pd, pn) = dark_of(PUDDLE);

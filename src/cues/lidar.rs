@@ -253,9 +253,12 @@ pub struct LidarCues {
     /// be fused into the elevation map instead of the raw cloud.
     pub corrected: PointCloud,
     pub stats: LidarCueStats,
-    /// The scan's dark threshold (the `dark_quantile` of its ground returns' normalised
-    /// reflectivity) when the reflectivity cue ran.
+    /// The scan's dark threshold (the `dark_quantile` of its ground returns' residuals from
+    /// the channel's fitted law, natural log) when the reflectivity cue ran.
     pub reflectivity_threshold: Option<f64>,
+    /// The channel's law fitted to this scan's ground returns, when the reflectivity cue
+    /// ran.
+    pub reflectivity_law: Option<super::reflectivity::ChannelLaw>,
     /// How far dry ground returned along each azimuth of this scan
     /// ([`LidarCueConfig::scan_dry_limit`]; `None` when that is off).
     pub reach: Option<DryReach>,
@@ -556,12 +559,13 @@ impl LidarCueModel {
                 }
             }
         }
-        let mut reference = None;
+        let (mut reference, mut law) = (None, None);
         if let Some(rc) = &self.reflectivity {
             if let Some(r) = super::reflectivity::apply(cloud, rc, &samples, &mut ev) {
                 stats.dark = r.dark;
                 stats.lit = r.lit;
                 reference = Some(r.threshold);
+                law = Some(r.law);
             }
         }
         let reach = self.cfg.scan_dry_limit.then(|| {
@@ -577,6 +581,7 @@ impl LidarCueModel {
             corrected,
             stats,
             reflectivity_threshold: reference,
+            reflectivity_law: law,
             reach,
         })
     }
