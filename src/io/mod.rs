@@ -20,6 +20,7 @@
 
 pub mod export;
 pub mod frames;
+pub mod geotiff;
 pub mod kitti;
 pub mod mapfile;
 pub mod mcap_log;

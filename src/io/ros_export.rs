@@ -477,7 +477,15 @@ pub fn write_ros_map(path: &Path, map: &HazardMap, opts: &RosMapOptions) -> Resu
         opts.stamp_ns,
         &occ,
     )?;
-    w.finish()
+    w.finish()?;
+    // The log writer's temporary file is owner-only; map.mcap is an ordinary output.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| crate::error::Error::io(path, e))?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
