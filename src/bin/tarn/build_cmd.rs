@@ -89,6 +89,9 @@ pub struct BuildArgs {
     /// Print the report as JSON instead of a summary.
     #[arg(long)]
     pub json: bool,
+    /// ROS and GIS outputs.
+    #[command(flatten)]
+    pub maps_out: crate::maps_out::MapsOutArgs,
 }
 
 impl BuildArgs {
@@ -115,6 +118,7 @@ impl BuildArgs {
             label_surface_max_std: None,
             per_frame_maps: false,
             json: false,
+            maps_out: Default::default(),
         }
     }
 }
@@ -197,22 +201,41 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         }
         let cfg = mapper_config(a)?;
         let r = run_cloud(a, &cfg)?;
+        let extra = crate::maps_out::write(&a.maps_out, &a.out, &cfg.log.map_frame, 0)?;
         if a.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
             print_summary(&r);
+            print_extra(&extra);
         }
         return Ok(());
     }
     let r = run_log(a)?;
+    let extra = if a.maps_out.any() {
+        // The map's log time: the last message of the log.
+        let end = tarn::io::mcap_log::summarize_quick(&a.input)
+            .ok()
+            .and_then(|s| s.end_ns);
+        let frame = mapper_config(a)?.log.map_frame;
+        crate::maps_out::write(&a.maps_out, &a.out, &frame, end.unwrap_or(0))?
+    } else {
+        Vec::new()
+    };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         print_log_summary(&r);
+        print_extra(&extra);
     }
     match &r.damage {
         Some(d) => anyhow::bail!("the map holds what came before the damage: {d}"),
         None => Ok(()),
+    }
+}
+
+fn print_extra(files: &[&str]) {
+    if !files.is_empty() {
+        println!("  also wrote {}", files.join(" "));
     }
 }
 

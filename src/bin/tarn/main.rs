@@ -7,6 +7,7 @@ mod cloud_cmd;
 mod cues_cmd;
 mod log_cmd;
 mod main_job;
+mod maps_out;
 mod optics_cmd;
 mod sim_cmd;
 
