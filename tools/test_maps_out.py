@@ -157,3 +157,126 @@ def test_geotiff_without_epsg_has_no_crs(tmp_path):
     with rasterio.open(tmp_path / "out" / "map.tif") as ds:
         assert ds.crs is None
         assert ds.transform.c == pytest.approx(E0)
+
+
+RIG = """name = "lidar_small_camera"
+description = "a 32-ring lidar and a small colour camera"
+
+[lidar]
+position = [0.0, 0.0, 1.8]
+rings = 32
+elevation_deg = [-25.0, 15.0]
+columns = 512
+wavelength_nm = 905.0
+aperture_m = 0.0254
+dry_limit_m = 40.0
+range_noise_m = 0.02
+intensity = "raw"
+
+[camera]
+position = [0.25, 0.0, 1.6]
+rpy_deg = [0.0, 10.0, 0.0]
+width = 160
+height = 120
+hfov_deg = 75.0
+"""
+
+SCENE = """name = "puddle_and_pond"
+description = "a puddle near a lidar and a pond farther on"
+seed = 7
+rig = "rig.toml"
+
+[terrain]
+origin = [-5.0, -10.0]
+size = [45.0, 20.0]
+resolution = 0.1
+roughness = 0.02
+roughness_scale = 3.0
+material = "mud"
+
+[[terrain.features]]
+kind = "depression"
+centre = [24.0, 0.0]
+radius = [4.0, 3.0]
+depth = 0.4
+flat = 0.4
+
+[[terrain.features]]
+kind = "depression"
+centre = [8.0, 2.0]
+radius = [1.5, 1.0]
+depth = 0.15
+flat = 0.3
+
+[[water]]
+kind = "level"
+level = -0.1
+centre = [24.0, 0.0]
+radius = 4.5
+attenuation = 4.0
+colour = [0.12, 0.10, 0.07]
+
+[[water]]
+kind = "level"
+level = -0.06
+centre = [8.0, 2.0]
+radius = 2.0
+attenuation = 4.0
+colour = [0.12, 0.10, 0.07]
+
+[sky]
+kind = "overcast"
+time_of_day = 13.0
+
+[trajectory]
+waypoints = [[0.0, 0.0], [2.0, 0.0]]
+speed = 1.0
+rate_hz = 2.0
+frames = 4
+"""
+
+
+@pytest.fixture(scope="module")
+def from_log(tmp_path_factory):
+    """A four-frame simulated log (about a second to simulate and build) whose map holds
+    water of unknown depth; built with --ros-map and --geotiff, default frame."""
+    d = tmp_path_factory.mktemp("maps_out_log")
+    (d / "rig.toml").write_text(RIG)
+    (d / "scene.toml").write_text(SCENE)
+    for args in (["simulate", d / "scene.toml", "--out", d / "sim"],
+                 ["build", d / "sim" / "log.mcap", "--out", d / "out", "--ros-map", "--geotiff"]):
+        r = subprocess.run([conftest.tarn_bin(), *args], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+    return d, read_map_ply(d / "out" / "map.ply")
+
+
+def test_log_map_is_stamped_and_its_water_reaches_both_messages(from_log):
+    from mcap.reader import make_reader
+
+    d, (v, x, y) = from_log
+    with open(d / "sim" / "log.mcap", "rb") as f:
+        last = max(m.log_time for _, _, m in make_reader(f).iter_messages())
+    msgs = messages(d / "out" / "map.mcap")
+    g, o = msgs["/tarn/grid_map"].ros_msg, msgs["/tarn/occupancy"].ros_msg
+    for m in msgs.values():
+        assert m.log_time_ns == last
+        h = m.ros_msg.header
+        assert h.frame_id == "map"
+        assert h.stamp.sec * 1_000_000_000 + h.stamp.nanosec == last
+    assert (v["hazard"] == 2).sum() > 50, "the scene should hold water of unknown depth"
+    rows = round(g.info.length_x / g.info.resolution)
+    i = np.rint((g.info.pose.position.x + g.info.length_x / 2 - x) / g.info.resolution - 0.5)
+    j = np.rint((g.info.pose.position.y + g.info.length_y / 2 - y) / g.info.resolution - 0.5)
+    flat = (j * rows + i).astype(int)
+    for layer, field in zip(LAYERS, PLY_FIELDS):
+        a = np.asarray(g.data[LAYERS.index(layer)].data, dtype=np.float32)[flat]
+        np.testing.assert_array_equal(a, v[field].astype(np.float32), err_msg=layer)
+    grid = np.asarray(o.data, dtype=np.int8).reshape(o.info.height, o.info.width)
+    col = np.floor((x - o.info.origin.position.x) / o.info.resolution).astype(int)
+    row = np.floor((y - o.info.origin.position.y) / o.info.resolution).astype(int)
+    occ = grid[row, col]
+    assert (occ[v["hazard"] == 2] == 100).all() and (occ[v["hazard"] == 0] == 0).all()
+    with rasterio.open(d / "out" / "map.tif") as ds:
+        assert ds.crs is None
+        water = ds.read(3)[rasterio.transform.rowcol(ds.transform, x, y)]
+    np.testing.assert_array_equal(water, v["water"])
