@@ -159,6 +159,17 @@ def test_geotiff_without_epsg_has_no_crs(tmp_path):
         assert ds.transform.c == pytest.approx(E0)
 
 
+
+def test_config_file_asks_for_the_geotiff_and_names_the_crs(tmp_path):
+    write_cloud(tmp_path / "in.ply")
+    (tmp_path / "tarn.toml").write_text("[build]\ngeotiff = true\nepsg = 25832\n")
+    r = subprocess.run([conftest.tarn_bin(), "build", tmp_path / "in.ply", "--out",
+                        tmp_path / "out", "--config", tmp_path / "tarn.toml"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    with rasterio.open(tmp_path / "out" / "map.tif") as ds:
+        assert ds.crs.to_epsg() == 25832
+
 RIG = """name = "lidar_small_camera"
 description = "a 32-ring lidar and a small colour camera"
 

@@ -201,7 +201,7 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         }
         let cfg = mapper_config(a)?;
         let r = run_cloud(a, &cfg)?;
-        let extra = crate::maps_out::write(&a.maps_out, &a.out, &cfg.log.map_frame, 0)?;
+        let extra = crate::maps_out::write(&a.maps_out, &cfg, &a.out, 0)?;
         if a.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
@@ -211,13 +211,13 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let r = run_log(a)?;
-    let extra = if a.maps_out.any() {
+    let cfg = mapper_config(a)?;
+    let extra = if cfg.build.ros_map || cfg.build.geotiff {
         // The map's log time: the last message of the log.
         let end = tarn::io::mcap_log::summarize_quick(&a.input)
             .ok()
             .and_then(|s| s.end_ns);
-        let frame = mapper_config(a)?.log.map_frame;
-        crate::maps_out::write(&a.maps_out, &a.out, &frame, end.unwrap_or(0))?
+        crate::maps_out::write(&a.maps_out, &cfg, &a.out, end.unwrap_or(0))?
     } else {
         Vec::new()
     };
@@ -279,6 +279,7 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
         cfg.log.frame_topic = t.clone();
     }
     apply_label_args(a, &mut cfg)?;
+    crate::maps_out::apply(&a.maps_out, &mut cfg);
     cfg.validate()?;
     Ok(cfg)
 }

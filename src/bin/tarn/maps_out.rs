@@ -1,5 +1,6 @@
 //! The ROS and GIS outputs of `tarn build`: `map.mcap` (`--ros-map`) and `map.tif`
-//! (`--geotiff`), written from the finished `map.ply` after the contract's files.
+//! (`--geotiff`), or the config's `[build]` `ros_map`, `geotiff` and `epsg`, written from
+//! the finished `map.ply` after the contract's files.
 
 use std::path::Path;
 
@@ -8,6 +9,7 @@ use clap::Args;
 use tarn::io::geotiff::{write_geotiff, GeoTiffOptions};
 use tarn::io::mapfile::read_map_ply;
 use tarn::io::ros_export::{write_ros_map, RosMapOptions};
+use tarn::mapper::MapperConfig;
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct MapsOutArgs {
@@ -29,38 +31,45 @@ pub struct MapsOutArgs {
     pub epsg: Option<u16>,
 }
 
-impl MapsOutArgs {
-    /// Whether any of these outputs was asked for.
-    pub fn any(&self) -> bool {
-        self.ros_map || self.geotiff
+/// The options over the config's `[build]` section.
+pub fn apply(a: &MapsOutArgs, cfg: &mut MapperConfig) {
+    cfg.build.ros_map |= a.ros_map;
+    cfg.build.geotiff |= a.geotiff;
+    if a.epsg.is_some() {
+        cfg.build.epsg = a.epsg;
     }
 }
 
-/// Writes the outputs asked for into `out`, from `out/map.ply`. `frame` names the map's
-/// frame unless `--frame-id` does; `stamp_ns` is the map's log time. Returns the names
+/// Writes the outputs the config asks for (`[build]` `ros_map`, `geotiff`, `epsg`, with
+/// the options applied) into `out`, from `out/map.ply`. The map's frame is `--frame-id`,
+/// else the log config's `map_frame`; `stamp_ns` is the map's log time. Returns the names
 /// of the files written.
 pub fn write(
     a: &MapsOutArgs,
+    cfg: &MapperConfig,
     out: &Path,
-    frame: &str,
     stamp_ns: u64,
 ) -> anyhow::Result<Vec<&'static str>> {
+    let b = &cfg.build;
     let mut written = Vec::new();
-    if !a.any() {
+    if !(b.ros_map || b.geotiff) {
         return Ok(written);
     }
     let ply = out.join("map.ply");
     let map = read_map_ply(&ply).with_context(|| format!("reading back {}", ply.display()))?;
-    if a.ros_map {
+    if b.ros_map {
         let opts = RosMapOptions {
-            frame_id: a.frame_id.clone().unwrap_or_else(|| frame.to_string()),
+            frame_id: a
+                .frame_id
+                .clone()
+                .unwrap_or_else(|| cfg.log.map_frame.clone()),
             stamp_ns,
         };
         write_ros_map(&out.join("map.mcap"), &map, &opts)?;
         written.push("map.mcap");
     }
-    if a.geotiff {
-        write_geotiff(&out.join("map.tif"), &map, &GeoTiffOptions { epsg: a.epsg })?;
+    if b.geotiff {
+        write_geotiff(&out.join("map.tif"), &map, &GeoTiffOptions { epsg: b.epsg })?;
         written.push("map.tif");
     }
     Ok(written)
