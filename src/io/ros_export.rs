@@ -19,7 +19,8 @@
 //! ([`Layer`]); class and hazard hold the codes of `map.ply` as floats.
 //!
 //! **OccupancyGrid** (`nav_msgs` conventions): row-major from the cell at `info.origin`
-//! (the map's lower-left corner, min x and min y), x along `width`. Values, from the
+//! (the map's lower-left corner, min x and min y), x along `width`: the GridMap's cell
+//! order reversed, as grid_map's `toOccupancyGrid` converts it. Values, from the
 //! hazard of each cell ([`occupancy_of`]): free 0, shallow water within fording depth 50,
 //! deep or unknown-depth water 100, obstacle 100, unobserved −1.
 //!
@@ -541,6 +542,28 @@ mod tests {
         assert_eq!((o.width, o.height), (3, 2));
         assert_eq!(o.origin.position, [2.0, -0.5, 0.0]);
         assert_eq!(o.data, vec![0, 50, 100, 100, -1, 0]);
+    }
+
+    #[test]
+    fn occupancy_order_is_grid_maps_reversed() {
+        // grid_map's own toOccupancyGrid writes cell k of a column-major layer to
+        // occupancy index n − 1 − k; both messages must agree on every cell.
+        let m = map();
+        let r = MapRaster::new(&m).unwrap();
+        let g = GridMapMsg::from_raster(&r, Header::default());
+        let o = OccupancyGridMsg::from_raster(&r, Header::default());
+        let hazard = &g.data[4].data;
+        let n = hazard.len();
+        for (k, h) in hazard.iter().enumerate() {
+            let want = match *h {
+                h if h.is_nan() => occupancy_of(None),
+                0.0 => occupancy_of(Some(Hazard::Free)),
+                1.0 => occupancy_of(Some(Hazard::ShallowWater)),
+                2.0 => occupancy_of(Some(Hazard::DeepWater)),
+                _ => occupancy_of(Some(Hazard::Obstacle)),
+            };
+            assert_eq!(o.data[n - 1 - k], want, "cell {k}");
+        }
     }
 
     #[test]
