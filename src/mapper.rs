@@ -230,6 +230,14 @@ pub struct BuildOptions {
     pub noise_sigma_m: f64,
     /// (cloud inputs) Largest window side (cells); larger clouds are built in blocks.
     pub max_window_cells: usize,
+    /// Also write `map.mcap`: the map as a GridMap and an OccupancyGrid
+    /// ([`crate::io::ros_export`]).
+    pub ros_map: bool,
+    /// Also write `map.tif`: the map's layers as a GeoTIFF ([`crate::io::geotiff`]).
+    pub geotiff: bool,
+    /// EPSG code of the projected CRS the map frame is in, written into `map.tif`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub epsg: Option<u16>,
 }
 
 impl Default for BuildOptions {
@@ -238,6 +246,9 @@ impl Default for BuildOptions {
             per_frame_maps: false,
             noise_sigma_m: 0.02,
             max_window_cells: 2048,
+            ros_map: false,
+            geotiff: false,
+            epsg: None,
         }
     }
 }

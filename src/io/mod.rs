@@ -20,11 +20,14 @@
 
 pub mod export;
 pub mod frames;
+pub mod geotiff;
 pub mod kitti;
 pub mod mapfile;
 pub mod mcap_log;
 pub mod ply;
+pub mod raster;
 pub mod ros;
+pub mod ros_export;
 pub mod tf;
 
 use std::path::Path;

@@ -89,6 +89,9 @@ pub struct BuildArgs {
     /// Print the report as JSON instead of a summary.
     #[arg(long)]
     pub json: bool,
+    /// ROS and GIS outputs.
+    #[command(flatten)]
+    pub maps_out: crate::maps_out::MapsOutArgs,
 }
 
 impl BuildArgs {
@@ -115,6 +118,7 @@ impl BuildArgs {
             label_surface_max_std: None,
             per_frame_maps: false,
             json: false,
+            maps_out: Default::default(),
         }
     }
 }
@@ -197,22 +201,41 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         }
         let cfg = mapper_config(a)?;
         let r = run_cloud(a, &cfg)?;
+        let extra = crate::maps_out::write(&a.maps_out, &cfg, &a.out, 0)?;
         if a.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
             print_summary(&r);
+            print_extra(&extra);
         }
         return Ok(());
     }
     let r = run_log(a)?;
+    let cfg = mapper_config(a)?;
+    let extra = if cfg.build.ros_map || cfg.build.geotiff {
+        // The map's log time: the last message of the log.
+        let end = tarn::io::mcap_log::summarize_quick(&a.input)
+            .ok()
+            .and_then(|s| s.end_ns);
+        crate::maps_out::write(&a.maps_out, &cfg, &a.out, end.unwrap_or(0))?
+    } else {
+        Vec::new()
+    };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {
         print_log_summary(&r);
+        print_extra(&extra);
     }
     match &r.damage {
         Some(d) => anyhow::bail!("the map holds what came before the damage: {d}"),
         None => Ok(()),
+    }
+}
+
+fn print_extra(files: &[&str]) {
+    if !files.is_empty() {
+        println!("  also wrote {}", files.join(" "));
     }
 }
 
@@ -256,6 +279,7 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
         cfg.log.frame_topic = t.clone();
     }
     apply_label_args(a, &mut cfg)?;
+    crate::maps_out::apply(&a.maps_out, &mut cfg);
     cfg.validate()?;
     Ok(cfg)
 }

@@ -7,6 +7,7 @@ mod cloud_cmd;
 mod cues_cmd;
 mod log_cmd;
 mod main_job;
+mod maps_out;
 mod optics_cmd;
 mod sim_cmd;
 
@@ -47,7 +48,7 @@ enum Command {
     /// Build a map from a ROS 2 log (.mcap: the full pipeline with water cues) or a point
     /// cloud in the map frame (.ply or KITTI .bin) and write the contract files: map.ply,
     /// terrain.ply, map.png, report.json.
-    Build(BuildArgs),
+    Build(Box<BuildArgs>),
     /// Lidar propagation over water: bottom returns, maximum measurable depth, and the
     /// lookahead interval where a missing return is diagnostic of water.
     LidarModel(optics_cmd::LidarModelArgs),
