@@ -10,6 +10,8 @@
 #   SCENES="default dry_paved" RIGS="small" tools/eval_matrix.sh   # a part of it
 #   TARN_BIN=target/debug/tarn tools/eval_matrix.sh                # skip the release build
 #   OUT=out/matrix DOC=docs/accuracy.md       # where runs and the table go (defaults)
+#   REUSE_SIMS=1 tools/eval_matrix.sh         # keep logs already simulated in OUT (the
+#                                             # simulator unchanged): builds and scores only
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ -z "${TARN_BIN:-}" ]; then
@@ -27,8 +29,10 @@ for rig in $RIGS; do
     dir="$OUT/$rig/$scene"
     mkdir -p "$OUT/$rig"
     echo "matrix: $scene with $rig" >&2
-    "$TARN_BIN" simulate "maps/$scene.toml" --rig "maps/rigs/$rig.toml" --out "$dir/sim" --json \
-      > "$dir.sim.json"
+    if [ -z "${REUSE_SIMS:-}" ] || [ ! -f "$dir/sim/log.mcap" ]; then
+      "$TARN_BIN" simulate "maps/$scene.toml" --rig "maps/rigs/$rig.toml" --out "$dir/sim" --json \
+        > "$dir.sim.json"
+    fi
     "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --out "$dir/map" --json \
       > "$dir.build.json"
     "$TARN_BIN" eval "$dir/map" --truth "$dir/sim" --json > "$dir.eval.json"
@@ -53,5 +57,6 @@ done
 cue_secs=$(( $(date +%s) - start - secs ))
 commit=$(git rev-parse --short HEAD)
 git diff --quiet HEAD -- src maps/rigs $(ls maps/*.toml) || commit="$commit (with uncommitted changes)"
+[ -n "${REUSE_SIMS:-}" ] && secs="$secs s of builds and scoring (the logs simulated earlier)"
 python3 tools/matrix_table.py "$OUT" "$commit" "$secs" "$cue_secs" "$SCENES" "$RIGS" "$DOC" "$CUES_DOC"
 echo "matrix: wrote $DOC in $secs s and $CUES_DOC in $cue_secs s more" >&2

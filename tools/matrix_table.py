@@ -69,7 +69,8 @@ for rig in rigs:
 
 
 def accuracy():
-    header("Accuracy: every scene × every rig", f"the whole matrix took {secs} s")
+    took = f"{secs} s" if secs.isdigit() else secs
+    header("Accuracy: every scene × every rig", f"the whole matrix took {took}")
     print("Each scene in `maps/` is rendered with each rig in `maps/rigs/`")
     print("(`tarn simulate SCENE --rig RIG`) and built as a user would build it:")
     print("`tarn build LOG --rig RIG` — the log and the rig's datasheet values, every sensor the")
