@@ -631,6 +631,13 @@ pub struct LogBuildReport {
     pub frames: crate::io::frames::FrameStats,
     /// Messages or frames that could not be used, with where and why.
     pub errors: Vec<String>,
+    /// What the plausibility checks dropped from frames that were fused, frame by frame
+    /// (the first [`MAX_WARNINGS`]).
+    #[serde(default)]
+    pub warnings: Vec<String>,
+    /// Lidar and stereo points beyond their sensor's `max_range_m`, dropped.
+    #[serde(default)]
+    pub points_beyond_max_range: BeyondRange,
     /// Where reading stopped early (a truncated or damaged log), if it did.
     pub damage: Option<String>,
     /// What the image labels contributed (`None`: not configured).
@@ -646,6 +653,16 @@ pub struct LogBuildReport {
     pub stage_totals_s: StageTimes,
     /// Per-frame latency of each stage (ms).
     pub stage_latency_ms: Vec<StageLatency>,
+}
+
+/// Warnings kept in a log build's report.
+pub const MAX_WARNINGS: usize = 100;
+
+/// Points dropped as beyond their sensor's maximum range.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BeyondRange {
+    pub lidar: u64,
+    pub stereo: u64,
 }
 
 /// Cue events summed over a build.
@@ -825,6 +842,8 @@ pub fn build_log(
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
     let mut counts = CueCounts::default();
     let mut errors = Vec::new();
+    let mut warnings = Vec::new();
+    let mut beyond = BeyondRange::default();
     let mut frames_fused = 0u64;
     let mut t_fuse = 0.0;
     let mut stage_totals = StageTimes::default();
@@ -861,6 +880,13 @@ pub fn build_log(
             let t = Instant::now();
             match mapper.update(&frame) {
                 Ok(r) => {
+                    beyond.lidar += r.beyond_max_range[0];
+                    beyond.stereo += r.beyond_max_range[1];
+                    for w in &r.warnings {
+                        if warnings.len() < MAX_WARNINGS {
+                            warnings.push(format!("frame at {:.6} s: {w}", frame.stamp));
+                        }
+                    }
                     if let Some(s) = r.lidar_points() {
                         lidar.merge(s);
                     }
@@ -943,6 +969,8 @@ pub fn build_log(
         cue_counts: counts,
         frames: stream_stats,
         errors,
+        warnings,
+        points_beyond_max_range: beyond,
         damage,
         labels: label_totals,
         cells_observed: map.cells.len(),
