@@ -237,7 +237,12 @@ fn far_points_in_clouds_build_with_bounded_memory() {
     let mut pts: Vec<[f32; 3]> = Vec::new();
     for j in 0..50 {
         for i in 0..50 {
-            pts.push([i as f32 * 0.1, j as f32 * 0.1, 0.01 * i as f32]);
+            // Off the origin: a KITTI point at (0, 0, 0) is a missing return.
+            pts.push([
+                0.05 + i as f32 * 0.1,
+                0.05 + j as f32 * 0.1,
+                0.01 * i as f32,
+            ]);
         }
     }
     for v in [1e12f32, -1e12, 1e20, -1e20] {
