@@ -62,7 +62,6 @@ def limits(mem_bytes):
     def pre():
         resource.setrlimit(resource.RLIMIT_AS, (mem_bytes, mem_bytes))
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-        os.setsid()
 
     return pre
 
@@ -80,6 +79,7 @@ def run_case(args, timeout_s, mem_bytes, out_dir=None):
             stdout=subprocess.DEVNULL,
             stderr=err,
             preexec_fn=limits(mem_bytes),
+            start_new_session=True,
             env={**os.environ, "RAYON_NUM_THREADS": "1", "RUST_BACKTRACE": "0"},
         )
         timed_out = False
@@ -361,15 +361,18 @@ def mcap_semantics(seed_log, work):
     import math
 
     with open(seed_log, "rb") as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        msgs = [(s, c, m, d) for s, c, m, d in reader.iter_decoded_messages()]
+        reader = make_reader(f)
+        msgs = [(s, c, m) for s, c, m in reader.iter_messages()]
+    factory = DecoderFactory()
 
     def rewrite(fn):
         buf = io.BytesIO()
         w = Writer(buf)
         schemas = {}
         k = {}
-        for s, c, m, d in msgs:
+        for s, c, m in msgs:
+            # Decoded afresh for every case: a change never leaks into the next case.
+            d = factory.decoder_for(c.message_encoding, s)(m.data)
             if s.name not in schemas:
                 schemas[s.name] = w.register_msgdef(s.name, s.data.decode())
             i = k.get(c.topic, 0)
@@ -380,12 +383,9 @@ def mcap_semantics(seed_log, work):
         w.finish()
         return buf.getvalue()
 
-    import copy
-
     def on(topic, index, change):
         def fn(t, i, d):
             if t == topic and (index is None or i == index):
-                d = copy.deepcopy(d)
                 r = change(d)
                 return d if r is None else r
             return d
@@ -424,7 +424,7 @@ def mcap_semantics(seed_log, work):
 
         return change
 
-    topics = sorted({c.topic for _, c, _, _ in msgs})
+    topics = sorted({c.topic for _, c, _ in msgs})
     cases = []
     tf_changes = {
         "jump-1e5": lambda tr: setattr(tr.translation, "x", tr.translation.x + 1e5),
