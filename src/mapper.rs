@@ -361,7 +361,7 @@ impl MapperConfig {
                 }
             };
             pos("wavelength_nm", l.wavelength_nm)?;
-            if !(l.max_range_m > 0.0) {
+            if l.max_range_m.is_nan() || l.max_range_m <= 0.0 {
                 return Err(Error::invalid(
                     "mapper config lidar.max_range_m",
                     format!("{} is not a number > 0", l.max_range_m),
@@ -430,7 +430,7 @@ impl MapperConfig {
                     ));
                 }
             }
-            if !(s.max_range_m > 0.0) {
+            if s.max_range_m.is_nan() || s.max_range_m <= 0.0 {
                 return Err(Error::invalid(
                     "mapper config stereo.max_range_m",
                     format!("{} is not a number > 0", s.max_range_m),
@@ -697,7 +697,7 @@ fn gate_range(
         let d = [p[0] as f64 - o.x, p[1] as f64 - o.y, p[2] as f64 - o.z];
         (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
     };
-    let beyond = |p: &[f32; 3]| p.iter().all(|v| v.is_finite()) && !(range(p) <= max);
+    let beyond = |p: &[f32; 3]| p.iter().all(|v| v.is_finite()) && range(p) > max;
     if !cloud.xyz.iter().any(beyond) {
         return None;
     }

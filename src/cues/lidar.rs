@@ -349,7 +349,7 @@ impl LidarCueModel {
         }
         let t = lookahead / self.table_step;
         // Checked before the cast: a lookahead of 1e20 m saturates `as usize`.
-        if !(t < self.depth_table.len().saturating_sub(1) as f64) {
+        if t.is_nan() || t >= self.depth_table.len().saturating_sub(1) as f64 {
             return 0.0;
         }
         let i = t as usize;

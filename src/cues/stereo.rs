@@ -728,7 +728,7 @@ const MAX_SPAN_M: f64 = 100.0;
 /// in order from `a`. Nothing for a segment longer than [`MAX_SPAN_M`] (or not finite).
 fn span_cells_between(res: f64, a: (f64, f64), b: (f64, f64), out: &mut Vec<CellKey>) {
     let len = (b.0 - a.0).hypot(b.1 - a.1);
-    if !(len <= MAX_SPAN_M) {
+    if len.is_nan() || len > MAX_SPAN_M {
         return;
     }
     let (ka, kb) = (key_of(res, a.0, a.1), key_of(res, b.0, b.1));

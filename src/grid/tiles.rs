@@ -253,3 +253,52 @@ impl CellSink for TileMap {
         self.add(key, cell);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cell(hits: u32) -> CellStats {
+        CellStats {
+            hits,
+            ..CellStats::default()
+        }
+    }
+
+    #[test]
+    fn sparse_and_dense_tiles_hold_the_same_cells() {
+        // 600 cells of one tile in two orders (the tile turns dense after 256), plus
+        // repeated cells: the same map, listed in the same order, whatever the order.
+        let keys: Vec<CellKey> = (0..600)
+            .map(|i| CellKey::new((i * 37) % 64, 128 + (i / 8) % 64))
+            .collect();
+        let (mut a, mut b) = (TileMap::new(0.1, 0.0).unwrap(), TileMap::new(0.1, 0.0).unwrap());
+        for (i, k) in keys.iter().enumerate() {
+            a.add(*k, &cell(1 + i as u32 % 3));
+        }
+        for (i, k) in keys.iter().enumerate().rev() {
+            b.add(*k, &cell(1 + i as u32 % 3));
+        }
+        assert!(a == b);
+        assert_eq!(a.observed().collect::<Vec<_>>(), b.observed().collect::<Vec<_>>());
+        assert_eq!(a.tile_count(), 1);
+        let distinct: std::collections::BTreeSet<_> = keys.iter().collect();
+        assert_eq!(a.observed_count(), distinct.len());
+        // The listing is in index order within the tile, as a dense tile lists it.
+        let listed: Vec<_> = a.observed().map(|(k, _)| (k.y, k.x)).collect();
+        let mut sorted = listed.clone();
+        sorted.sort();
+        assert_eq!(listed, sorted);
+        for k in &keys {
+            assert!(a.get(*k).is_some());
+        }
+        assert!(a.get(CellKey::new(63, 0)).is_none());
+        // A few scattered cells cost about a hundred bytes each, not a whole tile.
+        let mut c = TileMap::new(0.1, 0.0).unwrap();
+        for i in 0..100 {
+            c.add(CellKey::new(i * 1000, -i * 1000), &cell(1));
+        }
+        assert_eq!(c.tile_count(), 100);
+        assert!(c.cell_bytes() < 100 * 1024, "{}", c.cell_bytes());
+    }
+}

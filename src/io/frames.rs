@@ -101,7 +101,7 @@ impl LogConfig {
                 format!("lookahead_s {} must be ≥ 0", self.lookahead_s),
             ));
         }
-        if !(self.max_speed_mps > 0.0) {
+        if self.max_speed_mps.is_nan() || self.max_speed_mps <= 0.0 {
             return Err(Error::invalid(
                 "log config",
                 format!("max_speed_mps {} must be > 0", self.max_speed_mps),
