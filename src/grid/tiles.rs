@@ -272,7 +272,10 @@ mod tests {
         let keys: Vec<CellKey> = (0..600)
             .map(|i| CellKey::new((i * 37) % 64, 128 + (i / 8) % 64))
             .collect();
-        let (mut a, mut b) = (TileMap::new(0.1, 0.0).unwrap(), TileMap::new(0.1, 0.0).unwrap());
+        let (mut a, mut b) = (
+            TileMap::new(0.1, 0.0).unwrap(),
+            TileMap::new(0.1, 0.0).unwrap(),
+        );
         for (i, k) in keys.iter().enumerate() {
             a.add(*k, &cell(1 + i as u32 % 3));
         }
@@ -280,7 +283,10 @@ mod tests {
             b.add(*k, &cell(1 + i as u32 % 3));
         }
         assert!(a == b);
-        assert_eq!(a.observed().collect::<Vec<_>>(), b.observed().collect::<Vec<_>>());
+        assert_eq!(
+            a.observed().collect::<Vec<_>>(),
+            b.observed().collect::<Vec<_>>()
+        );
         assert_eq!(a.tile_count(), 1);
         let distinct: std::collections::BTreeSet<_> = keys.iter().collect();
         assert_eq!(a.observed_count(), distinct.len());
