@@ -14,7 +14,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
-use crate::grid::{key_of, CellKey, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap};
+use crate::grid::{
+    in_map_domain, key_of, CellKey, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap,
+};
 use crate::hazard::HazardMap;
 use crate::io::export;
 use crate::mapper::{Mapper, MapperConfig, StageTimes};
@@ -51,27 +53,143 @@ pub struct CloudBuild {
     pub window_cells: usize,
 }
 
-/// Key bounds of the finite points of a cloud in the map frame.
-fn key_bounds(cloud: &PointCloud, res: f64) -> Option<(CellKey, CellKey)> {
+/// Key bounds of the finite points of a cloud within the map's domain
+/// ([`MAX_MAP_COORD_M`](crate::grid::MAX_MAP_COORD_M)), and how many finite points lie beyond it.
+fn key_bounds(cloud: &PointCloud, res: f64) -> (Option<(CellKey, CellKey)>, u64) {
     (0..cloud.len())
         .into_par_iter()
         .with_min_len(4096)
         .filter(|&i| cloud.is_valid(i))
         .map(|i| {
             let p = cloud.point_in_map(i);
-            let k = key_of(res, p.x, p.y);
-            (k, k)
+            if in_map_domain(p.x, p.y) {
+                let k = key_of(res, p.x, p.y);
+                (Some((k, k)), 0)
+            } else {
+                (None, 1)
+            }
         })
-        .reduce_with(|(a0, a1), (b0, b1)| {
-            (
-                CellKey::new(a0.x.min(b0.x), a0.y.min(b0.y)),
-                CellKey::new(a1.x.max(b1.x), a1.y.max(b1.y)),
-            )
-        })
+        .reduce(
+            || (None, 0),
+            |(a, na), (b, nb)| {
+                let k = match (a, b) {
+                    (Some((a0, a1)), Some((b0, b1))) => Some((
+                        CellKey::new(a0.x.min(b0.x), a0.y.min(b0.y)),
+                        CellKey::new(a1.x.max(b1.x), a1.y.max(b1.y)),
+                    )),
+                    (a, b) => a.or(b),
+                };
+                (k, na + nb)
+            },
+        )
+}
+
+/// Smallest window side a block is split down to, cells.
+const MIN_LEAF_CELLS: usize = 16;
+
+/// A window of `s²` cells is fused as one piece only when it holds at least
+/// `s² / LEAF_CELLS_PER_POINT` points; emptier ones are split in four (down to
+/// [`MIN_LEAF_CELLS`]), so that the cost of moving and flushing windows stays proportional
+/// to the points, however scattered they are.
+const LEAF_CELLS_PER_POINT: usize = 64;
+
+/// Fuses whole windows of a cloud, one at a time, into a tile map. A window whose cells
+/// the points fill too sparsely is split into quadrants; windows of each side are reused.
+struct LeafFuser<'a> {
+    cloud: &'a PointCloud,
+    res: f64,
+    template: GridConfig,
+    noise: RangeNoise,
+    /// Grids by side (powers of two times [`MIN_LEAF_CELLS`], or the block side).
+    grids: Vec<RollingGrid>,
+    sub: PointCloud,
+    scratch: Vec<u32>,
+    stats: IngestStats,
+}
+
+impl LeafFuser<'_> {
+    fn key(&self, i: u32) -> CellKey {
+        let p = self.cloud.point_in_map(i as usize);
+        key_of(self.res, p.x, p.y)
+    }
+
+    /// Fuses the points `idx` (all inside the window of side `size` at `origin`).
+    fn fuse(
+        &mut self,
+        idx: &mut [u32],
+        origin: CellKey,
+        size: usize,
+        tiles: &mut TileMap,
+    ) -> Result<()> {
+        if size > MIN_LEAF_CELLS && size * size > LEAF_CELLS_PER_POINT * idx.len() {
+            // Four quadrants (the first half rounded up), the points partitioned among
+            // them with a counting sort.
+            let h = size.div_ceil(2);
+            let h64 = h as i64;
+            let quadrant = |k: CellKey| {
+                (((k.x - origin.x) >= h64) as usize) + 2 * (((k.y - origin.y) >= h64) as usize)
+            };
+            let mut counts = [0usize; 5];
+            for &i in idx.iter() {
+                counts[quadrant(self.key(i)) + 1] += 1;
+            }
+            for q in 0..4 {
+                counts[q + 1] += counts[q];
+            }
+            let mut fill = counts;
+            self.scratch.clear();
+            self.scratch.resize(idx.len(), 0);
+            for &i in idx.iter() {
+                let q = quadrant(self.key(i));
+                self.scratch[fill[q]] = i;
+                fill[q] += 1;
+            }
+            idx.copy_from_slice(&self.scratch);
+            for q in 0..4 {
+                let part = &mut idx[counts[q]..counts[q + 1]];
+                if part.is_empty() {
+                    continue;
+                }
+                let o = CellKey::new(
+                    origin.x + (q % 2) as i64 * h64,
+                    origin.y + (q / 2) as i64 * h64,
+                );
+                self.fuse(part, o, h, tiles)?;
+            }
+            return Ok(());
+        }
+        let at = match self.grids.iter().position(|g| g.size() == size) {
+            Some(at) => at,
+            None => {
+                let cfg = GridConfig {
+                    size_cells: size,
+                    ..self.template.clone()
+                };
+                self.grids.push(RollingGrid::new(cfg, 0.0, 0.0)?);
+                self.grids.len() - 1
+            }
+        };
+        self.sub.xyz.clear();
+        self.sub
+            .xyz
+            .extend(idx.iter().map(|&i| self.cloud.xyz[i as usize]));
+        self.sub.cols = self.sub.xyz.len();
+        let grid = &mut self.grids[at];
+        grid.move_origin(origin, tiles);
+        let st = grid.ingest(&self.sub, &self.noise)?;
+        grid.flush(tiles);
+        self.stats.merge(&st);
+        Ok(())
+    }
 }
 
 /// Fuses a whole cloud into a global tile map. `progress(done, total)` is called with
 /// point counts as blocks finish.
+///
+/// Time and memory follow the number of points, never the coordinates: points beyond
+/// [`MAX_MAP_COORD_M`](crate::grid::MAX_MAP_COORD_M) are counted as outside; blocks are numbered densely only when
+/// there are not many more of them than points, else only the occupied ones are; and a
+/// block is fused in windows no larger than its points fill.
 pub fn build_cloud(
     cloud: &PointCloud,
     cfg: &BuildConfig,
@@ -80,27 +198,42 @@ pub fn build_cloud(
     cfg.grid.validate()?;
     cfg.noise.validate()?;
     cloud.validate()?;
+    if cloud.len() >= u32::MAX as usize {
+        return Err(Error::invalid(
+            "cloud",
+            format!(
+                "{} points (at most {} per build)",
+                cloud.len(),
+                u32::MAX - 1
+            ),
+        ));
+    }
     let res = cfg.grid.resolution;
     let total = cloud.len() as u64;
-    let Some((lo, hi)) = key_bounds(cloud, res) else {
-        // Nothing finite: an empty map, every point counted as non-finite.
+    let (bounds, beyond) = key_bounds(cloud, res);
+    let Some((lo, hi)) = bounds else {
+        // Nothing finite within the map: an empty map, every point counted.
         let tiles = TileMap::new(res, cfg.grid.z_ref)?;
         progress(total, total);
         return Ok(CloudBuild {
             tiles,
             ingest: IngestStats {
                 points: total,
-                nonfinite: total,
+                nonfinite: total - beyond,
+                outside: beyond,
                 ..Default::default()
             },
             blocks: 0,
             window_cells: 0,
         });
     };
+    // Keys lie within ±2³⁵ (the domain at the finest resolution): no overflow below.
     let extent = (hi.x - lo.x).max(hi.y - lo.y) as u64 + 1;
-    let max_n = cfg.max_window_cells.max(16);
+    let max_n = cfg.max_window_cells.clamp(MIN_LEAF_CELLS, 32768);
     let n = if extent <= max_n as u64 {
-        (extent as usize).next_power_of_two().clamp(16, max_n)
+        (extent as usize)
+            .next_power_of_two()
+            .clamp(MIN_LEAF_CELLS, max_n)
     } else {
         max_n
     };
@@ -108,14 +241,15 @@ pub fn build_cloud(
         size_cells: n,
         ..cfg.grid.clone()
     };
-    let mut grid = RollingGrid::new(gcfg, 0.0, 0.0)?;
-    let mut tiles = TileMap::for_grid(&grid);
-    let mut stats = IngestStats::default();
     let n64 = n as i64;
+    let valid = cloud.valid_count() as u64;
 
-    if extent <= n as u64 {
+    if extent <= n as u64 && n * n <= LEAF_CELLS_PER_POINT * valid as usize {
+        // One window the points fill: fused in one batch.
+        let mut grid = RollingGrid::new(gcfg, 0.0, 0.0)?;
+        let mut tiles = TileMap::for_grid(&grid);
         grid.move_origin(lo, &mut tiles);
-        stats = grid.ingest(cloud, &cfg.noise)?;
+        let stats = grid.ingest(cloud, &cfg.noise)?;
         grid.flush(&mut tiles);
         progress(total, total);
         return Ok(CloudBuild {
@@ -132,27 +266,59 @@ pub fn build_cloud(
             return None;
         }
         let p = cloud.point_in_map(i);
+        if !in_map_domain(p.x, p.y) {
+            return None;
+        }
         let k = key_of(res, p.x, p.y);
         Some(((k.x - lo.x).div_euclid(n64), (k.y - lo.y).div_euclid(n64)))
     };
     let bw = (hi.x - lo.x).div_euclid(n64) + 1;
-    let ids: Vec<u32> = (0..cloud.len())
-        .into_par_iter()
-        .with_min_len(4096)
-        .map(|i| block_of(i).map_or(u32::MAX, |(bx, by)| (by * bw + bx) as u32))
-        .collect();
-    let nblocks = ((hi.y - lo.y).div_euclid(n64) + 1) * bw;
+    let bh = (hi.y - lo.y).div_euclid(n64) + 1;
+    let dense_limit = (valid as usize).max(1 << 16) as i64;
+    // Block ids (u32::MAX: no block) and each id's block coordinates.
+    let (ids, block_xy): (Vec<u32>, Vec<(i64, i64)>) = match bw.checked_mul(bh) {
+        Some(nb) if nb <= dense_limit => {
+            let ids = (0..cloud.len())
+                .into_par_iter()
+                .with_min_len(4096)
+                .map(|i| block_of(i).map_or(u32::MAX, |(bx, by)| (by * bw + bx) as u32))
+                .collect();
+            (ids, (0..nb).map(|b| (b % bw, b / bw)).collect())
+        }
+        _ => {
+            // Scattered: number only the occupied blocks, in row-major order.
+            let mut occupied: Vec<(i64, i64)> = (0..cloud.len())
+                .into_par_iter()
+                .with_min_len(4096)
+                .filter_map(|i| block_of(i).map(|(bx, by)| (by, bx)))
+                .collect();
+            occupied.par_sort_unstable();
+            occupied.dedup();
+            let number: std::collections::HashMap<(i64, i64), u32> = occupied
+                .iter()
+                .enumerate()
+                .map(|(b, &(by, bx))| ((bx, by), b as u32))
+                .collect();
+            let ids = (0..cloud.len())
+                .into_par_iter()
+                .with_min_len(4096)
+                .map(|i| block_of(i).map_or(u32::MAX, |b| number[&b]))
+                .collect();
+            (ids, occupied.into_iter().map(|(by, bx)| (bx, by)).collect())
+        }
+    };
+    let nblocks = block_xy.len();
     // Counting sort of point indices by block.
-    let mut start = vec![0usize; nblocks as usize + 1];
+    let mut start = vec![0usize; nblocks + 1];
     for &b in &ids {
         if b != u32::MAX {
             start[b as usize + 1] += 1;
         }
     }
-    for b in 0..nblocks as usize {
+    for b in 0..nblocks {
         start[b + 1] += start[b];
     }
-    let mut order = vec![0u32; start[nblocks as usize]];
+    let mut order = vec![0u32; start[nblocks]];
     let mut fill = start.clone();
     for (i, &b) in ids.iter().enumerate() {
         if b != u32::MAX {
@@ -161,32 +327,46 @@ pub fn build_cloud(
         }
     }
     drop(ids);
-    let nonfinite = total - order.len() as u64;
-    stats.points += nonfinite;
-    stats.nonfinite += nonfinite;
-    let mut done = nonfinite;
+    drop(fill);
+    let mut stats = IngestStats::default();
+    let skipped = total - order.len() as u64;
+    stats.points += skipped;
+    stats.nonfinite += skipped - beyond;
+    stats.outside += beyond;
+    let mut done = skipped;
     let mut blocks = 0;
     let mut sub = PointCloud::unorganized(Vec::new());
     sub.frame_to_map = cloud.frame_to_map;
     sub.sensor_origin = cloud.sensor_origin;
     sub.stamp = cloud.stamp;
-    for b in 0..nblocks as usize {
-        let idx = &order[start[b]..start[b + 1]];
+    let mut tiles = TileMap::new(res, cfg.grid.z_ref)?;
+    let mut fuser = LeafFuser {
+        cloud,
+        res,
+        template: gcfg,
+        noise: cfg.noise,
+        grids: Vec::new(),
+        sub,
+        scratch: Vec::new(),
+        stats: IngestStats::default(),
+    };
+    for (b, &(bx, by)) in block_xy.iter().enumerate() {
+        let idx = &mut order[start[b]..start[b + 1]];
         if idx.is_empty() {
             continue;
         }
         blocks += 1;
-        let (bx, by) = (b as i64 % bw, b as i64 / bw);
-        grid.move_origin(CellKey::new(lo.x + bx * n64, lo.y + by * n64), &mut tiles);
-        sub.xyz.clear();
-        sub.xyz.extend(idx.iter().map(|&i| cloud.xyz[i as usize]));
-        sub.cols = sub.xyz.len();
-        let st = grid.ingest(&sub, &cfg.noise)?;
-        stats.merge(&st);
-        done += idx.len() as u64;
+        let len = idx.len() as u64;
+        fuser.fuse(
+            idx,
+            CellKey::new(lo.x + bx * n64, lo.y + by * n64),
+            n,
+            &mut tiles,
+        )?;
+        done += len;
         progress(done, total);
     }
-    grid.flush(&mut tiles);
+    stats.merge(&fuser.stats);
     Ok(CloudBuild {
         tiles,
         ingest: stats,
@@ -334,6 +514,85 @@ mod tests {
     }
 
     #[test]
+    fn absurd_coordinates_cost_nothing_and_are_counted() {
+        // A small patch, then single points far away: finite but absurd, or beyond any map.
+        let mut cloud = ramp(20, 2.0);
+        let far = [1e6f32, -1e7, 9.9e7, 1e12, 1e20, -1e30, 3e38, f32::INFINITY];
+        for &v in &far {
+            cloud.xyz.push([v, 0.5, 0.0]);
+            cloud.xyz.push([0.5, v, 0.0]);
+            cloud.xyz.push([v, -v, 1.0]);
+        }
+        cloud.cols = cloud.xyz.len();
+        let t = std::time::Instant::now();
+        let b = build_cloud(&cloud, &BuildConfig::default(), &mut |_, _| {}).unwrap();
+        assert!(t.elapsed().as_secs_f64() < 10.0, "{:?}", t.elapsed());
+        let st = b.ingest;
+        assert_eq!(st.points, cloud.len() as u64);
+        // Within ±1e8 m: fused (3 values × 3 points); beyond: outside; inf: non-finite.
+        assert_eq!(st.fused, 400 + 9, "{st:?}");
+        assert_eq!(st.nonfinite, 3, "{st:?}");
+        assert_eq!(st.outside, 12, "{st:?}");
+        assert_eq!(b.tiles.observed_count(), 400 + 9);
+        // Scattered cells keep their tiles sparse.
+        assert!(
+            b.tiles.cell_bytes() < 4 << 20,
+            "{} bytes",
+            b.tiles.cell_bytes()
+        );
+        let map = HazardMap::from_elevation(&b.tiles);
+        let img = crate::io::export::render_map_png(&map);
+        assert!(img.width() <= 4096 && img.height() <= 4096 + 200);
+    }
+
+    #[test]
+    fn a_scattered_cloud_costs_per_point() {
+        // 20,000 points, each in its own block, over ±5,000 km: the blocks are numbered
+        // sparsely and each is fused in the smallest window.
+        let mut state = 1u64;
+        let mut rnd = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 1e7
+        };
+        let pts: Vec<[f32; 3]> = (0..20_000)
+            .map(|_| [rnd() as f32, rnd() as f32, 0.0])
+            .collect();
+        let cloud = PointCloud::unorganized(pts);
+        let t = std::time::Instant::now();
+        let b = build_cloud(&cloud, &BuildConfig::default(), &mut |_, _| {}).unwrap();
+        assert!(t.elapsed().as_secs_f64() < 20.0, "{:?}", t.elapsed());
+        assert_eq!(b.ingest.fused, 20_000);
+        assert_eq!(b.blocks, 20_000);
+        assert!(
+            b.tiles.cell_bytes() < 20_000 * 1024,
+            "{}",
+            b.tiles.cell_bytes()
+        );
+    }
+
+    #[test]
+    fn a_sparse_block_is_split_with_the_same_result() {
+        // Two dense patches 150 m apart: one 2048² window, split into quadrants; the cells
+        // are those of windows that fit each patch.
+        let mut a = ramp(100, 10.0);
+        let b = ramp(100, 10.0);
+        a.xyz
+            .extend(b.xyz.iter().map(|p| [p[0] + 150.0, p[1] + 120.0, p[2]]));
+        a.cols = a.xyz.len();
+        let split = build_cloud(&a, &BuildConfig::default(), &mut |_, _| {}).unwrap();
+        let small = BuildConfig {
+            max_window_cells: 100,
+            ..BuildConfig::default()
+        };
+        let blocks = build_cloud(&a, &small, &mut |_, _| {}).unwrap();
+        assert!(split.tiles == blocks.tiles);
+        assert_eq!(split.ingest, blocks.ingest);
+        assert_eq!(split.ingest.fused, 20_000);
+    }
+
+    #[test]
     fn all_nan_cloud_builds_an_empty_map() {
         let cloud = PointCloud::unorganized(vec![[f32::NAN; 3]; 10]);
         let b = build_cloud(&cloud, &BuildConfig::default(), &mut |_, _| {}).unwrap();
@@ -372,6 +631,13 @@ pub struct LogBuildReport {
     pub frames: crate::io::frames::FrameStats,
     /// Messages or frames that could not be used, with where and why.
     pub errors: Vec<String>,
+    /// What the plausibility checks dropped from frames that were fused, frame by frame
+    /// (the first [`MAX_WARNINGS`]).
+    #[serde(default)]
+    pub warnings: Vec<String>,
+    /// Lidar and stereo points beyond their sensor's `max_range_m`, dropped.
+    #[serde(default)]
+    pub points_beyond_max_range: BeyondRange,
     /// Where reading stopped early (a truncated or damaged log), if it did.
     pub damage: Option<String>,
     /// What the image labels contributed (`None`: not configured).
@@ -387,6 +653,16 @@ pub struct LogBuildReport {
     pub stage_totals_s: StageTimes,
     /// Per-frame latency of each stage (ms).
     pub stage_latency_ms: Vec<StageLatency>,
+}
+
+/// Warnings kept in a log build's report.
+pub const MAX_WARNINGS: usize = 100;
+
+/// Points dropped as beyond their sensor's maximum range.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BeyondRange {
+    pub lidar: u64,
+    pub stereo: u64,
 }
 
 /// Cue events summed over a build.
@@ -566,6 +842,8 @@ pub fn build_log(
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
     let mut counts = CueCounts::default();
     let mut errors = Vec::new();
+    let mut warnings = Vec::new();
+    let mut beyond = BeyondRange::default();
     let mut frames_fused = 0u64;
     let mut t_fuse = 0.0;
     let mut stage_totals = StageTimes::default();
@@ -602,6 +880,13 @@ pub fn build_log(
             let t = Instant::now();
             match mapper.update(&frame) {
                 Ok(r) => {
+                    beyond.lidar += r.beyond_max_range[0];
+                    beyond.stereo += r.beyond_max_range[1];
+                    for w in &r.warnings {
+                        if warnings.len() < MAX_WARNINGS {
+                            warnings.push(format!("frame at {:.6} s: {w}", frame.stamp));
+                        }
+                    }
                     if let Some(s) = r.lidar_points() {
                         lidar.merge(s);
                     }
@@ -684,6 +969,8 @@ pub fn build_log(
         cue_counts: counts,
         frames: stream_stats,
         errors,
+        warnings,
+        points_beyond_max_range: beyond,
         damage,
         labels: label_totals,
         cells_observed: map.cells.len(),

@@ -178,3 +178,262 @@ fn check_cloud(c: &crate::geom::PointCloud) {
         panic!("a reader returned an inconsistent cloud: {e}");
     }
 }
+
+/// Reads numbers from fuzz bytes; past the end every read gives 0.
+struct Bytes<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Bytes<'a> {
+    fn new(data: &'a [u8]) -> Self {
+        Bytes { data, at: 0 }
+    }
+    fn left(&self) -> usize {
+        self.data.len().saturating_sub(self.at)
+    }
+    fn take(&mut self, n: usize) -> &'a [u8] {
+        let a = self.at.min(self.data.len());
+        let b = (a + n).min(self.data.len());
+        self.at = a + n;
+        &self.data[a..b]
+    }
+    fn u8(&mut self) -> u8 {
+        self.take(1).first().copied().unwrap_or(0)
+    }
+    fn f32(&mut self) -> f32 {
+        let mut b = [0u8; 4];
+        let s = self.take(4);
+        b[..s.len()].copy_from_slice(s);
+        f32::from_le_bytes(b)
+    }
+}
+
+/// Everything tarn writes from a map, in memory (the picture, the terrain mesh's
+/// triangles, the far-origin offset, the report values); with `files`, also the files of
+/// `tarn build` into a fresh temporary directory.
+fn exports_of(map: &crate::hazard::HazardMap, files: bool) {
+    use crate::io::export;
+    let img = export::render_map_png(map);
+    assert!(
+        img.width() <= export::MAP_PNG_MAX_SIDE.max(640)
+            && img.height() <= export::MAP_PNG_MAX_SIDE + 200,
+        "map.png of {} × {} pixels",
+        img.width(),
+        img.height()
+    );
+    let tris = export::terrain_triangles(map);
+    assert!(tris
+        .iter()
+        .flatten()
+        .all(|&i| (i as usize) < map.cells.len()));
+    let _ = export::map_origin(map);
+    let _ = export::elevation_range(&map.cells);
+    let _ = map.water_report();
+    if files {
+        let dir = tempfile::tempdir().expect("a temporary directory");
+        export::write_map_files(dir.path(), map).expect("the map files are written");
+    }
+}
+
+/// A cloud build: the first byte chooses the reader (PLY, KITTI, or the bytes as raw
+/// little-endian `f32` x y z triples, which reach any coordinate), the window size and the
+/// resolution; the cloud is built ([`crate::build::build_cloud`]) and exported in memory.
+pub fn cloud_build(data: &[u8]) -> bool {
+    let Some((&head, rest)) = data.split_first() else {
+        return false;
+    };
+    let cloud = match head % 3 {
+        0 => crate::io::ply::read_from_bytes(rest, Path::new("fuzz.ply")),
+        1 => crate::io::kitti::read_from_bytes(rest, Path::new("fuzz.bin")),
+        _ => Ok(crate::geom::PointCloud::unorganized(
+            rest.chunks_exact(12)
+                .map(|c| {
+                    let f = |i: usize| f32::from_le_bytes(c[i..i + 4].try_into().unwrap());
+                    [f(0), f(4), f(8)]
+                })
+                .collect(),
+        )),
+    };
+    let Ok(cloud) = cloud else {
+        return false;
+    };
+    let cfg = crate::build::BuildConfig {
+        grid: crate::grid::GridConfig {
+            resolution: [0.05, 0.1, 0.25, 1.0][(head >> 2) as usize % 4],
+            ..Default::default()
+        },
+        max_window_cells: 16 << ((head >> 4) % 8),
+        ..Default::default()
+    };
+    let b = match crate::build::build_cloud(&cloud, &cfg, &mut |_, _| {}) {
+        Ok(b) => b,
+        Err(_) => return false,
+    };
+    let st = b.ingest;
+    assert_eq!(st.points, cloud.len() as u64, "{st:?}");
+    assert!(
+        st.fused + st.below + st.nonfinite + st.outside == st.points,
+        "every point is counted once: {st:?}"
+    );
+    assert!(b.tiles.observed_count() as u64 <= st.fused + st.below);
+    let map = crate::hazard::HazardMap::from_elevation(&b.tiles);
+    exports_of(&map, false);
+    true
+}
+
+/// `Mapper::update` over frames decoded from the bytes: a config byte (which cues run),
+/// then per frame a stamp step, the vehicle pose (translation and a raw quaternion, which
+/// need not be a rotation), and an organized lidar scan and stereo cloud of up to 16 × 48
+/// points (`f32` x y z, NaN where the bytes run out). Every frame is offered; then the
+/// whole map is finished and exported in memory.
+pub fn mapper_update(data: &[u8]) -> bool {
+    use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+    let mut b = Bytes::new(data);
+    let head = b.u8();
+    let mut cfg = crate::mapper::MapperConfig {
+        grid: crate::grid::GridConfig {
+            resolution: 0.25,
+            size_cells: 64,
+            ..Default::default()
+        },
+        ..crate::mapper::MapperConfig::default()
+    };
+    if let Some(l) = cfg.lidar.as_mut() {
+        l.cues = head & 1 != 0;
+        l.reflectivity = l.cues && head & 2 != 0;
+        if head & 4 != 0 {
+            l.height_m = Some(1.8);
+        }
+    }
+    if let Some(s) = cfg.stereo.as_mut() {
+        s.reflections = head & 8 != 0;
+        s.mirror_check = false;
+    }
+    let Ok(mut mapper) = crate::mapper::Mapper::new(cfg) else {
+        return false;
+    };
+    mapper.set_publish(head & 16 != 0);
+    let cloud = |b: &mut Bytes, intensity: bool| {
+        let rows = 1 + b.u8() as usize % 16;
+        let cols = 1 + b.u8() as usize % 48;
+        let xyz = (0..rows * cols)
+            .map(|_| {
+                if b.left() >= 12 {
+                    [b.f32(), b.f32(), b.f32()]
+                } else {
+                    [f32::NAN; 3]
+                }
+            })
+            .collect();
+        let mut c = crate::geom::PointCloud::organized(rows, cols, xyz).ok()?;
+        if intensity {
+            c.intensity = Some((0..rows * cols).map(|i| (i % 97) as f32).collect());
+        }
+        Some(c)
+    };
+    let (mut stamp, mut fused) = (0.0f64, 0);
+    for _ in 0..4 {
+        if b.left() == 0 {
+            break;
+        }
+        stamp += b.f32() as f64;
+        let t = [b.f32(), b.f32(), b.f32()].map(|v| v as f64);
+        let [w, x, y, z] = [b.f32(), b.f32(), b.f32(), b.f32()].map(|v| v as f64);
+        let q = Quaternion::new(w, x, y, z);
+        let base_to_map = crate::geom::Pose::from_parts(
+            Translation3::new(t[0], t[1], t[2]),
+            UnitQuaternion::new_unchecked(q),
+        );
+        let which = b.u8();
+        let mut lidar = (which & 1 != 0)
+            .then(|| cloud(&mut b, which & 4 != 0))
+            .flatten();
+        let mut stereo = (which & 2 != 0).then(|| cloud(&mut b, false)).flatten();
+        for c in [&mut lidar, &mut stereo].into_iter().flatten() {
+            c.frame_to_map = base_to_map;
+            c.stamp = stamp;
+        }
+        let frame = crate::io::frames::Frame {
+            stamp,
+            base_to_map,
+            lidar,
+            stereo,
+            image: None,
+            swir: None,
+            mwir: None,
+            stereo_baseline_m: None,
+        };
+        if let Ok(r) = mapper.update(&frame) {
+            fused += 1;
+            assert_eq!(r.frame_index, fused);
+        }
+    }
+    match mapper.finish_map() {
+        Ok((_, map)) => exports_of(&map, false),
+        Err(_) => return false,
+    }
+    fused > 0
+}
+
+/// The exports of a map with water: points and per-cell water evidence decoded from the
+/// bytes are fused into a 64² window placed anywhere in the map (up to ±1e8 m), the water
+/// stage makes bodies and hazards ([`crate::hazard::HazardMap::from_tiles`]), and every
+/// output is produced, the files included.
+pub fn exports(data: &[u8]) -> bool {
+    use crate::grid::{CellKey, Evidence, RollingGrid, TileMap};
+    let mut b = Bytes::new(data);
+    let res = 0.25;
+    let far = |v: f32| (v as f64).clamp(-1e8, 1e8);
+    let (cx, cy) = (far(b.f32()), far(b.f32()));
+    let cx = if cx.is_nan() { 0.0 } else { cx };
+    let cy = if cy.is_nan() { 0.0 } else { cy };
+    let gcfg = crate::grid::GridConfig {
+        resolution: res,
+        size_cells: 64,
+        ..Default::default()
+    };
+    let Ok(mut grid) = RollingGrid::new(gcfg, cx, cy) else {
+        return false;
+    };
+    let mut tiles = TileMap::for_grid(&grid);
+    let o = grid.origin();
+    // Cells: (column, row, height in cm, evidence counts).
+    let mut pts = Vec::new();
+    let mut ev = Vec::new();
+    while b.left() >= 4 && pts.len() < 4096 {
+        let (i, j) = (b.u8() as i64 % 64, b.u8() as i64 % 64);
+        let z = b.u8() as i8 as f64 * 0.05;
+        let kind = b.u8();
+        let k = CellKey::new(o.x + i, o.y + j);
+        let (x, y) = crate::grid::centre_of(res, k);
+        pts.push([(x - cx) as f32, (y - cy) as f32, z as f32]);
+        if kind & 0x80 != 0 {
+            let mut e = Evidence::default();
+            let c = (kind & 0x0f) as u16;
+            e.noret = c;
+            e.reflect = c * ((kind >> 4) & 1) as u16;
+            e.colour_water = c * ((kind >> 5) & 1) as u16;
+            e.add_level(((z - 0.1) * 1000.0) as i32);
+            if kind & 0x40 != 0 {
+                e.add_bottom_return(0.05 * (kind & 7) as f64, ((z - 0.1) * 1000.0) as i32, 1.0);
+            }
+            ev.push((k, e));
+        }
+    }
+    let mut cloud = crate::geom::PointCloud::unorganized(pts);
+    cloud.frame_to_map = crate::geom::pose_xyz_rpy(cx, cy, 0.0, 0.0, 0.0, 0.0);
+    if grid
+        .ingest(&cloud, &crate::grid::RangeNoise::constant(0.02))
+        .is_err()
+    {
+        return false;
+    }
+    grid.apply_evidence(&ev);
+    grid.flush(&mut tiles);
+    let Ok(map) = crate::hazard::HazardMap::from_tiles(&tiles, &Default::default()) else {
+        return false;
+    };
+    exports_of(&map, true);
+    !map.cells.is_empty()
+}

@@ -79,6 +79,9 @@ pub struct LidarConfig {
     pub max_gap_fraction: f64,
     /// Range noise of the returns.
     pub noise: RangeNoise,
+    /// Farthest plausible return, m: points beyond it are dropped (made missing returns)
+    /// and counted in the frame's warnings.
+    pub max_range_m: f64,
     pub cue: LidarCueConfig,
     pub reflectivity_cue: ReflectivityConfig,
 }
@@ -99,6 +102,7 @@ impl Default for LidarConfig {
             n_water: 1.33,
             max_gap_fraction: 0.25,
             noise: RangeNoise::LIDAR,
+            max_range_m: 300.0,
             cue: LidarCueConfig::default(),
             reflectivity_cue: ReflectivityConfig::default(),
         }
@@ -124,6 +128,9 @@ pub struct StereoConfig {
     /// The baseline (m), for logs without the right camera's `CameraInfo` (which, when
     /// present, is used instead).
     pub baseline_m: Option<f64>,
+    /// Farthest plausible stereo point, m: points beyond it are dropped (made NaN) and
+    /// counted in the frame's warnings.
+    pub max_range_m: f64,
     /// Cue settings; `cue.noise` is the range noise used only where the frame does not
     /// give the focal length and the baseline.
     pub cue: StereoCueConfig,
@@ -137,6 +144,7 @@ impl Default for StereoConfig {
             disparity_noise_px: 0.5,
             min_disparity_px: 1.0,
             baseline_m: None,
+            max_range_m: 200.0,
             cue: StereoCueConfig::default(),
         }
     }
@@ -364,6 +372,12 @@ impl MapperConfig {
                 }
             };
             pos("wavelength_nm", l.wavelength_nm)?;
+            if l.max_range_m.is_nan() || l.max_range_m <= 0.0 {
+                return Err(Error::invalid(
+                    "mapper config lidar.max_range_m",
+                    format!("{} is not a number > 0", l.max_range_m),
+                ));
+            }
             pos("dry_limit_m", l.dry_limit_m)?;
             pos("aperture_diameter_m", l.aperture_diameter_m)?;
             if let Some(c) = l.attenuation_per_m {
@@ -426,6 +440,12 @@ impl MapperConfig {
                         format!("{b} is not a finite number > 0"),
                     ));
                 }
+            }
+            if s.max_range_m.is_nan() || s.max_range_m <= 0.0 {
+                return Err(Error::invalid(
+                    "mapper config stereo.max_range_m",
+                    format!("{} is not a number > 0", s.max_range_m),
+                ));
             }
             named("stereo.cue", s.cue.validate())?;
         }
@@ -586,6 +606,10 @@ pub struct FrameReport {
     /// What the image labels contributed (`None`: not configured).
     pub labels: Option<crate::project::FrameLabelsReport>,
     pub times_s: StageTimes,
+    /// Lidar and stereo points beyond their sensor's `max_range_m`, dropped.
+    pub beyond_max_range: [u64; 2],
+    /// What the plausibility checks dropped from this frame, with the values.
+    pub warnings: Vec<String>,
 }
 
 impl FrameReport {
@@ -645,6 +669,61 @@ pub fn window_centre(grid: &GridConfig, base_to_map: &crate::geom::Pose) -> (f64
     (c.x + d * h.x, c.y + d * h.y)
 }
 
+/// Refuses a pose that is not a finite rotation and translation within the map's domain
+/// ([`crate::grid::MAX_MAP_COORD_M`]), naming the frame and the values.
+fn check_pose(stamp: f64, what: &str, pose: &crate::geom::Pose) -> Result<()> {
+    let t = pose.translation.vector;
+    let q = pose.rotation.quaternion().coords;
+    let norm = q.norm();
+    let bad = if !(t.iter().all(|v| v.is_finite())) {
+        Some("its translation is not finite")
+    } else if !(t.iter().all(|v| v.abs() <= crate::grid::MAX_MAP_COORD_M)) {
+        Some("its translation is beyond the map's ±1e8 m")
+    } else if !(q.iter().all(|v| v.is_finite()) && (norm - 1.0).abs() < 1e-3) {
+        Some("its rotation is not a unit quaternion")
+    } else {
+        None
+    };
+    match bad {
+        None => Ok(()),
+        Some(why) => Err(Error::invalid(
+            format!("frame at {stamp:.6} s"),
+            format!(
+                "{what} pose refused: {why} (translation {:?}, quaternion xyzw {:?})",
+                [t.x, t.y, t.z],
+                [q.x, q.y, q.z, q.w]
+            ),
+        )),
+    }
+}
+
+/// Makes every finite point of `cloud` farther than `max` from its sensor a missing
+/// return; `None` when there is none, else the gated cloud, how many and the farthest.
+fn gate_range(
+    cloud: &crate::geom::PointCloud,
+    max: f64,
+) -> Option<(crate::geom::PointCloud, u64, f64)> {
+    let o = cloud.sensor_origin;
+    let range = |p: &[f32; 3]| {
+        let d = [p[0] as f64 - o.x, p[1] as f64 - o.y, p[2] as f64 - o.z];
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+    };
+    let beyond = |p: &[f32; 3]| p.iter().all(|v| v.is_finite()) && range(p) > max;
+    if !cloud.xyz.iter().any(beyond) {
+        return None;
+    }
+    let mut c = cloud.clone();
+    let (mut n, mut far) = (0u64, 0.0f64);
+    for p in c.xyz.iter_mut() {
+        if beyond(p) {
+            n += 1;
+            far = far.max(range(p));
+            *p = [f32::NAN; 3];
+        }
+    }
+    Some((c, n, far))
+}
+
 /// The online mapper. See the module documentation.
 pub struct Mapper {
     cfg: MapperConfig,
@@ -663,6 +742,54 @@ pub struct Mapper {
 }
 
 impl Mapper {
+    /// The frame with the points beyond each sensor's `max_range_m` made missing returns,
+    /// and images whose pose is not plausible left without a pose; `None` when nothing
+    /// changes. What was dropped goes into the report.
+    fn gate_frame(&self, frame: &Frame, rep: &mut FrameReport) -> Option<Frame> {
+        let mut out: Option<Frame> = None;
+        let ranges = [
+            self.cfg.lidar.as_ref().map(|l| l.max_range_m),
+            self.cfg.stereo.as_ref().map(|s| s.max_range_m),
+        ];
+        for (k, (what, max)) in ["lidar", "stereo"].into_iter().zip(ranges).enumerate() {
+            let cloud = if k == 0 { &frame.lidar } else { &frame.stereo };
+            let (Some(cloud), Some(max)) = (cloud, max) else {
+                continue;
+            };
+            if let Some((gated, n, far)) = gate_range(cloud, max) {
+                rep.beyond_max_range[k] += n;
+                rep.warnings.push(format!(
+                    "{n} {what} points beyond {what}.max_range_m = {max} m dropped (farthest {far:.4e} m)"
+                ));
+                let f = out.get_or_insert_with(|| frame.clone());
+                if k == 0 {
+                    f.lidar = Some(gated);
+                } else {
+                    f.stereo = Some(gated);
+                }
+            }
+        }
+        let names = ["colour", "swir", "mwir"];
+        for (k, img) in [&frame.image, &frame.swir, &frame.mwir]
+            .into_iter()
+            .enumerate()
+        {
+            let Some(pose) = img.as_ref().and_then(|i| i.frame_to_map.as_ref()) else {
+                continue;
+            };
+            if let Err(e) = check_pose(frame.stamp, &format!("{} image", names[k]), pose) {
+                rep.warnings
+                    .push(format!("{e}; the image is used without a pose"));
+                let f = out.get_or_insert_with(|| frame.clone());
+                let slot = [&mut f.image, &mut f.swir, &mut f.mwir][k]
+                    .as_mut()
+                    .expect("the image is there");
+                slot.frame_to_map = None;
+            }
+        }
+        out
+    }
+
     /// A mapper for `cfg` (validated). With a given lidar height the cue model is built
     /// here; with `height_m` absent, on the first scan that allows the estimate.
     pub fn new(cfg: MapperConfig) -> Result<Mapper> {
@@ -758,15 +885,18 @@ impl Mapper {
         };
         let mut times = StageTimes::default();
 
+        // 0. plausibility: poses that are rotations within the map, points within range.
+        check_pose(frame.stamp, "vehicle (base_link → map)", &frame.base_to_map)?;
+        for (what, c) in [("lidar", &frame.lidar), ("stereo", &frame.stereo)] {
+            if let Some(c) = c {
+                check_pose(frame.stamp, &format!("{what} cloud"), &c.frame_to_map)?;
+            }
+        }
+        let gated = self.gate_frame(frame, &mut rep);
+        let frame = gated.as_ref().unwrap_or(frame);
+
         // 1. recentre
         let t = Instant::now();
-        let c = frame.base_to_map.translation.vector;
-        if !(c.x.is_finite() && c.y.is_finite()) {
-            return Err(Error::invalid(
-                format!("frame at {:.6} s", frame.stamp),
-                "vehicle position is not finite",
-            ));
-        }
         let (cx, cy) = window_centre(&self.cfg.grid, &frame.base_to_map);
         let grid = match self.grid.as_mut() {
             Some(g) => {

@@ -8,13 +8,16 @@ use std::path::{Path, PathBuf};
 
 type Entry = fn(&[u8]) -> bool;
 
-const TARGETS: [(&str, Entry); 6] = [
+const TARGETS: [(&str, Entry); 9] = [
     ("ply", tarn::fuzzing::ply),
     ("kitti", tarn::fuzzing::kitti),
     ("mcap", tarn::fuzzing::mcap),
     ("cdr", tarn::fuzzing::cdr),
     ("scene_toml", tarn::fuzzing::scene_toml),
     ("color_model_json", tarn::fuzzing::color_model_json),
+    ("cloud_build", tarn::fuzzing::cloud_build),
+    ("mapper_update", tarn::fuzzing::mapper_update),
+    ("exports", tarn::fuzzing::exports),
 ];
 
 fn inputs(kind: &str, target: &str) -> Vec<PathBuf> {

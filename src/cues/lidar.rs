@@ -424,10 +424,11 @@ impl LidarCueModel {
             return 0.0;
         }
         let t = lookahead / self.table_step;
-        let i = t as usize;
-        if i + 1 >= self.depth_table.len() {
+        // Checked before the cast: a lookahead of 1e20 m saturates `as usize`.
+        if t.is_nan() || t >= self.depth_table.len().saturating_sub(1) as f64 {
             return 0.0;
         }
+        let i = t as usize;
         let f = t - i as f64;
         self.depth_table[i] * (1.0 - f) + self.depth_table[i + 1] * f
     }

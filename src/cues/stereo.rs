@@ -719,11 +719,19 @@ fn mean_below_level(
     sw > 0.0 && swd / sw > cfg.gate_min_m.max(cfg.gate_sigma / sw.sqrt())
 }
 
+/// Longest span between two consecutive level crossings that is filled, metres: neighbouring
+/// rays of a stereo camera cross a level metres apart, not this far (a corrupted point would
+/// otherwise make a walk of its whole distance).
+const MAX_SPAN_M: f64 = 100.0;
+
 /// The cells the segment `a`–`b` passes through, strictly between the cells of its ends,
-/// in order from `a`.
+/// in order from `a`. Nothing for a segment longer than [`MAX_SPAN_M`] (or not finite).
 fn span_cells_between(res: f64, a: (f64, f64), b: (f64, f64), out: &mut Vec<CellKey>) {
-    let (ka, kb) = (key_of(res, a.0, a.1), key_of(res, b.0, b.1));
     let len = (b.0 - a.0).hypot(b.1 - a.1);
+    if len.is_nan() || len > MAX_SPAN_M {
+        return;
+    }
+    let (ka, kb) = (key_of(res, a.0, a.1), key_of(res, b.0, b.1));
     let n = (len / (0.25 * res)).ceil() as usize;
     let mut prev = ka;
     for i in 1..n {

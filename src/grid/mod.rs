@@ -27,6 +27,18 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
+/// Largest map-frame coordinate (|x| and |y|, metres) a cell may have: 100,000 km, beyond
+/// any UTM, ECEF or local frame on Earth. Within it a cell key at the finest resolution
+/// (5 mm) stays below 2³⁵, so every sum and difference of keys and window sizes is exact in
+/// `i64`; points beyond it are outside every grid, and a window is never centred there.
+pub const MAX_MAP_COORD_M: f64 = 1.0e8;
+
+/// Whether `(x, y)` lies within [`MAX_MAP_COORD_M`] (false for NaN).
+#[inline]
+pub fn in_map_domain(x: f64, y: f64) -> bool {
+    x.abs() <= MAX_MAP_COORD_M && y.abs() <= MAX_MAP_COORD_M
+}
+
 /// Global integer address of a cell: `floor(x / resolution)`, `floor(y / resolution)` in the
 /// map frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -299,12 +311,7 @@ impl RollingGrid {
     /// A grid whose window is centred on `(cx, cy)` (map frame, metres).
     pub fn new(cfg: GridConfig, cx: f64, cy: f64) -> Result<Self> {
         cfg.validate()?;
-        if !(cx.is_finite() && cy.is_finite()) {
-            return Err(Error::invalid(
-                "grid centre",
-                format!("({cx}, {cy}) is not finite"),
-            ));
-        }
+        check_centre(cx, cy)?;
         let n = cfg.size_cells;
         let mut g = RollingGrid {
             origin: CellKey::new(0, 0),
@@ -502,12 +509,7 @@ impl RollingGrid {
     /// Moves the window so that it is centred on `(cx, cy)`. Cells that leave go to `sink`
     /// and their storage is cleared; every cell that stays keeps its data untouched.
     pub fn recenter(&mut self, cx: f64, cy: f64, sink: &mut dyn CellSink) -> Result<()> {
-        if !(cx.is_finite() && cy.is_finite()) {
-            return Err(Error::invalid(
-                "grid centre",
-                format!("({cx}, {cy}) is not finite"),
-            ));
-        }
+        check_centre(cx, cy)?;
         let o = self.origin_for_centre(cx, cy);
         self.move_origin(o, sink);
         Ok(())
@@ -625,6 +627,23 @@ impl RollingGrid {
     pub fn z_of_mm(&self, mm: f64) -> f64 {
         self.cfg.z_ref + mm * 1e-3
     }
+}
+
+/// A window centre must be finite and within [`MAX_MAP_COORD_M`].
+fn check_centre(cx: f64, cy: f64) -> Result<()> {
+    if !(cx.is_finite() && cy.is_finite()) {
+        return Err(Error::invalid(
+            "grid centre",
+            format!("({cx}, {cy}) is not finite"),
+        ));
+    }
+    if !in_map_domain(cx, cy) {
+        return Err(Error::invalid(
+            "grid centre",
+            format!("({cx}, {cy}) m is beyond the map's ±{MAX_MAP_COORD_M:e} m"),
+        ));
+    }
+    Ok(())
 }
 
 /// The key of the cell containing `(x, y)` at `resolution`.

@@ -9,19 +9,96 @@ use crate::error::{Error, Result};
 /// Cells per tile side.
 pub const TILE_CELLS: i64 = 64;
 
-/// A tile: `TILE_CELLS²` cells, row-major.
-#[derive(Debug, Clone, PartialEq)]
-struct Tile {
-    cells: Vec<CellStats>,
-    observed: u32,
+/// Observed cells a tile holds as a sorted list before it switches to a dense array: a
+/// map of scattered points costs about 100 bytes per observed cell, not a whole tile's
+/// 393 kB per point.
+const SPARSE_MAX: usize = 256;
+
+/// A tile: `TILE_CELLS²` cells, row-major; few observed cells are kept as a list sorted by
+/// their index in the tile.
+#[derive(Debug, Clone)]
+enum Tile {
+    Sparse(Vec<(u16, CellStats)>),
+    Dense {
+        cells: Vec<CellStats>,
+        observed: u32,
+    },
 }
 
 impl Tile {
     fn new() -> Self {
-        Tile {
-            cells: vec![CellStats::default(); (TILE_CELLS * TILE_CELLS) as usize],
-            observed: 0,
+        Tile::Sparse(Vec::new())
+    }
+
+    fn observed(&self) -> usize {
+        match self {
+            Tile::Sparse(v) => v.len(),
+            Tile::Dense { observed, .. } => *observed as usize,
         }
+    }
+
+    fn get(&self, i: usize) -> Option<&CellStats> {
+        match self {
+            Tile::Sparse(v) => v
+                .binary_search_by_key(&(i as u16), |e| e.0)
+                .ok()
+                .map(|j| &v[j].1),
+            Tile::Dense { cells, .. } => Some(&cells[i]),
+        }
+    }
+
+    fn merge(&mut self, i: usize, c: &CellStats) {
+        match self {
+            Tile::Sparse(v) => match v.binary_search_by_key(&(i as u16), |e| e.0) {
+                Ok(j) => v[j].1.merge(c),
+                Err(j) => {
+                    if v.len() < SPARSE_MAX {
+                        v.insert(j, (i as u16, *c));
+                    } else {
+                        let mut cells =
+                            vec![CellStats::default(); (TILE_CELLS * TILE_CELLS) as usize];
+                        for (k, s) in v.drain(..) {
+                            cells[k as usize] = s;
+                        }
+                        cells[i] = *c;
+                        *self = Tile::Dense {
+                            cells,
+                            observed: SPARSE_MAX as u32 + 1,
+                        };
+                    }
+                }
+            },
+            Tile::Dense { cells, observed } => {
+                if cells[i].is_empty() {
+                    *observed += 1;
+                }
+                cells[i].merge(c);
+            }
+        }
+    }
+
+    /// Observed cells by index in the tile, in index order.
+    fn cells(&self) -> Box<dyn Iterator<Item = (usize, &CellStats)> + '_> {
+        match self {
+            Tile::Sparse(v) => Box::new(v.iter().map(|(i, c)| (*i as usize, c))),
+            Tile::Dense { cells, .. } => {
+                Box::new(cells.iter().enumerate().filter(|(_, c)| !c.is_empty()))
+            }
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        match self {
+            Tile::Sparse(v) => v.capacity() * std::mem::size_of::<(u16, CellStats)>(),
+            Tile::Dense { cells, .. } => cells.len() * std::mem::size_of::<CellStats>(),
+        }
+    }
+}
+
+impl PartialEq for Tile {
+    /// The same observed cells, whichever storage holds them.
+    fn eq(&self, o: &Self) -> bool {
+        self.observed() == o.observed() && self.cells().eq(o.cells())
     }
 }
 
@@ -79,18 +156,14 @@ impl TileMap {
             return;
         }
         let (tk, i) = split(k);
-        let t = self.tiles.entry(tk).or_insert_with(Tile::new);
-        if t.cells[i].is_empty() {
-            t.observed += 1;
-        }
-        t.cells[i].merge(c);
+        self.tiles.entry(tk).or_insert_with(Tile::new).merge(i, c);
     }
 
     pub fn get(&self, k: CellKey) -> Option<CellStats> {
         let (tk, i) = split(k);
         self.tiles
             .get(&tk)
-            .map(|t| t.cells[i])
+            .and_then(|t| t.get(i).copied())
             .filter(|c| !c.is_empty())
     }
 
@@ -128,23 +201,19 @@ impl TileMap {
     /// Observed cells in a fixed order (tile by tile, row by row): deterministic.
     pub fn observed(&self) -> impl Iterator<Item = (CellKey, CellStats)> + '_ {
         self.tiles.iter().flat_map(|(&(tx, ty), t)| {
-            t.cells
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| !c.is_empty())
-                .map(move |(i, c)| {
-                    let i = i as i64;
-                    let k = CellKey::new(
-                        tx * TILE_CELLS + i % TILE_CELLS,
-                        ty * TILE_CELLS + i / TILE_CELLS,
-                    );
-                    (k, *c)
-                })
+            t.cells().map(move |(i, c)| {
+                let i = i as i64;
+                let k = CellKey::new(
+                    tx * TILE_CELLS + i % TILE_CELLS,
+                    ty * TILE_CELLS + i / TILE_CELLS,
+                );
+                (k, *c)
+            })
         })
     }
 
     pub fn observed_count(&self) -> usize {
-        self.tiles.values().map(|t| t.observed as usize).sum()
+        self.tiles.values().map(Tile::observed).sum()
     }
 
     pub fn tile_count(&self) -> usize {
@@ -153,7 +222,7 @@ impl TileMap {
 
     /// Bytes held by cell storage.
     pub fn cell_bytes(&self) -> usize {
-        self.tiles.len() * (TILE_CELLS * TILE_CELLS) as usize * std::mem::size_of::<CellStats>()
+        self.tiles.values().map(Tile::bytes).sum()
     }
 
     /// Elevation of a cell in metres (map frame).
@@ -182,5 +251,60 @@ impl TileMap {
 impl CellSink for TileMap {
     fn accept(&mut self, key: CellKey, cell: &CellStats) {
         self.add(key, cell);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cell(hits: u32) -> CellStats {
+        CellStats {
+            hits,
+            ..CellStats::default()
+        }
+    }
+
+    #[test]
+    fn sparse_and_dense_tiles_hold_the_same_cells() {
+        // 600 cells of one tile in two orders (the tile turns dense after 256), plus
+        // repeated cells: the same map, listed in the same order, whatever the order.
+        let keys: Vec<CellKey> = (0..600)
+            .map(|i| CellKey::new((i * 37) % 64, 128 + (i / 8) % 64))
+            .collect();
+        let (mut a, mut b) = (
+            TileMap::new(0.1, 0.0).unwrap(),
+            TileMap::new(0.1, 0.0).unwrap(),
+        );
+        for (i, k) in keys.iter().enumerate() {
+            a.add(*k, &cell(1 + i as u32 % 3));
+        }
+        for (i, k) in keys.iter().enumerate().rev() {
+            b.add(*k, &cell(1 + i as u32 % 3));
+        }
+        assert!(a == b);
+        assert_eq!(
+            a.observed().collect::<Vec<_>>(),
+            b.observed().collect::<Vec<_>>()
+        );
+        assert_eq!(a.tile_count(), 1);
+        let distinct: std::collections::BTreeSet<_> = keys.iter().collect();
+        assert_eq!(a.observed_count(), distinct.len());
+        // The listing is in index order within the tile, as a dense tile lists it.
+        let listed: Vec<_> = a.observed().map(|(k, _)| (k.y, k.x)).collect();
+        let mut sorted = listed.clone();
+        sorted.sort();
+        assert_eq!(listed, sorted);
+        for k in &keys {
+            assert!(a.get(*k).is_some());
+        }
+        assert!(a.get(CellKey::new(63, 0)).is_none());
+        // A few scattered cells cost about a hundred bytes each, not a whole tile.
+        let mut c = TileMap::new(0.1, 0.0).unwrap();
+        for i in 0..100 {
+            c.add(CellKey::new(i * 1000, -i * 1000), &cell(1));
+        }
+        assert_eq!(c.tile_count(), 100);
+        assert!(c.cell_bytes() < 100 * 1024, "{}", c.cell_bytes());
     }
 }

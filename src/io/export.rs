@@ -348,6 +348,10 @@ const OBSTACLE: [u8; 3] = [220, 40, 30];
 /// hazard (shallow within the fording depth, deep, depth unknown); geometric obstacles
 /// red; each water body labelled with its id and depth at its centre; a legend of what is
 /// shown and a scale bar below the map.
+///
+/// The picture's size does not follow the map's extent beyond [`MAP_PNG_MAX_SIDE`] pixels:
+/// a wider map is drawn with several cells per pixel (water and obstacles drawn over the
+/// rest, so a hazard never disappears), and the scale bar says so.
 pub fn render_map_png(map: &HazardMap) -> RgbImage {
     const BG: [u8; 3] = [24, 24, 28];
     let Some((lo, hi)) = map.key_bounds() else {
@@ -355,8 +359,26 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         draw_text(&mut img, 10, 25, "no observed cells", 1, [220, 220, 220]);
         return img;
     };
-    let (wc, hc) = ((hi.x - lo.x + 1) as u32, (hi.y - lo.y + 1) as u32);
-    let s = (900 / wc.max(hc)).clamp(1, 8);
+    // Extents in i128: keys of any i64 value cannot overflow here.
+    let span = |a: i64, b: i64| (b as i128 - a as i128 + 1) as u128;
+    let (wc, hc) = (span(lo.x, hi.x), span(lo.y, hi.y));
+    let long = wc.max(hc);
+    // Cells per pixel side (d) and pixels per cell side (s): one of them is 1.
+    let d = long.div_ceil(MAP_PNG_MAX_SIDE as u128).max(1);
+    let s = if d > 1 {
+        1
+    } else {
+        (900 / long as u32).clamp(1, 8)
+    };
+    let (wc, hc) = (wc.div_ceil(d) as u32, hc.div_ceil(d) as u32);
+    let d64 = d as i128;
+    // Pixel column and row of a cell (row 0 at the top).
+    let pixel_of = |k: CellKey| {
+        (
+            ((k.x as i128 - lo.x as i128) / d64) as u32 * s,
+            ((hi.y as i128 - k.y as i128) / d64) as u32 * s,
+        )
+    };
     let (mw, mh) = (wc * s, hc * s);
     let legend_h = 96;
     let width = mw.max(640);
@@ -368,7 +390,13 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
     let zspan = (zhi - zlo).max(1e-6);
     // Light from the upper left (north-west), 45° up.
     let l = nalgebra::Vector3::new(-1.0, 1.0, 2f64.sqrt()).normalize();
-    for c in &map.cells {
+    // Several cells per pixel: drivable cells first, hazards over them.
+    let mut order: Vec<usize> = (0..map.cells.len()).collect();
+    if d > 1 {
+        let hazard = |c: &MapCell| c.class == Class::Water || c.hazard != Hazard::Free;
+        order.sort_by_key(|&i| hazard(&map.cells[i]));
+    }
+    for c in order.into_iter().map(|i| &map.cells[i]) {
         // Slopes over two cells each way (where observed) to keep per-cell noise down.
         let z = |dx: i64, dy: i64| elev.get(&CellKey::new(c.key.x + dx, c.key.y + dy)).copied();
         let slope = |pts: [(i64, Option<f64>); 4]| {
@@ -399,8 +427,7 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
                 (0.45 + 0.55 * n.dot(&l).max(0.0) / l.z) * (0.8 + 0.35 * (c.z - zlo) / zspan);
             base.map(|v| (v as f64 * shade.clamp(0.0, 1.2)).min(255.0) as u8)
         };
-        let px = (c.key.x - lo.x) as u32 * s;
-        let py = (hi.y - c.key.y) as u32 * s;
+        let (px, py) = pixel_of(c.key);
         fill_rect(&mut img, px, py, s, s, col);
     }
 
@@ -409,21 +436,24 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
     let text_scale = if mw >= 400 { 2 } else { 1 };
     for b in &map.bodies {
         let n = b.cells.len().max(1) as f64;
+        // Body position in pixels (cells divided by the cells per pixel).
         let cx = b.cells.iter().map(|k| k.x as f64).sum::<f64>() / n;
         let top = b.cells.iter().map(|k| k.y).max().unwrap_or(hi.y);
         let bottom = b.cells.iter().map(|k| k.y).min().unwrap_or(lo.y);
+        let rows_above = ((hi.y as i128 - top as i128) / d64) as i64;
+        let rows_below = ((hi.y as i128 - bottom as i128) / d64) as i64;
         let depth = match (b.depth.max_m, b.depth.unknown_cells) {
             (Some(d), 0) => format!("max {d:.2} m"),
             (Some(d), _) => format!("max {d:.2} m+?"),
             (None, _) => "depth ?".to_string(),
         };
-        let px = ((cx - lo.x as f64 + 0.5) * s as f64) as i64;
+        let px = ((cx - lo.x as f64 + 0.5) / d as f64 * s as f64) as i64;
         let line = 9 * text_scale as i64;
-        let above = (hi.y - top) * s as i64 - 2 * line - 2;
+        let above = rows_above * s as i64 - 2 * line - 2;
         let y0 = if above >= 0 {
             above
         } else {
-            (hi.y - bottom + 1) * s as i64 + 2
+            (rows_below + 1) * s as i64 + 2
         };
         for (row, text) in [format!("#{}", b.id), depth].iter().enumerate() {
             let tw = (text.len() as u32 * 8 * text_scale) as i64;
@@ -487,8 +517,10 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         draw_text(&mut img, lx + 16, ly + 2, name, 1, [230, 230, 230]);
         lx += w;
     }
-    let bar_m = nice_length(0.35 * wc as f64 * res);
-    let bar_px = ((bar_m / res) as u32 * s).max(1);
+    // Metres per pixel.
+    let mpp = res * d as f64 / s as f64;
+    let bar_m = nice_length(0.35 * mw as f64 * mpp);
+    let bar_px = ((bar_m / mpp) as u32).max(1);
     let by = ly + 30;
     fill_rect(&mut img, 8, by, bar_px, 4, [240, 240, 240]);
     fill_rect(&mut img, 8, by - 4, 2, 12, [240, 240, 240]);
@@ -506,8 +538,13 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         format!("{:.0} cm", bar_m * 100.0)
     };
     draw_text(&mut img, 16 + bar_px, by - 2, &label, 1, [240, 240, 240]);
+    let per_pixel = if d > 1 {
+        format!(" ({d}x{d} cells per pixel)")
+    } else {
+        String::new()
+    };
     let info = format!(
-        "{} cells at {:.2} m, {} water bodies   +x right, +y up",
+        "{} cells at {:.2} m{per_pixel}, {} water bodies   +x right, +y up",
         map.cells.len(),
         res,
         map.bodies.len()
@@ -515,6 +552,9 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
     draw_text(&mut img, 8, by + 14, &info, 1, [170, 170, 170]);
     img
 }
+
+/// Longest side of the map part of `map.png`, pixels.
+pub const MAP_PNG_MAX_SIDE: u32 = 4096;
 
 /// `map.png`, atomically.
 pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {

@@ -10,7 +10,7 @@
 use std::collections::{BTreeMap, VecDeque};
 use std::path::Path;
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 
 use super::mcap_log::{LogReader, RawMessage};
 use super::ros::{
@@ -48,7 +48,20 @@ pub struct LogConfig {
     /// How far past a scan's stamp the log must have advanced before the scan is
     /// emitted (waiting for late transforms and images), s.
     pub lookahead_s: f64,
+    /// Fastest the vehicle moves, m/s: a frame whose `base_frame` lies farther from the
+    /// last accepted frame's than this speed allows (plus [`POSE_JUMP_SLACK_M`]) is refused
+    /// and named in `skip_reasons`, unless [`POSE_JUMP_CONFIRM`] frames in a row agree
+    /// with it (the localisation really moved).
+    pub max_speed_mps: f64,
 }
+
+/// Distance a pose may move between two frames beyond `max_speed_mps` times their time
+/// difference (localisation corrections), m.
+pub const POSE_JUMP_SLACK_M: f64 = 1.0;
+
+/// Consecutive refused frames, each within the speed limit of the one before, after which
+/// the last of them is accepted and becomes the reference.
+pub const POSE_JUMP_CONFIRM: u32 = 3;
 
 impl Default for LogConfig {
     fn default() -> Self {
@@ -69,6 +82,7 @@ impl Default for LogConfig {
             base_frame: "base_link".into(),
             tolerance_s: 0.05,
             lookahead_s: 0.5,
+            max_speed_mps: 30.0,
         }
     }
 }
@@ -85,6 +99,12 @@ impl LogConfig {
             return Err(Error::invalid(
                 "log config",
                 format!("lookahead_s {} must be ≥ 0", self.lookahead_s),
+            ));
+        }
+        if self.max_speed_mps.is_nan() || self.max_speed_mps <= 0.0 {
+            return Err(Error::invalid(
+                "log config",
+                format!("max_speed_mps {} must be > 0", self.max_speed_mps),
             ));
         }
         if self.frame_topic != self.lidar_topic && self.frame_topic != self.stereo_topic {
@@ -159,6 +179,10 @@ pub struct FrameStats {
     pub unknown_type: BTreeMap<String, u64>,
     /// Messages of known type that could not be decoded (each also yielded as an error).
     pub decode_errors: u64,
+    /// Frames refused because their pose jumped farther than `max_speed_mps` allows (each
+    /// named in `skip_reasons` while there is room).
+    #[serde(default)]
+    pub frames_refused_pose_jump: u64,
 }
 
 impl FrameStats {
@@ -200,6 +224,10 @@ pub struct FrameStream {
     stats: FrameStats,
     /// The read error that ended the stream (a damaged or truncated file).
     damage: Option<String>,
+    /// Stamp (ns) and position of the last accepted frame's `base_frame`.
+    last_pose: Option<(i64, Vector3<f64>)>,
+    /// Refused frames in a row that agree with each other: the last one and how many.
+    jump_run: Option<(i64, Vector3<f64>, u32)>,
     ended: bool,
     out: VecDeque<Result<Frame>>,
 }
@@ -229,6 +257,8 @@ impl FrameStream {
             now_ns: i64::MIN,
             stats: FrameStats::default(),
             damage: None,
+            last_pose: None,
+            jump_run: None,
             ended: false,
             out: VecDeque::new(),
         })
@@ -444,6 +474,17 @@ impl FrameStream {
                 return None;
             }
         };
+        if let Err(why) = self.check_speed(ns, &base_to_map) {
+            self.stats.frames_refused_pose_jump += 1;
+            if self.stats.skip_reasons.len() < MAX_REASONS {
+                self.stats.skip_reasons.push(format!(
+                    "{} at {:.9} s (frame {frame_id:?}): {why}; frame refused",
+                    self.cfg.frame_topic,
+                    secs(ns)
+                ));
+            }
+            return None;
+        }
         cloud.frame_to_map = cloud_to_map;
         let other =
             Self::nearest(&self.other_clouds, ns, self.tol_ns()).map(|p| (p.ns, p.item.clone()));
@@ -473,6 +514,51 @@ impl FrameStream {
             mwir: self.matched_image(2, ns),
             stereo_baseline_m: self.baseline_m,
         })
+    }
+
+    /// The speed gate: `Err` (what jumped, how far, how fast) when the vehicle at `ns`
+    /// is farther from the last accepted frame than `max_speed_mps` allows. An accepted
+    /// pose becomes the reference; so does the last of [`POSE_JUMP_CONFIRM`] refused ones
+    /// that agree with each other.
+    fn check_speed(&mut self, ns: i64, pose: &Pose) -> std::result::Result<(), String> {
+        let p = pose.translation.vector;
+        let allowed = |from_ns: i64, from: &Vector3<f64>| {
+            let dt = (ns as f64 - from_ns as f64).abs() * 1e-9;
+            let d = (p - from).norm();
+            (d <= self.cfg.max_speed_mps * dt + POSE_JUMP_SLACK_M, d, dt)
+        };
+        let Some((last_ns, last)) = self.last_pose else {
+            self.last_pose = Some((ns, p));
+            return Ok(());
+        };
+        let (ok, d, dt) = allowed(last_ns, &last);
+        if ok {
+            self.last_pose = Some((ns, p));
+            self.jump_run = None;
+            return Ok(());
+        }
+        let run = match self.jump_run {
+            Some((rns, r, k)) if allowed(rns, &r).0 => k + 1,
+            _ => 1,
+        };
+        if run >= POSE_JUMP_CONFIRM {
+            self.last_pose = Some((ns, p));
+            self.jump_run = None;
+            return Ok(());
+        }
+        self.jump_run = Some((ns, p, run));
+        Err(format!(
+            "{} → {} moved {d:.3} m in {dt:.3} s since the frame at {:.9} s ({:.1} m/s, \
+             beyond log.max_speed_mps {} m/s), to ({:.3}, {:.3}, {:.3})",
+            self.cfg.map_frame,
+            self.cfg.base_frame,
+            secs(last_ns),
+            d / dt.max(1e-9),
+            self.cfg.max_speed_mps,
+            p.x,
+            p.y,
+            p.z
+        ))
     }
 
     /// Emits scans the log has moved far enough past (all of them when `flush`), then

@@ -195,8 +195,9 @@ impl GridSurface {
     /// Column and row of the cell under `(x, y)`, if inside the window.
     #[inline]
     fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
-        let i = floor_i64(x / self.resolution) - self.origin.x;
-        let j = floor_i64(y / self.resolution) - self.origin.y;
+        // Checked: a point far beyond the window saturates the floor near i64::MAX.
+        let i = floor_i64(x / self.resolution).checked_sub(self.origin.x)?;
+        let j = floor_i64(y / self.resolution).checked_sub(self.origin.y)?;
         let n = self.n as i64;
         (i >= 0 && j >= 0 && i < n && j < n).then_some((i as usize, j as usize))
     }

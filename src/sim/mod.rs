@@ -181,6 +181,8 @@ pub fn apply_rig(cfg: &mut crate::mapper::MapperConfig, rig: &RigSpec) {
             dry_limit_m: l.dry_limit_m,
             albedo: l.reference_albedo,
             aperture_diameter_m: l.aperture_m,
+            // The datasheet's range and a margin for range noise: nothing real lies beyond.
+            max_range_m: l.max_range_m * 1.1,
             noise: RangeNoise {
                 sigma0: l.range_noise_m.max(0.01),
                 ..RangeNoise::LIDAR
@@ -194,6 +196,7 @@ pub fn apply_rig(cfg: &mut crate::mapper::MapperConfig, rig: &RigSpec) {
             disparity_noise_px: s.disparity_noise_px,
             min_disparity_px: s.min_disparity_px,
             baseline_m: Some(s.baseline_m),
+            max_range_m: s.max_range_m * 1.1,
             ..c
         }),
         _ => None,

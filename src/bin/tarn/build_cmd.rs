@@ -424,6 +424,21 @@ fn print_log_summary(r: &LogBuildReport) {
             r.errors.len() - 10
         );
     }
+    // What the plausibility checks refused or dropped, on stderr.
+    let jumps = r
+        .frames
+        .skip_reasons
+        .iter()
+        .filter(|s| s.contains("max_speed_mps"));
+    for w in jumps.chain(&r.warnings).take(10) {
+        eprintln!("warning: {w}");
+    }
+    let (nj, nw) = (r.frames.frames_refused_pose_jump, r.warnings.len());
+    if nj + nw as u64 > 10 {
+        eprintln!(
+            "warning: {nj} frames refused for a pose jump, {nw} frames with points dropped (report.json lists them)"
+        );
+    }
     println!("  wrote map.ply terrain.ply water.ply map.png report.json");
 }
 

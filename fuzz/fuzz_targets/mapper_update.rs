@@ -1,0 +1,7 @@
+#![no_main]
+//! `cargo fuzz run mapper_update`: the entry point is shared with tests/fuzz_smoke.rs.
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let _ = tarn::fuzzing::mapper_update(data);
+});
