@@ -196,6 +196,11 @@ fn main() -> ExitCode {
     }
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
+        // Built, from a damaged input: the outputs are written and name what was skipped.
+        Err(e) if e.downcast_ref::<build_cmd::DamagedInput>().is_some() => {
+            eprintln!("tarn: warning: {e:#}");
+            ExitCode::from(3)
+        }
         Err(e) => {
             eprintln!("tarn: error: {e:#}");
             let interrupted = e
