@@ -175,6 +175,7 @@ pub fn build_cloud(
         if idx.is_empty() {
             continue;
         }
+        crate::interrupt::check("fusing the cloud")?;
         blocks += 1;
         let (bx, by) = (b as i64 % bw, b as i64 / bw);
         grid.move_origin(CellKey::new(lo.x + bx * n64, lo.y + by * n64), &mut tiles);
@@ -233,6 +234,7 @@ pub fn build_file(
     let t0 = Instant::now();
     cfg.grid.validate()?;
     let cloud = crate::io::read_point_cloud(input)?;
+    crate::interrupt::check("reading the cloud")?;
     if cloud.valid_count() == 0 {
         // Nothing to map: refuse rather than replace a previous map with an empty one.
         return Err(Error::format(

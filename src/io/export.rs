@@ -32,9 +32,16 @@ pub fn write_atomic(
         builder.permissions(std::fs::Permissions::from_mode(0o644));
     }
     let mut tmp = builder.tempfile_in(dir).map_err(|e| Error::io(dir, e))?;
+    let failed = |e: std::io::Error| {
+        if crate::interrupt::stop_requested() && e.to_string() == STOPPED {
+            Error::Interrupted(format!("writing {}", path.display()))
+        } else {
+            Error::io(path, e)
+        }
+    };
     {
         let mut w = BufWriter::new(tmp.as_file_mut());
-        body(&mut w).map_err(|e| Error::io(path, e))?;
+        body(&mut w).map_err(failed)?;
         w.flush().map_err(|e| Error::io(path, e))?;
     }
     tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
@@ -213,6 +220,19 @@ impl Staging {
     }
 }
 
+const STOPPED: &str = "stop requested";
+
+/// Every 65,536th item of a writer's loop: an error once a stop (SIGINT) was requested, so
+/// that an export of millions of cells stops within a fraction of a second; the staged
+/// files are then dropped and the previous outputs stay.
+fn stop_point(i: usize) -> std::io::Result<()> {
+    if i % 65_536 == 0 && crate::interrupt::stop_requested() {
+        Err(std::io::Error::other(STOPPED))
+    } else {
+        Ok(())
+    }
+}
+
 /// Writes `value` as pretty JSON, atomically.
 pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     write_atomic(path, |w| {
@@ -294,7 +314,8 @@ pub fn write_map_ply_with(path: &Path, map: &HazardMap, comments: &[String]) -> 
             xyz_header(double),
         )?;
         let mut rec = Vec::with_capacity(41);
-        for c in &map.cells {
+        for (i, c) in map.cells.iter().enumerate() {
+            stop_point(i)?;
             rec.clear();
             write_xyz(&mut rec, [c.x, c.y, c.z], double)?;
             for v in [c.elevation_std as f32, c.water, c.depth] {
@@ -312,14 +333,19 @@ pub fn write_map_ply_with(path: &Path, map: &HazardMap, comments: &[String]) -> 
 /// triangles when all four are observed, one when three are, none otherwise, so no
 /// triangle ever spans an unknown cell. Counter-clockwise seen from above (normals up).
 pub fn terrain_triangles(map: &HazardMap) -> Vec<[u32; 3]> {
-    let index: HashMap<CellKey, u32> = map
-        .cells
-        .iter()
-        .enumerate()
-        .map(|(i, c)| (c.key, i as u32))
-        .collect();
+    terrain_triangles_stoppable(map).expect("no stop point fails without a stop request")
+}
+
+/// [`terrain_triangles`], ending early with an error when a stop is requested.
+fn terrain_triangles_stoppable(map: &HazardMap) -> std::io::Result<Vec<[u32; 3]>> {
+    let mut index: HashMap<CellKey, u32> = HashMap::with_capacity(map.cells.len());
+    for (i, c) in map.cells.iter().enumerate() {
+        stop_point(i)?;
+        index.insert(c.key, i as u32);
+    }
     let mut tris = Vec::new();
-    for c in &map.cells {
+    for (i, c) in map.cells.iter().enumerate() {
+        stop_point(i)?;
         let k = c.key;
         let at = |dx, dy| index.get(&CellKey::new(k.x + dx, k.y + dy)).copied();
         // The block whose lower-left corner is this cell...
@@ -340,7 +366,7 @@ pub fn terrain_triangles(map: &HazardMap) -> Vec<[u32; 3]> {
             _ => {}
         }
     }
-    tris
+    Ok(tris)
 }
 
 /// Writes a binary PLY triangle mesh with per-vertex colours and class (`float` x y z).
@@ -396,7 +422,8 @@ fn write_mesh(
             xyz_header(double),
             triangles.len()
         )?;
-        for (p, rgb, class) in vertices {
+        for (i, (p, rgb, class)) in vertices.iter().enumerate() {
+            stop_point(i)?;
             write_xyz(w, *p, double)?;
             w.write_all(rgb)?;
             w.write_all(&[*class])?;
@@ -419,12 +446,9 @@ pub fn write_terrain_ply(path: &Path, map: &HazardMap) -> Result<()> {
         .iter()
         .map(|c| ([c.x, c.y, c.z], c.class.colour(), c.class as u8))
         .collect();
-    write_map_mesh_ply(
-        path,
-        "tarn terrain surface",
-        &verts,
-        &terrain_triangles(map),
-    )
+    let tris = terrain_triangles_stoppable(map)
+        .map_err(|_| Error::Interrupted(format!("writing {}", path.display())))?;
+    write_map_mesh_ply(path, "tarn terrain surface", &verts, &tris)
 }
 
 /// Colour of a water-mesh vertex `d` metres below the surface: the top sheet light to dark
@@ -725,6 +749,7 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
 
 /// `map.png`, atomically.
 pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {
+    crate::interrupt::check(&format!("writing {}", path.display()))?;
     let img = render_map_png(map);
     write_atomic(path, |w| {
         img.write_to(w, image::ImageFormat::Png)

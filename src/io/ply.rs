@@ -1118,6 +1118,10 @@ fn read_ascii(
         }
         let mut v = RawVertex::default();
         for i in 0..el.count {
+            // A long text body answers a stop request (SIGINT) within a fraction of a second.
+            if i % 65_536 == 0 {
+                crate::interrupt::check("reading the cloud")?;
+            }
             let Some((no, text)) = lines.next_line(path)? else {
                 return Err(Error::format(
                     path,
