@@ -876,6 +876,86 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
     }
 
+    fn staged(out: &Path, text: &str) {
+        let stage = Staging::new(out).unwrap();
+        for f in OUTPUT_FILES {
+            std::fs::write(stage.path().join(f), text).unwrap();
+        }
+        stage.commit().unwrap();
+    }
+
+    #[test]
+    fn staged_outputs_replace_the_set_and_leave_nothing_behind() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let entries = || {
+            let mut v: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        // A new folder, then a folder of tarn's files replaced as one.
+        staged(&out, "one");
+        staged(&out, "two");
+        assert_eq!(entries(), ["out"]);
+        for f in OUTPUT_FILES {
+            assert_eq!(std::fs::read_to_string(out.join(f)).unwrap(), "two");
+        }
+        // A folder holding something else keeps it; the files are replaced.
+        std::fs::create_dir(out.join("sim")).unwrap();
+        std::fs::write(out.join("sim/log.mcap"), "log").unwrap();
+        staged(&out, "three");
+        assert_eq!(entries(), ["out"]);
+        assert_eq!(
+            std::fs::read_to_string(out.join("sim/log.mcap")).unwrap(),
+            "log"
+        );
+        assert_eq!(
+            std::fs::read_to_string(out.join("map.ply")).unwrap(),
+            "three"
+        );
+        // Dropped before the commit: nothing changes, nothing is left.
+        let stage = Staging::new(&out).unwrap();
+        std::fs::write(stage.path().join("map.ply"), "four").unwrap();
+        drop(stage);
+        assert_eq!(entries(), ["out"]);
+        assert_eq!(
+            std::fs::read_to_string(out.join("map.ply")).unwrap(),
+            "three"
+        );
+    }
+
+    #[test]
+    fn map_ply_coordinates_are_double_where_float_loses_millimetres() {
+        let far = HazardMap {
+            resolution: 0.1,
+            cells: vec![cell(5_000_003, 45_000_007, 312.5)],
+            bodies: vec![],
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("map.ply");
+        write_map_ply(&p, &far).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let h = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
+        let head = String::from_utf8_lossy(&bytes[..h]);
+        assert!(head.contains("property double x\nproperty double y\nproperty double z\n"));
+        assert_eq!(bytes.len() - h, 41);
+        let d = |o: usize| f64::from_le_bytes(bytes[h + o..h + o + 8].try_into().unwrap());
+        let c = &far.cells[0];
+        assert_eq!((d(0), d(8), d(16)), (c.x, c.y, c.z));
+        let back = crate::io::mapfile::read_map_ply(&p).unwrap();
+        assert_eq!((back.cells[0].x, back.cells[0].y), (c.x, c.y));
+        assert_eq!(back.cells[0].key, c.key);
+        assert!(!needs_double([[16383.9, -16383.9, 0.0]]));
+        assert!(needs_double([[0.0, -16384.0, 0.0]]));
+    }
+
     #[test]
     fn map_ply_has_the_contract_layout() {
         let map = HazardMap {

@@ -346,7 +346,7 @@ impl LogReader {
             end_byte: footer_at,
             what,
             log_time_ns: [None, None],
-            log_time_from: String::new(),
+            log_time_from: "unknown".into(),
             resumed_by: "record length".into(),
         };
         if crc != 0 && crc32fast::hash(&bytes) != crc {
@@ -1215,11 +1215,14 @@ pub struct RecodeStats {
     pub written: u64,
     /// Messages of types tarn does not read, by topic; not copied.
     pub skipped_unknown: BTreeMap<String, u64>,
+    /// Damaged parts of the input, skipped: the output holds everything else.
+    pub damaged: Vec<DamagedRange>,
 }
 
 /// Reads every TF, PointCloud2, Image and CameraInfo message of `input`, decodes it and
 /// writes it again with tarn's encoder into `output` (with `opts`' compression, chunking
-/// and byte order). Messages of other types are skipped and counted.
+/// and byte order). Messages of other types are skipped and counted; damaged parts of the
+/// input are skipped and listed in [`RecodeStats::damaged`].
 pub fn recode(
     input: impl AsRef<Path>,
     output: impl AsRef<Path>,
@@ -1271,5 +1274,6 @@ pub fn recode(
         stats.written += 1;
     }
     w.finish()?;
+    stats.damaged = r.damaged().to_vec();
     Ok(stats)
 }

@@ -175,7 +175,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             for (t, n) in &s.skipped_unknown {
                 println!("skipped {n} messages of unknown type on {t}");
             }
-            Ok(())
+            build_cmd::damaged_input(&input, "wrote", &s.damaged)
         }
     }
 }
