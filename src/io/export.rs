@@ -131,6 +131,16 @@ pub struct Staging {
 impl Staging {
     /// Creates the staging folder for the output folder `out` (and `out`'s parent if needed).
     pub fn new(out: &Path) -> Result<Self> {
+        // An output folder reached through a symbolic link is replaced where it lies; the
+        // link stays.
+        let resolved;
+        let out = match std::fs::symlink_metadata(out) {
+            Ok(m) if m.file_type().is_symlink() => {
+                resolved = std::fs::canonicalize(out).map_err(|e| Error::io(out, e))?;
+                resolved.as_path()
+            }
+            _ => out,
+        };
         let parent = match out.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),
@@ -916,14 +926,31 @@ mod tests {
             std::fs::read_to_string(out.join("map.ply")).unwrap(),
             "three"
         );
+        // Through a symbolic link: the folder it points to is replaced, the link stays.
+        #[cfg(unix)]
+        {
+            let link = dir.path().join("link");
+            std::os::unix::fs::symlink(&out, &link).unwrap();
+            staged(&link, "via link");
+            assert!(std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink());
+            assert_eq!(
+                std::fs::read_to_string(out.join("map.ply")).unwrap(),
+                "via link"
+            );
+            std::fs::remove_file(&link).unwrap();
+        }
         // Dropped before the commit: nothing changes, nothing is left.
+        let before = std::fs::read_to_string(out.join("map.ply")).unwrap();
         let stage = Staging::new(&out).unwrap();
         std::fs::write(stage.path().join("map.ply"), "four").unwrap();
         drop(stage);
         assert_eq!(entries(), ["out"]);
         assert_eq!(
             std::fs::read_to_string(out.join("map.ply")).unwrap(),
-            "three"
+            before
         );
     }
 
