@@ -889,6 +889,8 @@ pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
     let (mut start, mut end) = (None::<u64>, None::<u64>);
     while let Some(m) = r.next_message() {
         let m = m?;
+        // A log without a summary section is counted in a pass of its own before a build.
+        crate::interrupt::check("counting the log's messages")?;
         let e = counts
             .entry(m.channel.topic.clone())
             .or_insert_with(|| (m.channel.schema.clone(), 0));
@@ -1233,6 +1235,8 @@ pub fn recode(
     let mut stats = RecodeStats::default();
     while let Some(m) = r.next_message() {
         let m = m?;
+        // A log without a summary section is counted in a pass of its own before a build.
+        crate::interrupt::check("counting the log's messages")?;
         let ch = &m.channel;
         let loc = || {
             format!(
