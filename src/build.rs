@@ -355,6 +355,7 @@ pub fn build_cloud(
         if idx.is_empty() {
             continue;
         }
+        crate::interrupt::check("fusing the cloud")?;
         blocks += 1;
         let len = idx.len() as u64;
         fuser.fuse(
@@ -413,6 +414,7 @@ pub fn build_file(
     let t0 = Instant::now();
     cfg.grid.validate()?;
     let cloud = crate::io::read_point_cloud(input)?;
+    crate::interrupt::check("reading the cloud")?;
     if cloud.valid_count() == 0 {
         // Nothing to map: refuse rather than replace a previous map with an empty one.
         return Err(Error::format(
@@ -432,7 +434,8 @@ pub fn build_file(
     crate::interrupt::check("fusing the cloud")?;
     let t2 = Instant::now();
     let map = HazardMap::from_elevation(&built.tiles);
-    export::write_map_files(out, &map)?;
+    let stage = export::Staging::new(out)?;
+    export::write_map_files(stage.path(), &map)?;
     let t_export = t2.elapsed().as_secs_f64();
     let res = built.tiles.resolution();
     let report = BuildReport {
@@ -463,7 +466,9 @@ pub fn build_file(
             total: t0.elapsed().as_secs_f64(),
         },
     };
-    export::write_json(&out.join("report.json"), &report)?;
+    export::write_json(&stage.path().join("report.json"), &report)?;
+    crate::interrupt::check("writing the outputs")?;
+    stage.commit()?;
     Ok(report)
 }
 
@@ -638,8 +643,11 @@ pub struct LogBuildReport {
     /// Lidar and stereo points beyond their sensor's `max_range_m`, dropped.
     #[serde(default)]
     pub points_beyond_max_range: BeyondRange,
-    /// Where reading stopped early (a truncated or damaged log), if it did.
-    pub damage: Option<String>,
+    /// The damaged parts of the log, skipped: exact byte ranges, what was wrong, and the
+    /// log times they held. Empty for an undamaged log; a map built from a damaged log
+    /// holds everything else.
+    #[serde(default)]
+    pub damaged: Vec<crate::io::mcap_log::DamagedRange>,
     /// What the image labels contributed (`None`: not configured).
     #[serde(default)]
     pub labels: Option<crate::project::FrameLabelsReport>,
@@ -805,8 +813,9 @@ pub struct LogBuildConfig {
 /// vehicle, with the configured cues; cells that leave it go to the global tile map. At the
 /// end the hazard map of everything is exported. `progress(bytes_read, bytes_total)`.
 ///
-/// A damaged or truncated log still gives the map of everything before the damage; the
-/// report says where reading stopped.
+/// A damaged or truncated log gives the map of everything that could be read: damaged
+/// chunks and records are skipped and listed in [`LogBuildReport::damaged`]. A file that
+/// is not a log, or cannot be read, is an error.
 pub fn build_log(
     input: &Path,
     out: &Path,
@@ -853,9 +862,14 @@ pub fn build_log(
     // frame: the order, and so the map, is the log's. A bounded queue keeps at most two
     // decoded frames waiting.
     let (tx, rx) = std::sync::mpsc::sync_channel(2);
-    // What the reader leaves: its counts, and where the log was damaged if it was.
-    type ReadEnd = (crate::io::frames::FrameStats, Option<String>);
-    let (stream_stats, stream_damage) = std::thread::scope(|scope| -> Result<ReadEnd> {
+    // What the reader leaves: its counts, the damaged parts of the log, and the error that
+    // ended reading early if one did.
+    type ReadEnd = (
+        crate::io::frames::FrameStats,
+        Vec<crate::io::mcap_log::DamagedRange>,
+        Option<String>,
+    );
+    let (stream_stats, damaged, fatal) = std::thread::scope(|scope| -> Result<ReadEnd> {
         // Owned here, so that an early return drops it and the reader's next send fails.
         let rx = rx;
         let reader = scope.spawn(move || {
@@ -865,7 +879,11 @@ pub fn build_log(
                     break;
                 }
             }
-            (stream.stats().clone(), stream.damage().map(str::to_string))
+            (
+                stream.stats().clone(),
+                stream.damaged().to_vec(),
+                stream.fatal_error().map(str::to_string),
+            )
         });
         for (item, (done, total)) in rx.iter() {
             crate::interrupt::check("reading the log")?;
@@ -916,13 +934,19 @@ pub fn build_log(
             )
         })
     })?;
-    // The stream meets any damage; a log without a summary section was streamed once more
-    // for its counts and met it there too.
-    let damage = summary.damage.clone().or(stream_damage);
+    if let Some(e) = fatal {
+        // Not a log, or unreadable: nothing is written.
+        return Err(Error::format(
+            input,
+            format!("topic {}", log_cfg.frame_topic),
+            format!("no map built: {e}"),
+        ));
+    }
     if frames_fused == 0 {
         // Nothing to map: refuse rather than replace a previous map with an empty one.
-        let why = damage
-            .clone()
+        let why = damaged
+            .first()
+            .map(|d| format!("{}: {d}", input.display()))
             .or_else(|| errors.first().cloned())
             .unwrap_or_else(|| {
                 format!(
@@ -947,7 +971,8 @@ pub fn build_log(
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
     let (tiles, map) = mapper.finish_map()?;
-    export::write_map_files(out, &map)?;
+    let stage = export::Staging::new(out)?;
+    export::write_map_files_marked(stage.path(), &map, &damage_marks(input, &damaged))?;
     let t_export = t2.elapsed().as_secs_f64();
     let total = t0.elapsed().as_secs_f64();
     let report = LogBuildReport {
@@ -971,7 +996,7 @@ pub fn build_log(
         errors,
         warnings,
         points_beyond_max_range: beyond,
-        damage,
+        damaged,
         labels: label_totals,
         cells_observed: map.cells.len(),
         tiles: tiles.tile_count(),
@@ -986,8 +1011,31 @@ pub fn build_log(
         stage_totals_s: stage_totals,
         stage_latency_ms: stage_latency(&per_frame),
     };
-    export::write_json(&out.join("report.json"), &report)?;
+    export::write_json(&stage.path().join("report.json"), &report)?;
+    crate::interrupt::check("writing the outputs")?;
+    stage.commit()?;
     Ok(report)
+}
+
+/// The comment lines that mark `map.ply` of a map built from a damaged log: the input, how
+/// many ranges were skipped, and the first few of them (`report.json` lists them all).
+fn damage_marks(input: &Path, damaged: &[crate::io::mcap_log::DamagedRange]) -> Vec<String> {
+    const SHOWN: usize = 16;
+    if damaged.is_empty() {
+        return Vec::new();
+    }
+    let mut v = vec![format!(
+        "damaged input: {} had {} damaged range(s), skipped; report.json lists them",
+        input.file_name().unwrap_or_default().to_string_lossy(),
+        damaged.len()
+    )];
+    v.extend(
+        damaged
+            .iter()
+            .take(SHOWN)
+            .map(|d| format!("damaged bytes {}..{}", d.start_byte, d.end_byte)),
+    );
+    v
 }
 
 /// The cues a config runs, by name.

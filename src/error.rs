@@ -25,7 +25,7 @@ pub enum Error {
     Invalid { what: String, message: String },
     /// A stop was requested (SIGINT, see [`crate::interrupt`]) while doing the named work;
     /// nothing was written.
-    #[error("interrupted while {0}: stopped before writing anything")]
+    #[error("interrupted while {0}: the previous outputs are kept")]
     Interrupted(String),
 }
 

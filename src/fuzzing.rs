@@ -61,6 +61,14 @@ pub fn mcap(data: &[u8]) -> bool {
             ok = false;
         }
     }
+    for d in reader.damaged() {
+        // Ranges are inside the file and name what was wrong.
+        assert!(
+            d.start_byte <= d.end_byte && d.end_byte <= data.len() as u64,
+            "{d:?}"
+        );
+        ok = false;
+    }
     let reader = LogReader::from_bytes(data.to_vec(), "fuzz.mcap");
     let stream = match FrameStream::from_reader(reader, &LogConfig::default()) {
         Ok(s) => s,
@@ -227,7 +235,7 @@ fn exports_of(map: &crate::hazard::HazardMap, files: bool) {
         .iter()
         .flatten()
         .all(|&i| (i as usize) < map.cells.len()));
-    let _ = export::map_origin(map);
+    let _ = export::needs_double(map.cells.iter().map(|c| [c.x, c.y, c.z]));
     let _ = export::elevation_range(&map.cells);
     let _ = map.water_report();
     if files {

@@ -1,6 +1,7 @@
 //! `tarn build LOG.mcap`: a vehicle drives a sloped plane with a spinning lidar; the map
-//! built from its log matches the plane, and a truncated log gives the map of what came
-//! before the damage plus a failing exit status.
+//! built from its log matches the plane; a truncated or damaged log gives the map of
+//! everything that could be read, exit status 3 and the damaged byte ranges in
+//! `report.json`.
 
 use std::path::Path;
 
@@ -8,7 +9,7 @@ use nalgebra::{Point3, Vector3};
 use tarn::build::{build_log, LogBuildConfig};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::grid::GridConfig;
-use tarn::io::mcap_log::{LogWriter, WriteOptions};
+use tarn::io::mcap_log::{LogReader, LogWriter, WriteOptions};
 use tarn::io::ply;
 use tarn::io::ros::{Header, TfMessage, TransformStamped};
 use tarn::mapper::MapperConfig;
@@ -65,7 +66,11 @@ fn scan(sensor_to_map: &Pose, k: u64) -> PointCloud {
 }
 
 fn write_log(path: &Path, frames: u64) {
-    let mut w = LogWriter::create(path, &WriteOptions::default()).unwrap();
+    write_log_with(path, frames, &WriteOptions::default());
+}
+
+fn write_log_with(path: &Path, frames: u64, opts: &WriteOptions) {
+    let mut w = LogWriter::create(path, opts).unwrap();
     let ext = TransformStamped::new("base_link", "lidar", 0, lidar_ext());
     w.write_tf(
         "/tf_static",
@@ -114,7 +119,11 @@ fn map_of_a_drive_matches_the_terrain() {
     let out = dir.path().join("map");
     let r = build_log(&log, &out, &cfg, &mut |_, _| {}).unwrap();
     assert_eq!(r.frames_fused, 99);
-    assert!(r.damage.is_none() && r.errors.is_empty(), "{:?}", r.errors);
+    assert!(
+        r.damaged.is_empty() && r.errors.is_empty(),
+        "{:?}",
+        r.errors
+    );
     assert!(r.lidar_points.fused > 100_000);
     assert!(r.x_realtime > 0.0);
     // Every cell against the plane; well-observed cells within a few centimetres.
@@ -132,31 +141,158 @@ fn map_of_a_drive_matches_the_terrain() {
     assert!(rms < 0.02, "rms {rms} over {n} cells");
 }
 
+fn tarn_build(input: &Path, out: &Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_tarn"))
+        .args([
+            "build".as_ref(),
+            input.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ])
+        .output()
+        .unwrap()
+}
+
+fn report(out: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap()
+}
+
 #[test]
-fn truncated_log_gives_the_map_before_the_damage_and_fails() {
+fn truncated_log_gives_the_map_before_the_damage_and_exits_3() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("drive.mcap");
     write_log(&log, 60);
     let bytes = std::fs::read(&log).unwrap();
     let cut = dir.path().join("cut.mcap");
-    std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).unwrap();
+    let len = bytes.len() * 6 / 10;
+    std::fs::write(&cut, &bytes[..len]).unwrap();
     let out = dir.path().join("map");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_tarn"))
-        .args([
-            "build".as_ref(),
-            cut.as_os_str(),
-            "--out".as_ref(),
-            out.as_os_str(),
-        ])
-        .output()
-        .unwrap();
+    let o = tarn_build(&cut, &out);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(!o.status.success());
-    assert!(err.contains("cut.mcap"), "{err}");
-    assert!(err.contains("before the damage"), "{err}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(err.contains("cut.mcap") && err.contains("damaged"), "{err}");
+    let report = report(&out);
     let fused = report["frames_fused"].as_u64().unwrap();
     assert!(fused > 10 && fused < 59, "{fused}");
+    // One damaged range: from the record the cut went through to the end of the file.
+    let d = report["damaged"].as_array().unwrap();
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert_eq!(d[0]["end_byte"].as_u64(), Some(len as u64));
+    let start = d[0]["start_byte"].as_u64().unwrap() as usize;
+    assert_eq!(
+        bytes[start], 0x06,
+        "a chunk record starts at the damage: {d:?}"
+    );
+    let clen = u64::from_le_bytes(bytes[start + 1..start + 9].try_into().unwrap()) as usize;
+    assert!(start + 9 + clen > len, "{d:?}");
     assert!(out.join("map.ply").exists());
+    // The partial map carries the mark in its header too.
+    let ply = std::fs::read(out.join("map.ply")).unwrap();
+    let head = String::from_utf8_lossy(&ply[..ply.len().min(2048)]).into_owned();
+    assert!(head.contains("comment damaged input"), "{head}");
+}
+
+/// Chunks of the log with the number of messages each holds.
+fn chunks(bytes: &[u8]) -> Vec<(mcap::records::ChunkIndex, usize)> {
+    let summary = mcap::read::Summary::read(bytes).unwrap().unwrap();
+    let mut v: Vec<_> = summary
+        .chunk_indexes
+        .iter()
+        .map(|c| {
+            let n = summary.stream_chunk(bytes, c).unwrap().count();
+            (c.clone(), n)
+        })
+        .collect();
+    v.sort_by_key(|(c, _)| c.chunk_start_offset);
+    v
+}
+
+/// Where a chunk's compressed records start.
+fn records_offset(c: &mcap::records::ChunkIndex) -> usize {
+    c.chunk_start_offset as usize + 9 + 8 + 8 + 8 + 4 + 4 + c.compression.len() + 8
+}
+
+fn messages_of(bytes: Vec<u8>) -> (u64, Vec<tarn::io::mcap_log::DamagedRange>) {
+    let mut r = LogReader::from_bytes(bytes, "damaged.mcap");
+    let mut n = 0;
+    while let Some(m) = r.next_message() {
+        m.unwrap();
+        n += 1;
+    }
+    (n, r.damaged().to_vec())
+}
+
+#[test]
+fn a_damaged_chunk_is_skipped_and_every_other_chunk_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("drive.mcap");
+    // Small chunks: a few scans each.
+    let opts = WriteOptions {
+        chunk_size: Some(96 * 1024),
+        ..WriteOptions::default()
+    };
+    write_log_with(&log, 40, &opts);
+    let bytes = std::fs::read(&log).unwrap();
+    let chunks = chunks(&bytes);
+    assert!(chunks.len() >= 8, "{} chunks", chunks.len());
+    let total: usize = chunks.iter().map(|(_, n)| n).sum();
+    assert_eq!(messages_of(bytes.clone()), (total as u64, vec![]));
+
+    let k = chunks.len() / 2;
+    let (c, lost) = (&chunks[k].0, chunks[k].1);
+    let (start, end) = (c.chunk_start_offset, c.chunk_start_offset + c.chunk_length);
+    let body = records_offset(c);
+    // One bit flipped in the compressed records; the same chunk's bytes overwritten; the
+    // summary's index gone (the footer's magic broken), so the reader scans.
+    let mut flipped = bytes.clone();
+    flipped[(body + end as usize) / 2] ^= 0x10;
+    let mut overwritten = bytes.clone();
+    overwritten[body + 16..body + 16 + 600].fill(0xA5);
+    let mut no_index = flipped.clone();
+    let n = no_index.len();
+    no_index[n - 8..].fill(0);
+    for (name, damaged, by) in [
+        ("flipped", &flipped, "chunk index"),
+        ("overwritten", &overwritten, "chunk index"),
+        ("no-index", &no_index, "record length"),
+    ] {
+        let (kept, d) = messages_of(damaged.clone());
+        assert_eq!(kept as usize, total - lost, "{name}: {d:?}");
+        assert_eq!(d.len(), 1, "{name}: {d:?}");
+        assert_eq!((d[0].start_byte, d[0].end_byte), (start, end), "{name}");
+        assert_eq!(d[0].resumed_by, by, "{name}");
+        if by == "chunk index" {
+            let t = [Some(c.message_start_time), Some(c.message_end_time)];
+            assert_eq!(d[0].log_time_ns, t, "{name}");
+        } else {
+            // Bounded by the messages read on either side.
+            let [a, b] = d[0].log_time_ns;
+            assert!(a.unwrap() <= c.message_start_time && b.unwrap() >= c.message_end_time);
+        }
+        assert!(
+            d[0].what.contains("CRC") || d[0].what.contains("decode"),
+            "{name}: {}",
+            d[0].what
+        );
+
+        let path = dir.path().join(format!("{name}.mcap"));
+        std::fs::write(&path, damaged).unwrap();
+        let out = dir.path().join(format!("map-{name}"));
+        let o = tarn_build(&path, &out);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(3), "{name}: {err}");
+        assert!(
+            err.contains(&format!("bytes {start}..{end}")),
+            "{name}: {err}"
+        );
+        let r = report(&out);
+        assert_eq!(
+            r["damaged"][0]["start_byte"].as_u64(),
+            Some(start),
+            "{name}"
+        );
+        assert_eq!(r["damaged"][0]["end_byte"].as_u64(), Some(end), "{name}");
+        let fused = r["frames_fused"].as_u64().unwrap();
+        assert!((30..39).contains(&fused), "{name}: {fused} frames");
+    }
 }

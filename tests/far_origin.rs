@@ -1,6 +1,6 @@
 //! Poses and clouds 5,000 km from the map origin (UTM-like): centimetre accuracy is kept
-//! through the PLY reader, ingest, export (`map.ply`, `terrain.ply` carry a
-//! `comment origin` line and local `float` vertices) and the readers that load them back.
+//! through the PLY reader, ingest, export (`map.ply` and `terrain.ply` store
+//! `double` x y z in the map frame) and the readers that load them back.
 
 use std::path::Path;
 
@@ -80,7 +80,14 @@ fn a_map_5000_km_out_keeps_centimetres_through_build_and_export() {
         "cells collapsed onto the same key"
     );
 
-    // The point-cloud reader sees the same points in the map frame (the origin in f64).
+    // Map-frame coordinates, in double, that any PLY reader takes as they are.
+    for name in ["map.ply", "terrain.ply"] {
+        let bytes = std::fs::read(out.join(name)).unwrap();
+        let head = String::from_utf8_lossy(&bytes[..bytes.len().min(1024)]).into_owned();
+        assert!(head.contains("property double x\n"), "{name}: {head}");
+        assert!(!head.contains("comment origin"), "{name}: {head}");
+    }
+    // The point-cloud reader sees the same points in the map frame.
     for name in ["map.ply", "terrain.ply"] {
         let cloud = ply::read(&out.join(name)).unwrap();
         assert_eq!(cloud.len(), map.cells.len(), "{name}");
@@ -99,7 +106,7 @@ fn a_map_5000_km_out_keeps_centimetres_through_build_and_export() {
 }
 
 #[test]
-fn a_map_near_the_origin_has_no_origin_line() {
+fn a_map_near_the_origin_keeps_float_coordinates() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("near.ply");
     std::fs::write(
@@ -122,6 +129,7 @@ fn a_map_near_the_origin_has_no_origin_line() {
     let bytes = std::fs::read(out.join("map.ply")).unwrap();
     let text = String::from_utf8_lossy(&bytes[..300]);
     assert!(!text.contains("comment origin"), "{text}");
+    assert!(text.contains("property float x\n"), "{text}");
 }
 
 #[test]

@@ -485,3 +485,121 @@ fn bad_logs_are_refused_or_reported() {
     assert!(fused >= 7 && skipped >= 1, "{r}");
     assert!(r.to_string().contains("outside the buffered time"), "{r}");
 }
+
+// ------------------------------------------------------------------------------------
+// Outputs appear together
+
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    files(dir)
+        .into_iter()
+        .map(|f| {
+            let b = std::fs::read(&f).unwrap();
+            (f, b)
+        })
+        .collect()
+}
+
+/// Staging folders (`.NAME.tarn-stage-*`) left in `parent`.
+fn staging_left(parent: &Path) -> Vec<String> {
+    files(parent)
+        .into_iter()
+        .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".tarn-stage-"))
+        .collect()
+}
+
+/// A binary PLY of `n` points of a sloped plane over a `side`-metre square.
+fn write_plane_ply(path: &Path, n: usize, side: f64) {
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\n\
+         property float y\nproperty float z\nend_header\n"
+    )
+    .into_bytes();
+    let k = (n as f64).sqrt().ceil() as usize;
+    for i in 0..n {
+        let (x, y) = (
+            (i % k) as f64 * side / k as f64,
+            (i / k) as f64 * side / k as f64,
+        );
+        for v in [x, y, 0.05 * x + 0.01 * ((i * 7919) % 13) as f64] {
+            bytes.extend_from_slice(&(v as f32).to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn sigint_during_a_cloud_rebuild_keeps_the_previous_outputs_byte_for_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("small.ply");
+    write_plane_ply(&small, 10_000, 20.0);
+    // Millions of points over 300 m: reading, fusing in blocks and exporting take seconds.
+    let big = dir.path().join("big.ply");
+    write_plane_ply(&big, 3_000_000, 300.0);
+    let out = dir.path().join("out");
+    let o = run(&["build", p(&small), "--out", p(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before = snapshot(&out);
+    assert_eq!(before.len(), 5);
+    for after_ms in [150, 1500, 4000] {
+        let t = std::time::Instant::now();
+        let o = build_interrupted(&big, &out, after_ms);
+        let e = stderr(&o);
+        if o.status.success() {
+            // The machine was fast enough to finish first: nothing to check at this time.
+            eprintln!("build finished before SIGINT at {after_ms} ms");
+            std::fs::remove_dir_all(&out).unwrap();
+            let o = run(&["build", p(&small), "--out", p(&out)]);
+            assert!(o.status.success(), "{}", stderr(&o));
+            continue;
+        }
+        assert_eq!(o.status.code(), Some(130), "{e}");
+        assert!(e.contains("interrupted while"), "{e}");
+        let stopped_after = t.elapsed().as_secs_f64() - after_ms as f64 * 1e-3;
+        eprintln!("SIGINT at {after_ms} ms: stopped {stopped_after:.2} s later: {e}");
+        assert!(
+            snapshot(&out) == before,
+            "outputs changed after SIGINT at {after_ms} ms"
+        );
+        assert!(
+            staging_left(dir.path()).is_empty(),
+            "{:?}",
+            files(dir.path())
+        );
+    }
+}
+
+#[test]
+fn a_failed_build_leaves_no_output_and_no_staging_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let garbage = d.join("garbage.mcap");
+    std::fs::write(&garbage, b"not a log, not at all").unwrap();
+    let nan = d.join("nan.ply");
+    std::fs::write(
+        &nan,
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+         property float z\nend_header\nnan 0 0\n0 nan 0\n",
+    )
+    .unwrap();
+    let good = d.join("good.ply");
+    write_plane_ply(&good, 10_000, 20.0);
+    let kept = d.join("kept");
+    let o = run(&["build", p(&good), "--out", p(&kept)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let before = snapshot(&kept);
+    for input in [&garbage, &nan] {
+        let fresh = d.join("fresh");
+        let o = run(&["build", p(input), "--out", p(&fresh)]);
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(!fresh.exists(), "{input:?}: {:?}", files(&fresh));
+        let o = run(&["build", p(input), "--out", p(&kept)]);
+        assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+        assert!(
+            snapshot(&kept) == before,
+            "{input:?} changed the previous outputs"
+        );
+        assert!(staging_left(d).is_empty(), "{:?}", files(d));
+    }
+    assert!(staging_left(d).is_empty(), "{:?}", files(d));
+}

@@ -5,7 +5,7 @@
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use image::{Rgb, RgbImage};
 
@@ -32,14 +32,215 @@ pub fn write_atomic(
         builder.permissions(std::fs::Permissions::from_mode(0o644));
     }
     let mut tmp = builder.tempfile_in(dir).map_err(|e| Error::io(dir, e))?;
+    let failed = |e: std::io::Error| {
+        if crate::interrupt::stop_requested() && e.to_string() == STOPPED {
+            Error::Interrupted(format!("writing {}", path.display()))
+        } else {
+            Error::io(path, e)
+        }
+    };
     {
         let mut w = BufWriter::new(tmp.as_file_mut());
-        body(&mut w).map_err(|e| Error::io(path, e))?;
+        body(&mut w).map_err(failed)?;
         w.flush().map_err(|e| Error::io(path, e))?;
     }
     tmp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
     tmp.persist(path).map_err(|e| Error::io(path, e.error))?;
     Ok(())
+}
+
+/// The files of one build, in the order they are moved into place when they cannot be moved
+/// as one folder (`report.json`, which names the set, last).
+pub const OUTPUT_FILES: [&str; 5] = [
+    "map.ply",
+    "terrain.ply",
+    "water.ply",
+    "map.png",
+    "report.json",
+];
+
+fn sync_dir(dir: &Path) -> Result<()> {
+    // A directory is fsynced through a read-only handle on Unix; elsewhere this is a no-op.
+    #[cfg(unix)]
+    File::open(dir)
+        .and_then(|f| f.sync_all())
+        .map_err(|e| Error::io(dir, e))?;
+    #[cfg(not(unix))]
+    let _ = dir;
+    Ok(())
+}
+
+/// Atomically exchanges two directories (Linux `renameat2(RENAME_EXCHANGE)`); `Ok(false)`
+/// where the system or the file system does not offer it.
+#[cfg(target_os = "linux")]
+fn exchange(a: &Path, b: &Path) -> std::io::Result<bool> {
+    use std::os::unix::ffi::OsStrExt;
+    let ca = std::ffi::CString::new(a.as_os_str().as_bytes())?;
+    let cb = std::ffi::CString::new(b.as_os_str().as_bytes())?;
+    // SAFETY: both paths are valid NUL-terminated strings that outlive the call.
+    let r = unsafe {
+        libc::syscall(
+            libc::SYS_renameat2,
+            libc::AT_FDCWD,
+            ca.as_ptr(),
+            libc::AT_FDCWD,
+            cb.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if r == 0 {
+        return Ok(true);
+    }
+    let e = std::io::Error::last_os_error();
+    match e.raw_os_error() {
+        Some(libc::ENOSYS | libc::EINVAL | libc::ENOTSUP) => Ok(false),
+        _ => Err(e),
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn exchange(_: &Path, _: &Path) -> std::io::Result<bool> {
+    Ok(false)
+}
+
+/// The outputs of one build, written into a staging folder beside the output folder and
+/// moved into place together by [`Staging::commit`], so that a reader of the output folder
+/// sees the previous set or the new one, never a mix, and a build that fails or is
+/// interrupted before the commit leaves the previous outputs byte for byte (dropping a
+/// `Staging` removes its folder).
+///
+/// The staging folder is `PARENT/.NAME.tarn-stage-XXXXXX` (same file system, so the moves
+/// are renames). At the commit every file and the folder are fsynced; then:
+///
+/// - no output folder yet: the staging folder is renamed to it;
+/// - an output folder holding only tarn's output files ([`OUTPUT_FILES`]): the two folders
+///   are exchanged in one step (`renameat2(RENAME_EXCHANGE)` on Linux; elsewhere the old
+///   folder is renamed aside first, so that for a moment there is no folder, never a
+///   mixed one), and the old one is removed;
+/// - an output folder that also holds other things (the default run keeps `sim/` in it):
+///   those are left alone and the files are renamed into it one by one, `report.json`
+///   last; each file is whole, and a reader that takes `report.json` as the mark of a
+///   finished set sees one.
+///
+/// The output folder's parent is fsynced last.
+pub struct Staging {
+    out: PathBuf,
+    dir: Option<tempfile::TempDir>,
+}
+
+impl Staging {
+    /// Creates the staging folder for the output folder `out` (and `out`'s parent if needed).
+    pub fn new(out: &Path) -> Result<Self> {
+        // An output folder reached through a symbolic link is replaced where it lies; the
+        // link stays.
+        let resolved;
+        let out = match std::fs::symlink_metadata(out) {
+            Ok(m) if m.file_type().is_symlink() => {
+                resolved = std::fs::canonicalize(out).map_err(|e| Error::io(out, e))?;
+                resolved.as_path()
+            }
+            _ => out,
+        };
+        let parent = match out.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
+        let name = out
+            .file_name()
+            .map_or("out".into(), |n| n.to_string_lossy().into_owned());
+        let dir = tempfile::Builder::new()
+            .prefix(&format!(".{name}.tarn-stage-"))
+            .tempdir_in(&parent)
+            .map_err(|e| Error::io(&parent, e))?;
+        // An ordinary folder once in place (tempfile makes it owner-only).
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o755))
+                .map_err(|e| Error::io(dir.path(), e))?;
+        }
+        Ok(Staging {
+            out: out.to_path_buf(),
+            dir: Some(dir),
+        })
+    }
+
+    /// Where the files of this build are written.
+    pub fn path(&self) -> &Path {
+        self.dir.as_ref().expect("until commit").path()
+    }
+
+    /// Moves the staged files into the output folder together (see [`Staging`]).
+    pub fn commit(mut self) -> Result<()> {
+        let stage = self.dir.take().expect("commit runs once");
+        let names: Vec<std::ffi::OsString> = std::fs::read_dir(stage.path())
+            .map_err(|e| Error::io(stage.path(), e))?
+            .map(|e| e.map(|e| e.file_name()))
+            .collect::<std::io::Result<_>>()
+            .map_err(|e| Error::io(stage.path(), e))?;
+        for n in &names {
+            let p = stage.path().join(n);
+            File::open(&p)
+                .and_then(|f| f.sync_all())
+                .map_err(|e| Error::io(&p, e))?;
+        }
+        sync_dir(stage.path())?;
+        let out = &self.out;
+        let parent = stage
+            .path()
+            .parent()
+            .map_or(PathBuf::from("."), Path::to_path_buf);
+        if !out.exists() {
+            let stage = stage.keep();
+            std::fs::rename(&stage, out).map_err(|e| Error::io(out, e))?;
+            return sync_dir(&parent);
+        }
+        let ours = |n: &std::ffi::OsStr| OUTPUT_FILES.iter().any(|f| n == *f);
+        let only_ours = std::fs::read_dir(out)
+            .map_err(|e| Error::io(out, e))?
+            .all(|e| e.is_ok_and(|e| ours(&e.file_name()) && e.path().is_file()));
+        if only_ours {
+            let stage_path = stage.keep();
+            let old = if exchange(&stage_path, out).map_err(|e| Error::io(out, e))? {
+                // The old outputs now sit in the staging folder's place.
+                stage_path
+            } else {
+                let aside = parent.join(format!(
+                    "{}.old",
+                    stage_path.file_name().unwrap_or_default().to_string_lossy()
+                ));
+                std::fs::rename(out, &aside).map_err(|e| Error::io(out, e))?;
+                std::fs::rename(&stage_path, out).map_err(|e| Error::io(out, e))?;
+                aside
+            };
+            sync_dir(&parent)?;
+            std::fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
+            return Ok(());
+        }
+        let mut order: Vec<&std::ffi::OsString> = names.iter().collect();
+        order.sort_by_key(|n| n.as_os_str() == "report.json");
+        for n in order {
+            let to = out.join(n);
+            std::fs::rename(stage.path().join(n), &to).map_err(|e| Error::io(&to, e))?;
+        }
+        sync_dir(out)?;
+        drop(stage);
+        sync_dir(&parent)
+    }
+}
+
+const STOPPED: &str = "stop requested";
+
+/// Every 65,536th item of a writer's loop: an error once a stop (SIGINT) was requested, so
+/// that an export of millions of cells stops within a fraction of a second; the staged
+/// files are then dropped and the previous outputs stay.
+fn stop_point(i: usize) -> std::io::Result<()> {
+    if i % 65_536 == 0 && crate::interrupt::stop_requested() {
+        Err(std::io::Error::other(STOPPED))
+    } else {
+        Ok(())
+    }
 }
 
 /// Writes `value` as pretty JSON, atomically.
@@ -50,67 +251,88 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
     })
 }
 
-/// `map.ply`: binary little-endian, one vertex per observed cell, the contract's schema.
-/// The offset written as `comment origin X Y 0` into `map.ply` and `terrain.ply` when the
-/// map lies far from the map frame's origin (UTM-like coordinates): `float` holds 0.5 m
-/// steps at 5,000 km, so vertices are then stored relative to this origin (whole metres,
-/// the centre of the map's extent) and readers add it back ([`crate::io::ply`] and
-/// [`crate::io::mapfile`] do). `[0, 0]` — and no comment line — when every cell centre lies
-/// within [`crate::io::ply::FAR_FROM_ORIGIN_M`] of the origin, as in every simulated scene.
-pub fn map_origin(map: &HazardMap) -> [f64; 2] {
-    let far = crate::io::ply::FAR_FROM_ORIGIN_M;
-    let mut lo = [f64::INFINITY; 2];
-    let mut hi = [f64::NEG_INFINITY; 2];
-    for c in &map.cells {
-        lo = [lo[0].min(c.x), lo[1].min(c.y)];
-        hi = [hi[0].max(c.x), hi[1].max(c.y)];
-    }
-    if map.cells.is_empty() || (0..2).all(|i| lo[i] >= -far && hi[i] <= far) {
-        return [0.0; 2];
-    }
-    [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])].map(f64::round)
+/// Beyond this distance (metres) of the map frame's origin a `float` coordinate is no
+/// longer within 0.5 mm of the value it stands for (its step is 2^-10 m below 2^14 m, and
+/// doubles beyond); `map.ply`, `terrain.ply` and `water.ply` then store `double` x y z.
+pub const FLOAT_COORDINATE_LIMIT_M: f64 = 16384.0;
+
+/// Whether vertices at these map-frame coordinates need `double` x y z
+/// ([`FLOAT_COORDINATE_LIMIT_M`]).
+pub fn needs_double(points: impl IntoIterator<Item = [f64; 3]>) -> bool {
+    points
+        .into_iter()
+        .any(|p| p.iter().any(|c| c.abs() >= FLOAT_COORDINATE_LIMIT_M))
 }
 
-fn origin_comment(o: [f64; 2]) -> String {
-    if o == [0.0; 2] {
-        String::new()
+/// The header lines declaring x y z (`double` or `float`), with a comment saying why when
+/// they are `double`.
+fn xyz_header(double: bool) -> String {
+    if double {
+        format!(
+            "comment coordinates double: the map frame's x y z, beyond {FLOAT_COORDINATE_LIMIT_M} m a float would lose millimetres\n\
+             property double x\nproperty double y\nproperty double z\n"
+        )
     } else {
-        format!("comment origin {} {} 0\n", o[0], o[1])
+        "property float x\nproperty float y\nproperty float z\n".to_string()
     }
 }
 
+fn write_xyz(w: &mut impl Write, p: [f64; 3], double: bool) -> std::io::Result<()> {
+    for v in p {
+        if double {
+            w.write_all(&v.to_le_bytes())?;
+        } else {
+            w.write_all(&(v as f32).to_le_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// One header comment line of free text (line breaks would end the comment).
+fn comment_line(text: &str) -> String {
+    let t: String = text
+        .chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
+    format!("comment {t}\n")
+}
+
+/// `map.ply`: binary little-endian, one vertex per observed cell, the contract's schema:
+/// x y z are the cell centre in the map frame, `float`, or `double` when the map reaches
+/// [`FLOAT_COORDINATE_LIMIT_M`] (UTM-like coordinates).
 pub fn write_map_ply(path: &Path, map: &HazardMap) -> Result<()> {
-    let o = map_origin(map);
+    write_map_ply_with(path, map, &[])
+}
+
+/// [`write_map_ply`] with extra header comment lines (e.g. the mark of a map built from a
+/// damaged input: `damaged input: …`).
+pub fn write_map_ply_with(path: &Path, map: &HazardMap, comments: &[String]) -> Result<()> {
+    let double = needs_double(map.cells.iter().map(|c| [c.x, c.y, c.z]));
+    let extra: String = comments.iter().map(|c| comment_line(c)).collect();
     write_atomic(path, |w| {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\ncomment tarn map: one vertex per observed cell\n\
              comment class 0 unknown 1 ground 2 water 3 vegetation 4 obstacle 5 snow/ice\n\
              comment hazard 0 free 1 shallow water 2 deep or unknown-depth water 3 obstacle\n\
-             comment resolution {}\n{}element vertex {}\n\
-             property float x\nproperty float y\nproperty float z\n\
+             comment resolution {}\n{extra}element vertex {}\n{}\
              property float elevation_std\nproperty float water\nproperty float depth\n\
              property uchar class\nproperty uchar hazard\n\
              property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
             map.resolution,
-            origin_comment(o),
-            map.cells.len()
+            map.cells.len(),
+            xyz_header(double),
         )?;
-        let mut rec = [0u8; 29];
-        for c in &map.cells {
-            let f = [
-                (c.x - o[0]) as f32,
-                (c.y - o[1]) as f32,
-                c.z as f32,
-                c.elevation_std as f32,
-                c.water,
-                c.depth,
-            ];
-            for (j, v) in f.iter().enumerate() {
-                rec[4 * j..4 * j + 4].copy_from_slice(&v.to_le_bytes());
+        let mut rec = Vec::with_capacity(41);
+        for (i, c) in map.cells.iter().enumerate() {
+            stop_point(i)?;
+            rec.clear();
+            write_xyz(&mut rec, [c.x, c.y, c.z], double)?;
+            for v in [c.elevation_std as f32, c.water, c.depth] {
+                rec.extend_from_slice(&v.to_le_bytes());
             }
             let [r, g, b] = c.class.colour();
-            rec[24..29].copy_from_slice(&[c.class as u8, c.hazard as u8, r, g, b]);
+            rec.extend_from_slice(&[c.class as u8, c.hazard as u8, r, g, b]);
             w.write_all(&rec)?;
         }
         Ok(())
@@ -121,14 +343,19 @@ pub fn write_map_ply(path: &Path, map: &HazardMap) -> Result<()> {
 /// triangles when all four are observed, one when three are, none otherwise, so no
 /// triangle ever spans an unknown cell. Counter-clockwise seen from above (normals up).
 pub fn terrain_triangles(map: &HazardMap) -> Vec<[u32; 3]> {
-    let index: HashMap<CellKey, u32> = map
-        .cells
-        .iter()
-        .enumerate()
-        .map(|(i, c)| (c.key, i as u32))
-        .collect();
+    terrain_triangles_stoppable(map).expect("no stop point fails without a stop request")
+}
+
+/// [`terrain_triangles`], ending early with an error when a stop is requested.
+fn terrain_triangles_stoppable(map: &HazardMap) -> std::io::Result<Vec<[u32; 3]>> {
+    let mut index: HashMap<CellKey, u32> = HashMap::with_capacity(map.cells.len());
+    for (i, c) in map.cells.iter().enumerate() {
+        stop_point(i)?;
+        index.insert(c.key, i as u32);
+    }
     let mut tris = Vec::new();
-    for c in &map.cells {
+    for (i, c) in map.cells.iter().enumerate() {
+        stop_point(i)?;
         let k = c.key;
         let at = |dx, dy| index.get(&CellKey::new(k.x + dx, k.y + dy)).copied();
         // The block whose lower-left corner is this cell...
@@ -149,15 +376,41 @@ pub fn terrain_triangles(map: &HazardMap) -> Vec<[u32; 3]> {
             _ => {}
         }
     }
-    tris
+    Ok(tris)
 }
 
-/// Writes a binary PLY triangle mesh with per-vertex colours and class.
+/// Writes a binary PLY triangle mesh with per-vertex colours and class (`float` x y z).
 pub fn write_mesh_ply(
     path: &Path,
     comment: &str,
     vertices: &[([f32; 3], [u8; 3], u8)],
     triangles: &[[u32; 3]],
+) -> Result<()> {
+    let v: Vec<_> = vertices
+        .iter()
+        .map(|(p, rgb, c)| (p.map(f64::from), *rgb, *c))
+        .collect();
+    write_mesh(path, comment, &v, triangles, false)
+}
+
+/// A triangle mesh in the map frame: `double` x y z where a `float` would lose
+/// millimetres ([`needs_double`]), `float` otherwise.
+pub fn write_map_mesh_ply(
+    path: &Path,
+    comment: &str,
+    vertices: &[([f64; 3], [u8; 3], u8)],
+    triangles: &[[u32; 3]],
+) -> Result<()> {
+    let double = needs_double(vertices.iter().map(|v| v.0));
+    write_mesh(path, comment, vertices, triangles, double)
+}
+
+fn write_mesh(
+    path: &Path,
+    comment: &str,
+    vertices: &[([f64; 3], [u8; 3], u8)],
+    triangles: &[[u32; 3]],
+    double: bool,
 ) -> Result<()> {
     if let Some(bad) = triangles
         .iter()
@@ -172,17 +425,16 @@ pub fn write_mesh_ply(
     write_atomic(path, |w| {
         write!(
             w,
-            "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\n\
-             property float x\nproperty float y\nproperty float z\n\
+            "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\n{}\
              property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar class\n\
              element face {}\nproperty list uchar int vertex_indices\nend_header\n",
             vertices.len(),
+            xyz_header(double),
             triangles.len()
         )?;
-        for (p, rgb, class) in vertices {
-            for v in p {
-                w.write_all(&v.to_le_bytes())?;
-            }
+        for (i, (p, rgb, class)) in vertices.iter().enumerate() {
+            stop_point(i)?;
+            write_xyz(w, *p, double)?;
             w.write_all(rgb)?;
             w.write_all(&[*class])?;
         }
@@ -196,22 +448,17 @@ pub fn write_mesh_ply(
     })
 }
 
-/// `terrain.ply`: the terrain surface over observed cells, coloured by class.
+/// `terrain.ply`: the terrain surface over observed cells, coloured by class, in the map
+/// frame.
 pub fn write_terrain_ply(path: &Path, map: &HazardMap) -> Result<()> {
-    let o = map_origin(map);
     let verts: Vec<_> = map
         .cells
         .iter()
-        .map(|c| {
-            (
-                [(c.x - o[0]) as f32, (c.y - o[1]) as f32, c.z as f32],
-                c.class.colour(),
-                c.class as u8,
-            )
-        })
+        .map(|c| ([c.x, c.y, c.z], c.class.colour(), c.class as u8))
         .collect();
-    let comment = format!("tarn terrain surface\n{}", origin_comment(o));
-    write_mesh_ply(path, comment.trim_end(), &verts, &terrain_triangles(map))
+    let tris = terrain_triangles_stoppable(map)
+        .map_err(|_| Error::Interrupted(format!("writing {}", path.display())))?;
+    write_map_mesh_ply(path, "tarn terrain surface", &verts, &tris)
 }
 
 /// Colour of a water-mesh vertex `d` metres below the surface: the top sheet light to dark
@@ -231,7 +478,7 @@ fn water_vertex_colour(top: bool, known: bool) -> [u8; 3] {
 /// `red green blue`, `int body` (the body id), `float depth` (below the surface at that
 /// vertex: 0 on the top sheet).
 pub fn write_water_ply(path: &Path, map: &HazardMap) -> Result<()> {
-    let mut verts: Vec<([f32; 3], [u8; 3], i32, f32)> = Vec::new();
+    let mut verts: Vec<([f64; 3], [u8; 3], i32, f32)> = Vec::new();
     let mut tris: Vec<[u32; 3]> = Vec::new();
     for b in &map.bodies {
         let m = crate::water::mesh::body_mesh(b, map.resolution, &b.surface.evaluator());
@@ -243,31 +490,25 @@ pub fn write_water_ply(path: &Path, map: &HazardMap) -> Result<()> {
         for (i, (v, d)) in m.vertices.iter().zip(&m.vertex_depth).enumerate() {
             let i = i as u32;
             let top = top_vertex.contains(&i) || !bottom_vertex.contains(&i);
-            verts.push((
-                v.map(|c| c as f32),
-                water_vertex_colour(top, known),
-                b.id as i32,
-                *d as f32,
-            ));
+            verts.push((*v, water_vertex_colour(top, known), b.id as i32, *d as f32));
         }
         tris.extend(m.top.iter().chain(&m.bottom).map(|t| t.map(|i| i + base)));
     }
+    let double = needs_double(verts.iter().map(|v| v.0));
     write_atomic(path, |w| {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\ncomment tarn water surfaces: one mesh per body, \
-             closed where every depth is known\nelement vertex {}\n\
-             property float x\nproperty float y\nproperty float z\n\
+             closed where every depth is known\nelement vertex {}\n{}\
              property uchar red\nproperty uchar green\nproperty uchar blue\n\
              property int body\nproperty float depth\n\
              element face {}\nproperty list uchar int vertex_indices\nend_header\n",
             verts.len(),
+            xyz_header(double),
             tris.len()
         )?;
         for (p, rgb, body, depth) in &verts {
-            for v in p {
-                w.write_all(&v.to_le_bytes())?;
-            }
+            write_xyz(w, *p, double)?;
             w.write_all(rgb)?;
             w.write_all(&body.to_le_bytes())?;
             w.write_all(&depth.to_le_bytes())?;
@@ -558,6 +799,7 @@ pub const MAP_PNG_MAX_SIDE: u32 = 4096;
 
 /// `map.png`, atomically.
 pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {
+    crate::interrupt::check(&format!("writing {}", path.display()))?;
     let img = render_map_png(map);
     write_atomic(path, |w| {
         img.write_to(w, image::ImageFormat::Png)
@@ -567,13 +809,18 @@ pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {
 
 /// Writes `map.ply`, `terrain.ply`, `water.ply` and `map.png` into `dir` (created if needed).
 pub fn write_map_files(dir: &Path, map: &HazardMap) -> Result<()> {
+    write_map_files_marked(dir, map, &[])
+}
+
+/// [`write_map_files`], with `marks` as extra comment lines in `map.ply`'s header.
+pub fn write_map_files_marked(dir: &Path, map: &HazardMap, marks: &[String]) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     // The files are independent: written side by side (each atomically), the first error
     // in this order reported.
     let ((map_ply, water_ply), (terrain_ply, png)) = rayon::join(
         || {
             (
-                write_map_ply(&dir.join("map.ply"), map),
+                write_map_ply_with(&dir.join("map.ply"), map, marks),
                 write_water_ply(&dir.join("water.ply"), map),
             )
         },
@@ -677,6 +924,103 @@ mod tests {
         std::fs::write(&p, b"old").unwrap();
         let _ = write_atomic(&p, |_| Err(std::io::Error::other("boom")));
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
+    }
+
+    fn staged(out: &Path, text: &str) {
+        let stage = Staging::new(out).unwrap();
+        for f in OUTPUT_FILES {
+            std::fs::write(stage.path().join(f), text).unwrap();
+        }
+        stage.commit().unwrap();
+    }
+
+    #[test]
+    fn staged_outputs_replace_the_set_and_leave_nothing_behind() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let entries = || {
+            let mut v: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        // A new folder, then a folder of tarn's files replaced as one.
+        staged(&out, "one");
+        staged(&out, "two");
+        assert_eq!(entries(), ["out"]);
+        for f in OUTPUT_FILES {
+            assert_eq!(std::fs::read_to_string(out.join(f)).unwrap(), "two");
+        }
+        // A folder holding something else keeps it; the files are replaced.
+        std::fs::create_dir(out.join("sim")).unwrap();
+        std::fs::write(out.join("sim/log.mcap"), "log").unwrap();
+        staged(&out, "three");
+        assert_eq!(entries(), ["out"]);
+        assert_eq!(
+            std::fs::read_to_string(out.join("sim/log.mcap")).unwrap(),
+            "log"
+        );
+        assert_eq!(
+            std::fs::read_to_string(out.join("map.ply")).unwrap(),
+            "three"
+        );
+        // Through a symbolic link: the folder it points to is replaced, the link stays.
+        #[cfg(unix)]
+        {
+            let link = dir.path().join("link");
+            std::os::unix::fs::symlink(&out, &link).unwrap();
+            staged(&link, "via link");
+            assert!(std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink());
+            assert_eq!(
+                std::fs::read_to_string(out.join("map.ply")).unwrap(),
+                "via link"
+            );
+            std::fs::remove_file(&link).unwrap();
+        }
+        // Dropped before the commit: nothing changes, nothing is left.
+        let before = std::fs::read_to_string(out.join("map.ply")).unwrap();
+        let stage = Staging::new(&out).unwrap();
+        std::fs::write(stage.path().join("map.ply"), "four").unwrap();
+        drop(stage);
+        assert_eq!(entries(), ["out"]);
+        assert_eq!(
+            std::fs::read_to_string(out.join("map.ply")).unwrap(),
+            before
+        );
+    }
+
+    #[test]
+    fn map_ply_coordinates_are_double_where_float_loses_millimetres() {
+        let far = HazardMap {
+            resolution: 0.1,
+            cells: vec![cell(5_000_003, 45_000_007, 312.5)],
+            bodies: vec![],
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("map.ply");
+        write_map_ply(&p, &far).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let h = bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11;
+        let head = String::from_utf8_lossy(&bytes[..h]);
+        assert!(head.contains("property double x\nproperty double y\nproperty double z\n"));
+        assert_eq!(bytes.len() - h, 41);
+        let d = |o: usize| f64::from_le_bytes(bytes[h + o..h + o + 8].try_into().unwrap());
+        let c = &far.cells[0];
+        assert_eq!((d(0), d(8), d(16)), (c.x, c.y, c.z));
+        let back = crate::io::mapfile::read_map_ply(&p).unwrap();
+        assert_eq!((back.cells[0].x, back.cells[0].y), (c.x, c.y));
+        assert_eq!(back.cells[0].key, c.key);
+        assert!(!needs_double([[16383.9, -16383.9, 0.0]]));
+        assert!(needs_double([[0.0, -16384.0, 0.0]]));
     }
 
     #[test]

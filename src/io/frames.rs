@@ -12,7 +12,7 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 
-use super::mcap_log::{LogReader, RawMessage};
+use super::mcap_log::{DamagedRange, LogReader, RawMessage};
 use super::ros::{
     camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, Image,
     ImageMsg, PointCloud2Msg, TfMessage,
@@ -208,7 +208,9 @@ struct Pending<T> {
 }
 
 /// The frame stream. Iterate for `Result<Frame>`; an `Err` for one bad message does not
-/// end the stream, a damaged or truncated file does (after everything before it).
+/// end the stream. Damaged parts of the file are skipped by the reader and listed in
+/// [`FrameStream::damaged`]; only a file that is not a log or cannot be read ends the
+/// stream with an `Err` (after the frames of everything before it).
 pub struct FrameStream {
     cfg: LogConfig,
     reader: LogReader,
@@ -222,8 +224,8 @@ pub struct FrameStream {
     /// Latest log time seen, ns.
     now_ns: i64,
     stats: FrameStats,
-    /// The read error that ended the stream (a damaged or truncated file).
-    damage: Option<String>,
+    /// The read error that ended the stream (not a log, or the file could not be read).
+    fatal: Option<String>,
     /// Stamp (ns) and position of the last accepted frame's `base_frame`.
     last_pose: Option<(i64, Vector3<f64>)>,
     /// Refused frames in a row that agree with each other: the last one and how many.
@@ -256,7 +258,7 @@ impl FrameStream {
             baseline_m: None,
             now_ns: i64::MIN,
             stats: FrameStats::default(),
-            damage: None,
+            fatal: None,
             last_pose: None,
             jump_run: None,
             ended: false,
@@ -268,12 +270,17 @@ impl FrameStream {
         &self.stats
     }
 
-    /// Where and why reading stopped early (a damaged or truncated file), once it has.
-    pub fn damage(&self) -> Option<&str> {
-        self.damage.as_deref()
+    /// The parts of the log skipped as damaged so far, in file order.
+    pub fn damaged(&self) -> &[DamagedRange] {
+        self.reader.damaged()
     }
 
-    /// Bytes of the log read so far and the log's size, for a progress bar.
+    /// The error that ended the stream early, if one did: the file is not an MCAP log or
+    /// could not be read (damage inside a log is skipped, not fatal: [`Self::damaged`]).
+    pub fn fatal_error(&self) -> Option<&str> {
+        self.fatal.as_deref()
+    }
+
     pub fn progress(&self) -> (u64, u64) {
         (self.reader.bytes_read(), self.reader.total_bytes())
     }
@@ -609,9 +616,9 @@ impl Iterator for FrameStream {
                     self.ended = true;
                 }
                 Some(Err(e)) => {
-                    // Everything before the damage still makes frames; then the error.
+                    // Everything before the error still makes frames; then the error.
                     self.emit_ready(true);
-                    self.damage = Some(e.to_string());
+                    self.fatal = Some(e.to_string());
                     self.out.push_back(Err(e));
                     self.ended = true;
                 }

@@ -1,5 +1,6 @@
 //! Reading `map.ply` (and `truth.ply`) back: the export contract's exact vertex schema,
-//! binary little endian. Anything else is refused with the line or byte where it differs.
+//! binary little endian, with x y z all `float` or all `double`. Anything else is refused
+//! with the line or byte where it differs.
 
 use std::path::Path;
 
@@ -20,10 +21,14 @@ const PROPS: [&str; 11] = [
     "property uchar green",
     "property uchar blue",
 ];
-const RECORD: usize = 29;
+/// Bytes of a vertex after x y z.
+const REST: usize = 17;
 
 /// Reads a contract `map.ply`. The resolution comes from its `comment resolution R` line
-/// (required); cell keys are `floor(x / R)`, `floor(y / R)`.
+/// (required); cell keys are `floor(x / R)`, `floor(y / R)`. Coordinates are in the map
+/// frame (`float` or `double`); a `comment origin X Y Z` line, which earlier versions wrote
+/// for maps far from the origin with `float` coordinates relative to it, is still added
+/// back.
 pub fn read_map_ply(path: &Path) -> Result<HazardMap> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     parse_map_ply(path, &bytes)
@@ -127,9 +132,15 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
             format!("unexpected {l:?}"),
         ));
     }
+    // x y z: all float or all double.
+    let double = props
+        .first()
+        .is_some_and(|(_, l)| *l == "property double x");
     for (i, want) in PROPS.iter().enumerate() {
+        let want_double = want.replace("float", "double");
+        let want = if double && i < 3 { &want_double } else { *want };
         match props.get(i) {
-            Some((_, got)) if got == want => {}
+            Some((_, got)) if *got == want => {}
             Some((n, got)) => {
                 return Err(fmt(
                     path,
@@ -150,9 +161,11 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
     let count = count.ok_or_else(|| fmt(path, "header", "no `element vertex N`"))?;
     let resolution =
         resolution.ok_or_else(|| fmt(path, "header", "no `comment resolution R` line"))?;
+    let xyz = if double { 24 } else { 12 };
+    let record = xyz + REST;
     let body = &bytes[end + END.len()..];
     let need = count
-        .checked_mul(RECORD)
+        .checked_mul(record)
         .ok_or_else(|| fmt(path, "header", "vertex count overflows"))?;
     if body.len() != need {
         return Err(fmt(
@@ -165,16 +178,24 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
         ));
     }
     let mut cells = Vec::with_capacity(count);
-    for (i, r) in body.chunks_exact(RECORD).enumerate() {
+    for (i, rec) in body.chunks_exact(record).enumerate() {
+        let c = |j: usize| -> f64 {
+            if double {
+                f64::from_le_bytes(rec[8 * j..8 * j + 8].try_into().expect("8 bytes"))
+            } else {
+                f32::from_le_bytes(rec[4 * j..4 * j + 4].try_into().expect("4 bytes")) as f64
+            }
+        };
+        let r = &rec[xyz..];
         let f = |j: usize| f32::from_le_bytes([r[4 * j], r[4 * j + 1], r[4 * j + 2], r[4 * j + 3]]);
-        let class = *Class::ALL.get(r[24] as usize).ok_or_else(|| {
+        let class = *Class::ALL.get(r[12] as usize).ok_or_else(|| {
             fmt(
                 path,
                 format!("vertex {i}"),
-                format!("class {} is not a contract class (0..=5)", r[24]),
+                format!("class {} is not a contract class (0..=5)", r[12]),
             )
         })?;
-        let hazard = match r[25] {
+        let hazard = match r[13] {
             0 => Hazard::Free,
             1 => Hazard::ShallowWater,
             2 => Hazard::DeepWater,
@@ -187,7 +208,7 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
                 ))
             }
         };
-        let (x, y) = (f(0) as f64 + origin[0], f(1) as f64 + origin[1]);
+        let (x, y) = (c(0) + origin[0], c(1) + origin[1]);
         if !(x.is_finite() && y.is_finite()) {
             return Err(fmt(path, format!("vertex {i}"), "x or y is not finite"));
         }
@@ -198,10 +219,10 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
             ),
             x,
             y,
-            z: f(2) as f64 + origin[2],
-            elevation_std: f(3) as f64,
-            water: f(4),
-            depth: f(5),
+            z: c(2) + origin[2],
+            elevation_std: f(0) as f64,
+            water: f(1),
+            depth: f(2),
             class,
             hazard,
             hits: 0,

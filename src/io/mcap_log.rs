@@ -7,7 +7,7 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::{BufWriter, Read};
+use std::io::{BufWriter, Read, Seek};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -60,17 +60,158 @@ pub fn record_length_limit(total_bytes: u64) -> usize {
     total_bytes.saturating_mul(64).clamp(FLOOR, CEIL) as usize
 }
 
-/// A streaming reader of the messages of an MCAP file, in file order.
+/// A byte source a [`LogReader`] can read and seek in (a file, or bytes in memory).
+pub trait LogSource: Read + Seek + Send {}
+impl<T: Read + Seek + Send> LogSource for T {}
+
+/// A part of a log that could not be read and was skipped: a chunk whose CRC or
+/// decompression failed, a record whose framing is broken, or the cut end of a truncated
+/// file. Byte offsets are exact offsets into the file.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct DamagedRange {
+    /// First byte of the skipped range (the start of the damaged record).
+    pub start_byte: u64,
+    /// First byte after it: where reading resumed, or the file's size when it did not.
+    pub end_byte: u64,
+    /// What was wrong.
+    pub what: String,
+    /// Log times (ns) bounding the skipped messages, `[first, last]`: exact from the
+    /// chunk index when the log has one (`log_time_from: "chunk index"`), else the last
+    /// message read before the damage and the first one after it (`"neighbours"`; `None`
+    /// where there is no such message).
+    pub log_time_ns: [Option<u64>; 2],
+    pub log_time_from: String,
+    /// How reading went on: `"chunk index"`, `"record length"` (the damaged record's own
+    /// framing held), `"forward scan"` (the next plausible record found by scanning),
+    /// or `"end"` (nothing readable followed).
+    pub resumed_by: String,
+}
+
+impl std::fmt::Display for DamagedRange {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "bytes {}..{} skipped: {}",
+            self.start_byte, self.end_byte, self.what
+        )?;
+        if let [Some(a), Some(b)] = self.log_time_ns {
+            write!(
+                f,
+                " (log time {:.9}..{:.9} s",
+                a as f64 * 1e-9,
+                b as f64 * 1e-9
+            )?;
+            write!(f, ", from the {})", self.log_time_from)?;
+        }
+        Ok(())
+    }
+}
+
+/// A chunk as the summary section's chunk index places it.
+#[derive(Debug, Clone, Copy)]
+struct IndexedChunk {
+    start: u64,
+    end: u64,
+    t0: u64,
+    t1: u64,
+}
+
+/// What the summary section gives a reader.
+#[derive(Default)]
+struct SummaryInfo {
+    chunks: Vec<IndexedChunk>,
+    schemas: Vec<(u16, String, String)>,
+    channels: Vec<(u16, u16, String, String)>,
+    /// Where the data section ends (the summary's start).
+    data_end: Option<u64>,
+}
+
+const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+const FOOTER_LEN: u64 = 9 + 20;
+
+/// Outcome of reading one record.
+enum Step {
+    /// Go on at this byte.
+    Next(u64),
+    /// The data section is over.
+    End,
+}
+
+/// A streaming reader of the messages of an MCAP file, in file order, that skips what is
+/// damaged.
+///
+/// Every chunk's `uncompressed_crc` is checked (when it is not zero) before any of its
+/// records is used, and a chunk is used whole or not at all. A damaged chunk, a record whose
+/// framing is broken, or the cut end of a truncated file is recorded as a
+/// [`DamagedRange`] ([`LogReader::damaged`]) and reading goes on at the next chunk of the
+/// summary's chunk index, or, without one, at the next plausible record found by scanning
+/// forward. The data section's CRC is checked when nothing else was found damaged. Only a
+/// file that is not an MCAP log at all (no magic) or that cannot be read ends the stream
+/// with an error.
+///
+/// Memory is bounded by the largest chunk and record ([`record_length_limit`]).
 pub struct LogReader {
     path: PathBuf,
-    source: Box<dyn Read + Send>,
-    reader: LinearReader,
+    src: std::io::BufReader<Box<dyn LogSource>>,
+    /// Where `src` is positioned.
+    pos: u64,
+    total_bytes: u64,
     schemas: HashMap<u16, (String, String)>,
     channels: HashMap<u16, Arc<ChannelInfo>>,
-    bytes_read: u64,
-    total_bytes: u64,
+    index: Vec<IndexedChunk>,
+    /// Where the data section ends, when the summary says so.
+    data_end: Option<u64>,
+    limit: usize,
+    pending: std::collections::VecDeque<RawMessage>,
+    damaged: Vec<DamagedRange>,
+    /// CRC of every byte read in order from the start; dropped at the first skip.
+    hasher: Option<crc32fast::Hasher>,
+    last_time: Option<u64>,
+    /// Damaged ranges waiting for the log time of the next message read.
+    open_times: Vec<usize>,
     messages: u64,
+    started: bool,
     finished: bool,
+}
+
+fn u64_at(b: &[u8], at: usize) -> Option<u64> {
+    Some(u64::from_le_bytes(b.get(at..at + 8)?.try_into().ok()?))
+}
+
+fn u32_at(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+}
+
+/// Whether a chunk record body's header fields agree with each other and with the body's
+/// length (the chunk's framing held, whatever its contents).
+fn chunk_header(body: &[u8]) -> std::result::Result<(), String> {
+    let short = || "chunk header is shorter than its fields".to_string();
+    let (t0, t1) = (
+        u64_at(body, 0).ok_or_else(short)?,
+        u64_at(body, 8).ok_or_else(short)?,
+    );
+    let clen = u32_at(body, 28).ok_or_else(short)? as usize;
+    let name = body
+        .get(32..32usize.saturating_add(clen))
+        .ok_or_else(short)?;
+    if !matches!(name, b"" | b"zstd" | b"lz4") {
+        return Err(format!(
+            "unknown chunk compression {:?}",
+            String::from_utf8_lossy(name)
+        ));
+    }
+    let rlen = u64_at(body, 32 + clen).ok_or_else(short)?;
+    let records = 32 + clen + 8;
+    if rlen != (body.len() - records) as u64 {
+        return Err(format!(
+            "chunk says its records take {rlen} bytes, the record holds {}",
+            body.len() - records
+        ));
+    }
+    if t0 > t1 {
+        return Err(format!("chunk message times {t0} > {t1}"));
+    }
+    Ok(())
 }
 
 impl LogReader {
@@ -87,24 +228,31 @@ impl LogReader {
         Self::from_reader(name.as_ref(), Box::new(std::io::Cursor::new(bytes)), total)
     }
 
-    /// A reader of an MCAP log from any byte source of `total_bytes` (for progress and
-    /// for the record length limit); `name` is used in error messages only.
+    /// A reader of an MCAP log from any seekable byte source of `total_bytes` (for
+    /// progress, the footer and the record length limit); `name` is used in error messages
+    /// only.
     pub fn from_reader(
         name: impl AsRef<Path>,
-        source: Box<dyn Read + Send>,
+        source: Box<dyn LogSource>,
         total_bytes: u64,
     ) -> Self {
-        let options = mcap::sans_io::linear_reader::LinearReaderOptions::default()
-            .with_record_length_limit(record_length_limit(total_bytes));
         LogReader {
             path: name.as_ref().to_path_buf(),
-            source,
-            reader: LinearReader::new_with_options(options),
+            src: std::io::BufReader::with_capacity(READ_SIZE, source),
+            pos: 0,
+            total_bytes,
             schemas: HashMap::new(),
             channels: HashMap::new(),
-            bytes_read: 0,
-            total_bytes,
+            index: Vec::new(),
+            data_end: None,
+            limit: record_length_limit(total_bytes),
+            pending: Default::default(),
+            damaged: Vec::new(),
+            hasher: Some(crc32fast::Hasher::new()),
+            last_time: None,
+            open_times: Vec::new(),
             messages: 0,
+            started: false,
             finished: false,
         }
     }
@@ -115,7 +263,7 @@ impl LogReader {
 
     /// Bytes of the file consumed so far (for a progress bar).
     pub fn bytes_read(&self) -> u64 {
-        self.bytes_read
+        self.pos
     }
 
     /// Size of the file in bytes.
@@ -133,115 +281,570 @@ impl LogReader {
         self.channels.values()
     }
 
-    fn damaged(&mut self, what: String) -> Error {
-        self.finished = true;
-        Error::format(
-            &self.path,
-            format!("byte {} of {}", self.bytes_read, self.total_bytes),
-            format!(
-                "{what}; the log is truncated or damaged here ({} messages before this point were read)",
-                self.messages
-            ),
-        )
+    /// The parts of the log skipped so far as damaged, in file order.
+    pub fn damaged(&self) -> &[DamagedRange] {
+        &self.damaged
     }
 
-    /// The next message, `None` at the end of a well-formed file. After an error (a
-    /// truncated or damaged file) the reader is finished.
-    pub fn next_message(&mut self) -> Option<Result<RawMessage>> {
-        if self.finished {
-            return None;
+    fn seek_to(&mut self, at: u64) -> std::io::Result<()> {
+        if at != self.pos {
+            self.src.seek(std::io::SeekFrom::Start(at))?;
+            self.pos = at;
         }
-        loop {
-            let event = match self.reader.next_event() {
-                None => {
-                    self.finished = true;
-                    return None;
-                }
-                Some(Err(e)) => {
-                    let what = match e {
-                        mcap::McapError::UnexpectedEof => {
-                            "file ends in the middle of a record".to_string()
-                        }
-                        e => e.to_string(),
-                    };
-                    return Some(Err(self.damaged(what)));
-                }
-                Some(Ok(ev)) => ev,
+        Ok(())
+    }
+
+    /// `n` bytes at the current position (`n` already checked against the file's size).
+    fn read_vec(&mut self, n: usize) -> std::io::Result<Vec<u8>> {
+        let mut v = vec![0u8; n];
+        self.src.read_exact(&mut v)?;
+        self.pos += n as u64;
+        if let Some(h) = self.hasher.as_mut() {
+            h.update(&v);
+        }
+        Ok(v)
+    }
+
+    /// Up to `n` bytes at `at`, without hashing (for the footer, the summary and scans).
+    fn peek_at(&mut self, at: u64, n: usize) -> std::io::Result<Vec<u8>> {
+        self.hasher = None;
+        self.seek_to(at)?;
+        let n = n.min(self.total_bytes.saturating_sub(at) as usize);
+        let mut v = vec![0u8; n];
+        self.src.read_exact(&mut v)?;
+        self.pos += n as u64;
+        Ok(v)
+    }
+
+    fn io_err(&mut self, e: std::io::Error) -> Error {
+        self.finished = true;
+        Error::io(&self.path, e)
+    }
+
+    /// Reads the footer and the summary section (its chunk index, schemas and channels),
+    /// when the file has them and the summary's CRC holds. A damaged summary is recorded
+    /// and not used.
+    fn read_summary(&mut self) -> std::io::Result<SummaryInfo> {
+        let mut info = SummaryInfo::default();
+        let total = self.total_bytes;
+        if total < 8 + FOOTER_LEN + 8 {
+            return Ok(info);
+        }
+        let tail = self.peek_at(total - 8 - FOOTER_LEN, (FOOTER_LEN + 8) as usize)?;
+        if &tail[FOOTER_LEN as usize..] != MAGIC || tail[0] != mcap::records::op::FOOTER {
+            return Ok(info);
+        }
+        let start = u64_at(&tail, 9).unwrap_or(0);
+        let crc = u32_at(&tail, 25).unwrap_or(0);
+        let footer_at = total - 8 - FOOTER_LEN;
+        if start == 0 || start < 8 || start > footer_at || footer_at - start > self.limit as u64 {
+            return Ok(info);
+        }
+        let bytes = self.peek_at(start, (total - 8 - 4 - start) as usize)?;
+        let bad = |what: String| DamagedRange {
+            start_byte: start,
+            end_byte: footer_at,
+            what,
+            log_time_ns: [None, None],
+            log_time_from: "unknown".into(),
+            resumed_by: "record length".into(),
+        };
+        if crc != 0 && crc32fast::hash(&bytes) != crc {
+            self.damaged.push(bad(
+                "summary section: CRC mismatch; its chunk index is not used".into(),
+            ));
+            return Ok(info);
+        }
+        let records = &bytes[..(footer_at - start) as usize];
+        let mut at = 0usize;
+        while at < records.len() {
+            let (Some(&op), Some(len)) = (records.get(at), u64_at(records, at + 1)) else {
+                self.damaged.push(bad(format!(
+                    "summary section: record header cut at byte {}",
+                    start + at as u64
+                )));
+                return Ok(SummaryInfo::default());
             };
-            match event {
-                LinearReadEvent::ReadRequest(need) => {
-                    let want = need.max(READ_SIZE);
-                    let buf = self.reader.insert(want);
-                    match self.source.read(buf) {
-                        Ok(n) => {
-                            self.bytes_read += n as u64;
-                            self.reader.notify_read(n);
-                        }
-                        Err(e) => {
-                            self.finished = true;
-                            return Some(Err(Error::io(&self.path, e)));
-                        }
+            let body_at = at + 9;
+            let Some(body) = usize::try_from(len)
+                .ok()
+                .and_then(|l| records.get(body_at..body_at.checked_add(l)?))
+            else {
+                self.damaged.push(bad(format!(
+                    "summary section: record at byte {} claims {len} bytes",
+                    start + at as u64
+                )));
+                return Ok(SummaryInfo::default());
+            };
+            use mcap::records::op;
+            if matches!(op, op::CHUNK_INDEX | op::SCHEMA | op::CHANNEL) {
+                match mcap::parse_record(op, body) {
+                    Ok(Record::ChunkIndex(c)) => info.chunks.push(IndexedChunk {
+                        start: c.chunk_start_offset,
+                        end: c.chunk_start_offset.saturating_add(c.chunk_length),
+                        t0: c.message_start_time,
+                        t1: c.message_end_time,
+                    }),
+                    Ok(Record::Schema { header, .. }) => {
+                        info.schemas.push((header.id, header.name, header.encoding))
+                    }
+                    Ok(Record::Channel(c)) => {
+                        info.channels
+                            .push((c.id, c.schema_id, c.topic, c.message_encoding))
+                    }
+                    _ => {
+                        self.damaged.push(bad(format!(
+                            "summary section: bad record (opcode {op:#04x}) at byte {}",
+                            start + at as u64
+                        )));
+                        return Ok(SummaryInfo::default());
                     }
                 }
+            }
+            at = body_at + body.len();
+        }
+        info.chunks.sort_by_key(|c| c.start);
+        let consistent = info
+            .chunks
+            .iter()
+            .all(|c| c.start >= 8 && c.end <= start && c.start < c.end)
+            && info.chunks.windows(2).all(|w| w[0].end <= w[1].start);
+        if !consistent {
+            self.damaged.push(bad(
+                "summary section: the chunk index does not fit the data section; not used".into(),
+            ));
+            return Ok(SummaryInfo::default());
+        }
+        info.data_end = Some(start);
+        Ok(info)
+    }
+
+    /// Records a damaged range `[start, end)`, and drops the data-section CRC (it can no
+    /// longer be checked).
+    fn record_damage(&mut self, start: u64, end: u64, what: String, resumed_by: &str) {
+        self.hasher = None;
+        // The chunk index's times when the range is (or starts with) an indexed chunk.
+        let indexed: Vec<&IndexedChunk> = self
+            .index
+            .iter()
+            .filter(|c| c.start >= start && c.start < end.max(start + 1))
+            .collect();
+        let (times, from) = if !indexed.is_empty() {
+            let t0 = indexed.iter().map(|c| c.t0).min();
+            let t1 = indexed.iter().map(|c| c.t1).max();
+            ([t0, t1], "chunk index")
+        } else {
+            self.open_times.push(self.damaged.len());
+            ([self.last_time, None], "neighbours")
+        };
+        self.damaged.push(DamagedRange {
+            start_byte: start,
+            end_byte: end,
+            what,
+            log_time_ns: times,
+            log_time_from: from.into(),
+            resumed_by: resumed_by.into(),
+        });
+    }
+
+    /// Where to go on after damage at `start`, found at `seen` bytes past it: the next
+    /// indexed chunk after `start`, or the next plausible record found by scanning from
+    /// `start + 1`.
+    fn resume_after(&mut self, start: u64, what: String) -> std::io::Result<Step> {
+        if let Some(end) = self.data_end {
+            let next = self.index.iter().find(|c| c.start > start).map(|c| c.start);
+            let to = next.unwrap_or(end);
+            self.record_damage(start, to, what, "chunk index");
+            return Ok(match next {
+                Some(n) => Step::Next(n),
+                None => Step::End,
+            });
+        }
+        match self.scan(start + 1)? {
+            Some(p) => {
+                self.record_damage(start, p, what, "forward scan");
+                Ok(Step::Next(p))
+            }
+            None => {
+                let t = self.total_bytes;
+                self.record_damage(start, t, what, "end");
+                Ok(Step::End)
+            }
+        }
+    }
+
+    /// Whether a record that ends at `end` is followed by the end of the file or by a
+    /// record header that fits in it.
+    fn followed_well(&mut self, end: u64) -> std::io::Result<bool> {
+        if end == self.total_bytes {
+            return Ok(true);
+        }
+        let h = self.peek_at(end, 9)?;
+        Ok(h.len() == 9
+            && (1..=0x0f).contains(&h[0])
+            && u64_at(&h, 1).is_some_and(|l| l <= self.total_bytes - end - 9))
+    }
+
+    /// Whether a plausible record starts at `at`, given the bytes `b` from there.
+    fn plausible(&mut self, b: &[u8], at: u64) -> std::io::Result<bool> {
+        use mcap::records::op;
+        let (Some(&opc), Some(len)) = (b.first(), u64_at(b, 1)) else {
+            return Ok(false);
+        };
+        let room = self.total_bytes - at;
+        if room < 9 || len > room - 9 || len > self.limit as u64 {
+            return Ok(false);
+        }
+        let end = at + 9 + len;
+        Ok(match opc {
+            op::CHUNK => {
+                let head = &b[9..b.len().min(9 + 64)];
+                // Judge the header's fields against the claimed length.
+                let clen = u32_at(head, 28).unwrap_or(u32::MAX) as u64;
+                clen <= 4
+                    && head.len() as u64 >= 40 + clen
+                    && u64_at(head, 32 + clen as usize) == Some(len.wrapping_sub(40 + clen))
+                    && matches!(&head[32..32 + clen as usize], b"" | b"zstd" | b"lz4")
+                    && u64_at(head, 0) <= u64_at(head, 8)
+            }
+            op::MESSAGE => {
+                len >= 22
+                    && b.len() >= 11
+                    && self
+                        .channels
+                        .contains_key(&u16::from_le_bytes([b[9], b[10]]))
+                    && self.followed_well(end)?
+            }
+            op::SCHEMA | op::CHANNEL if len <= 1 << 20 => {
+                let body = self.peek_at(at + 9, len as usize)?;
+                mcap::parse_record(opc, &body).is_ok() && self.followed_well(end)?
+            }
+            op::DATA_END => len == 4 && self.followed_well(end)?,
+            op::FOOTER => len == 20 && end + 8 == self.total_bytes,
+            _ => false,
+        })
+    }
+
+    /// The first byte at or after `from` where a plausible record starts.
+    fn scan(&mut self, from: u64) -> std::io::Result<Option<u64>> {
+        const WINDOW: usize = 1 << 20;
+        let mut at = from;
+        while at < self.total_bytes {
+            let buf = self.peek_at(at, WINDOW + 128)?;
+            for i in 0..buf.len().min(WINDOW) {
+                if (1..=0x0f).contains(&buf[i]) && self.plausible(&buf[i..], at + i as u64)? {
+                    return Ok(Some(at + i as u64));
+                }
+            }
+            at += WINDOW as u64;
+        }
+        Ok(None)
+    }
+
+    /// Decodes a chunk's records into messages (and the schemas and channels it defines),
+    /// all or nothing: the CRC of the uncompressed records is checked before any is used.
+    fn decode_chunk(&self, record: &[u8]) -> std::result::Result<Vec<(u8, Vec<u8>)>, String> {
+        chunk_header(&record[9..])?;
+        let options = mcap::sans_io::linear_reader::LinearReaderOptions::default()
+            .with_skip_start_magic(true)
+            .with_skip_end_magic(true)
+            .with_validate_chunk_crcs(true)
+            .with_prevalidate_chunk_crcs(true)
+            .with_record_length_limit(self.limit);
+        let mut r = LinearReader::new_with_options(options);
+        let mut fed = false;
+        let mut out = Vec::new();
+        while let Some(ev) = r.next_event() {
+            match ev.map_err(|e| match e {
+                mcap::McapError::BadChunkCrc { saved, calculated } => format!(
+                    "chunk CRC mismatch (stored {saved:#010x}, computed {calculated:#010x})"
+                ),
+                e => format!("chunk cannot be decoded: {e}"),
+            })? {
+                LinearReadEvent::ReadRequest(_) => {
+                    let n = if fed { 0 } else { record.len() };
+                    if !fed {
+                        r.insert(n).copy_from_slice(record);
+                    }
+                    r.notify_read(n);
+                    fed = true;
+                }
                 LinearReadEvent::Record { data, opcode } => {
-                    // Only schemas, channels and messages matter here. Other records are
-                    // not parsed at all: mcap 0.26's attachment parser panics on a record
-                    // shorter than its own header (found by fuzzing, kept in
-                    // fuzz/regressions/mcap/attachment-shorter-than-header.mcap).
-                    if !matches!(
+                    if matches!(
                         opcode,
                         mcap::records::op::SCHEMA
                             | mcap::records::op::CHANNEL
                             | mcap::records::op::MESSAGE
                     ) {
-                        continue;
-                    }
-                    let rec = match mcap::parse_record(opcode, data) {
-                        Ok(r) => r,
-                        Err(e) => {
-                            let what = format!("bad record (opcode {opcode:#04x}): {e}");
-                            return Some(Err(self.damaged(what)));
-                        }
-                    };
-                    match rec {
-                        Record::Schema { header, .. } => {
-                            self.schemas
-                                .insert(header.id, (header.name, header.encoding));
-                        }
-                        Record::Channel(c) => {
-                            let (schema, schema_encoding) =
-                                self.schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                            self.channels.insert(
-                                c.id,
-                                Arc::new(ChannelInfo {
-                                    topic: c.topic,
-                                    schema,
-                                    schema_encoding,
-                                    message_encoding: c.message_encoding,
-                                }),
-                            );
-                        }
-                        Record::Message { header, data } => {
-                            let Some(channel) = self.channels.get(&header.channel_id).cloned()
-                            else {
-                                let what = format!(
-                                    "message {} refers to channel {} that no Channel record defined",
-                                    self.messages, header.channel_id
-                                );
-                                return Some(Err(self.damaged(what)));
-                            };
-                            self.messages += 1;
-                            return Some(Ok(RawMessage {
-                                channel,
-                                sequence: header.sequence,
-                                log_time: header.log_time,
-                                publish_time: header.publish_time,
-                                data: data.into_owned(),
-                            }));
-                        }
-                        _ => {}
+                        out.push((opcode, data.to_vec()));
                     }
                 }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Applies one schema, channel or message record; a message is queued. `Err` names
+    /// what is wrong with the record.
+    fn apply(&mut self, opcode: u8, body: &[u8]) -> std::result::Result<(), String> {
+        match mcap::parse_record(opcode, body) {
+            Ok(Record::Schema { header, .. }) => {
+                self.schemas
+                    .insert(header.id, (header.name, header.encoding));
+            }
+            Ok(Record::Channel(c)) => {
+                let (schema, schema_encoding) =
+                    self.schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                self.channels.insert(
+                    c.id,
+                    Arc::new(ChannelInfo {
+                        topic: c.topic,
+                        schema,
+                        schema_encoding,
+                        message_encoding: c.message_encoding,
+                    }),
+                );
+            }
+            Ok(Record::Message { header, data }) => {
+                let Some(channel) = self.channels.get(&header.channel_id).cloned() else {
+                    return Err(format!(
+                        "message at log time {} ns refers to channel {} that no Channel record defined",
+                        header.log_time, header.channel_id
+                    ));
+                };
+                self.pending.push_back(RawMessage {
+                    channel,
+                    sequence: header.sequence,
+                    log_time: header.log_time,
+                    publish_time: header.publish_time,
+                    data: data.into_owned(),
+                });
+            }
+            Ok(_) => {}
+            Err(e) => return Err(format!("bad record (opcode {opcode:#04x}): {e}")),
+        }
+        Ok(())
+    }
+
+    /// Reads the record at `self.pos`.
+    fn step(&mut self) -> std::io::Result<Step> {
+        use mcap::records::op;
+        let start = self.pos;
+        let total = self.total_bytes;
+        if self.data_end.is_some_and(|e| start >= e) {
+            return Ok(Step::End);
+        }
+        // The next chunk the index places at or after this record.
+        let expect = self.index.iter().find(|c| c.start >= start).copied();
+        if total - start < 9 {
+            let what = if start == total {
+                "the file ends without its data end and footer records (truncated)".to_string()
+            } else {
+                format!(
+                    "file ends in the middle of a record header ({} bytes)",
+                    total - start
+                )
+            };
+            self.record_damage(start, total, what, "end");
+            return Ok(Step::End);
+        }
+        // The data section's CRC covers the bytes before the DataEnd record.
+        let crc_before = self.hasher.clone();
+        let head = self.read_vec(9)?;
+        let opcode = head[0];
+        let len = u64_at(&head, 1).expect("9 bytes");
+        let end = start.checked_add(9).and_then(|s| s.checked_add(len));
+        if let Some(c) = expect {
+            if c.start == start && (opcode != op::CHUNK || end != Some(c.end)) {
+                let what = format!(
+                    "the chunk index places a chunk of {} bytes here; the record header says opcode {opcode:#04x}, {len} bytes",
+                    c.end - c.start
+                );
+                self.record_damage(start, c.end, what, "chunk index");
+                return Ok(Step::Next(c.end));
+            }
+            if c.start > start && end.is_none_or(|e| e > c.start) {
+                let what = format!(
+                    "record (opcode {opcode:#04x}) claims {len} bytes, across the next indexed chunk at byte {}",
+                    c.start
+                );
+                self.record_damage(start, c.start, what, "chunk index");
+                return Ok(Step::Next(c.start));
+            }
+        }
+        let known = (1..=0x0f).contains(&opcode) || opcode >= 0x80;
+        let fits = end.is_some_and(|e| e <= total) && len <= self.limit as u64;
+        if !known || !fits {
+            let what = if !known {
+                format!("no record has opcode {opcode:#04x}")
+            } else if end.is_some_and(|e| e > total) {
+                format!(
+                    "file ends in the middle of a record (opcode {opcode:#04x} claims {len} bytes, {} remain): truncated or damaged",
+                    total - start - 9
+                )
+            } else {
+                format!("record (opcode {opcode:#04x}) claims {len} bytes, beyond the record length limit")
+            };
+            return self.resume_after(start, what);
+        }
+        let end = end.expect("checked");
+        match opcode {
+            op::CHUNK => {
+                let body = self.read_vec(len as usize)?;
+                let mut record = head;
+                record.extend_from_slice(&body);
+                drop(body);
+                match self.decode_chunk(&record) {
+                    Ok(records) => {
+                        let mut bad = None;
+                        for (opc, data) in records {
+                            if let Err(e) = self.apply(opc, &data) {
+                                bad.get_or_insert(e);
+                            }
+                        }
+                        if let Some(e) = bad {
+                            // The chunk's CRC held: keep its good messages, name the bad one.
+                            self.record_damage(start, end, e, "record length");
+                        }
+                        Ok(Step::Next(end))
+                    }
+                    Err(what) => {
+                        let framing_held = chunk_header(&record[9..]).is_ok();
+                        if framing_held && (self.data_end.is_some() || self.followed_well(end)?) {
+                            let by = if self.index.iter().any(|c| c.start == start) {
+                                "chunk index"
+                            } else {
+                                "record length"
+                            };
+                            self.record_damage(start, end, what, by);
+                            Ok(Step::Next(end))
+                        } else {
+                            self.resume_after(start, what)
+                        }
+                    }
+                }
+            }
+            op::SCHEMA | op::CHANNEL | op::MESSAGE => {
+                let body = self.read_vec(len as usize)?;
+                if let Err(what) = self.apply(opcode, &body) {
+                    self.record_damage(start, end, what, "record length");
+                }
+                Ok(Step::Next(end))
+            }
+            op::DATA_END => {
+                let calculated = crc_before.map(|h| h.finalize());
+                self.hasher = None;
+                let body = self.read_vec(len as usize)?;
+                let saved = u32_at(&body, 0).unwrap_or(0);
+                if let Some(c) = calculated {
+                    if saved != 0 && c != saved && self.damaged.is_empty() {
+                        self.record_damage(
+                            8,
+                            start,
+                            format!(
+                                "data section CRC mismatch (stored {saved:#010x}, computed {c:#010x}): damage outside the checked chunks"
+                            ),
+                            "record length",
+                        );
+                        // Where in the data section is not known, so neither are the times.
+                        self.open_times.clear();
+                        if let Some(d) = self.damaged.last_mut() {
+                            d.log_time_ns = [None, None];
+                            d.log_time_from = "unknown".into();
+                        }
+                    }
+                }
+                Ok(Step::End)
+            }
+            op::FOOTER => Ok(Step::End),
+            _ => {
+                // Indexes, attachments, metadata, private records: not needed here, but
+                // read (not skipped) so that the data section's CRC covers them.
+                self.read_vec(len as usize)?;
+                Ok(Step::Next(end))
+            }
+        }
+    }
+
+    /// Checks the magic, reads the summary, and positions the reader at the first record.
+    fn start(&mut self) -> Result<()> {
+        self.started = true;
+        if self.total_bytes < 8 {
+            self.finished = true;
+            let what = if self.total_bytes == 0 {
+                "empty file (0 bytes)".to_string()
+            } else {
+                format!("{} bytes: too short for an MCAP log", self.total_bytes)
+            };
+            return Err(Error::format(&self.path, "byte 0", what));
+        }
+        let magic = self.read_vec(8).map_err(|e| self.io_err(e))?;
+        if magic != MAGIC {
+            self.finished = true;
+            return Err(Error::format(
+                &self.path,
+                format!("byte 0 of {}", self.total_bytes),
+                "Bad magic number: not an MCAP log",
+            ));
+        }
+        let info = self.read_summary().map_err(|e| self.io_err(e))?;
+        for (id, name, enc) in info.schemas {
+            self.schemas.insert(id, (name, enc));
+        }
+        for (id, schema_id, topic, message_encoding) in info.channels {
+            let (schema, schema_encoding) =
+                self.schemas.get(&schema_id).cloned().unwrap_or_default();
+            self.channels.insert(
+                id,
+                Arc::new(ChannelInfo {
+                    topic,
+                    schema,
+                    schema_encoding,
+                    message_encoding,
+                }),
+            );
+        }
+        self.index = info.chunks;
+        self.data_end = info.data_end;
+        // Reading the summary moved the file; the data-section CRC starts again from the
+        // magic (hashed above only if nothing was peeked: redo it).
+        self.seek_to(8).map_err(|e| self.io_err(e))?;
+        let mut h = crc32fast::Hasher::new();
+        h.update(MAGIC);
+        self.hasher = Some(h);
+        Ok(())
+    }
+
+    /// The next message, `None` at the end of the file. Damage is skipped and recorded
+    /// ([`LogReader::damaged`]); an `Err` (a file that is not an MCAP log, or a read
+    /// error) ends the stream.
+    pub fn next_message(&mut self) -> Option<Result<RawMessage>> {
+        loop {
+            if let Some(m) = self.pending.pop_front() {
+                self.messages += 1;
+                self.last_time = Some(m.log_time);
+                for i in self.open_times.drain(..) {
+                    self.damaged[i].log_time_ns[1] = Some(m.log_time);
+                }
+                return Some(Ok(m));
+            }
+            if self.finished {
+                return None;
+            }
+            if !self.started {
+                if let Err(e) = self.start() {
+                    return Some(Err(e));
+                }
+                continue;
+            }
+            match self.step() {
+                Ok(Step::Next(at)) => {
+                    if let Err(e) = self.seek_to(at) {
+                        return Some(Err(self.io_err(e)));
+                    }
+                }
+                Ok(Step::End) => self.finished = true,
+                Err(e) => return Some(Err(self.io_err(e))),
             }
         }
     }
@@ -272,27 +875,22 @@ pub struct LogSummary {
     pub start_ns: Option<u64>,
     pub end_ns: Option<u64>,
     pub duration_s: f64,
-    /// Where and why reading stopped early (a truncated or damaged file); the counts are
-    /// those of the messages before that point.
-    pub damage: Option<String>,
+    /// The damaged parts of the file, skipped (the counts are those of the messages read).
+    pub damaged: Vec<DamagedRange>,
 }
 
 /// Counts messages per topic in one streaming pass. A truncated or damaged file gives the
-/// counts up to the damage and says where it is in [`LogSummary::damage`]; only a file that
-/// cannot be opened is an error.
+/// counts of the messages it could read and says what was skipped in
+/// [`LogSummary::damaged`]; a file that cannot be opened or read, or that is not an MCAP
+/// log, is an error.
 pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
     let mut r = LogReader::open(path)?;
     let mut counts: BTreeMap<String, (String, u64)> = BTreeMap::new();
     let (mut start, mut end) = (None::<u64>, None::<u64>);
-    let mut damage = None;
     while let Some(m) = r.next_message() {
-        let m = match m {
-            Ok(m) => m,
-            Err(e) => {
-                damage = Some(e.to_string());
-                break;
-            }
-        };
+        let m = m?;
+        // A log without a summary section is counted in a pass of its own before a build.
+        crate::interrupt::check("counting the log's messages")?;
         let e = counts
             .entry(m.channel.topic.clone())
             .or_insert_with(|| (m.channel.schema.clone(), 0));
@@ -300,7 +898,7 @@ pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
         start = Some(start.map_or(m.log_time, |s| s.min(m.log_time)));
         end = Some(end.map_or(m.log_time, |s| s.max(m.log_time)));
     }
-    Ok(LogSummary::of(counts, start, end, damage))
+    Ok(LogSummary::of(counts, start, end, r.damaged().to_vec()))
 }
 
 impl LogSummary {
@@ -309,7 +907,7 @@ impl LogSummary {
         counts: BTreeMap<String, (String, u64)>,
         start: Option<u64>,
         end: Option<u64>,
-        damage: Option<String>,
+        damaged: Vec<DamagedRange>,
     ) -> Self {
         LogSummary {
             messages: counts.values().map(|v| v.1).sum(),
@@ -327,7 +925,7 @@ impl LogSummary {
             },
             start_ns: start,
             end_ns: end,
-            damage,
+            damaged,
         }
     }
 }
@@ -380,7 +978,7 @@ fn summary_section(path: &Path) -> Option<LogSummary> {
     let (start, end) = (messages > 0)
         .then_some((stats.message_start_time, stats.message_end_time))
         .unzip();
-    Some(LogSummary::of(counts, start, end, None))
+    Some(LogSummary::of(counts, start, end, Vec::new()))
 }
 
 /// Chunk compression for written logs.
@@ -619,11 +1217,14 @@ pub struct RecodeStats {
     pub written: u64,
     /// Messages of types tarn does not read, by topic; not copied.
     pub skipped_unknown: BTreeMap<String, u64>,
+    /// Damaged parts of the input, skipped: the output holds everything else.
+    pub damaged: Vec<DamagedRange>,
 }
 
 /// Reads every TF, PointCloud2, Image and CameraInfo message of `input`, decodes it and
 /// writes it again with tarn's encoder into `output` (with `opts`' compression, chunking
-/// and byte order). Messages of other types are skipped and counted.
+/// and byte order). Messages of other types are skipped and counted; damaged parts of the
+/// input are skipped and listed in [`RecodeStats::damaged`].
 pub fn recode(
     input: impl AsRef<Path>,
     output: impl AsRef<Path>,
@@ -634,6 +1235,8 @@ pub fn recode(
     let mut stats = RecodeStats::default();
     while let Some(m) = r.next_message() {
         let m = m?;
+        // A log without a summary section is counted in a pass of its own before a build.
+        crate::interrupt::check("counting the log's messages")?;
         let ch = &m.channel;
         let loc = || {
             format!(
@@ -675,5 +1278,6 @@ pub fn recode(
         stats.written += 1;
     }
     w.finish()?;
+    stats.damaged = r.damaged().to_vec();
     Ok(stats)
 }

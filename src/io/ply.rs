@@ -48,9 +48,11 @@
 //! 5,000 km from the origin in `double` keeps sub-millimetre detail near its first point
 //! (f32 steps are ≤ 0.5 mm within 4,096 m of `o`).
 //!
-//! A header line `comment origin X Y Z` (finite metres; tarn writes it into `map.ply` and
-//! `terrain.ply` of maps far from the map origin) says the vertices are relative to that
-//! point of the map frame: it goes into `frame_to_map` (f64), never into the `f32` points.
+//! A header line `comment origin X Y Z` (finite metres; earlier versions of tarn wrote it
+//! into `map.ply` and `terrain.ply` of maps far from the map origin, with `float` vertices
+//! relative to it; tarn now writes `double` map-frame vertices instead) says the vertices
+//! are relative to that point of the map frame: it goes into `frame_to_map` (f64), never
+//! into the `f32` points.
 
 use std::path::Path;
 
@@ -1118,6 +1120,10 @@ fn read_ascii(
         }
         let mut v = RawVertex::default();
         for i in 0..el.count {
+            // A long text body answers a stop request (SIGINT) within a fraction of a second.
+            if i % 65_536 == 0 {
+                crate::interrupt::check("reading the cloud")?;
+            }
             let Some((no, text)) = lines.next_line(path)? else {
                 return Err(Error::format(
                     path,

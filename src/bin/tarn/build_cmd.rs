@@ -188,8 +188,41 @@ fn is_log(p: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
 }
 
-/// Runs `tarn build`: prints the report, and fails after writing the map if the log was
-/// damaged (the map holds everything before the damage).
+/// The map was built, but from a damaged input: the process exits with status 3 (the
+/// report names what was skipped).
+#[derive(Debug)]
+pub struct DamagedInput(pub String);
+
+impl std::fmt::Display for DamagedInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for DamagedInput {}
+
+/// `Err(DamagedInput)` naming every damaged range of `input`, or `Ok` when there is none.
+pub fn damaged_input(
+    input: &Path,
+    what: &str,
+    damaged: &[tarn::io::mcap_log::DamagedRange],
+) -> anyhow::Result<()> {
+    if damaged.is_empty() {
+        return Ok(());
+    }
+    let list: Vec<String> = damaged.iter().map(|d| format!("  {d}")).collect();
+    Err(DamagedInput(format!(
+        "{}: damaged; {what} everything else ({} damaged range{}, listed in report.json):\n{}",
+        input.display(),
+        damaged.len(),
+        if damaged.len() == 1 { "" } else { "s" },
+        list.join("\n")
+    ))
+    .into())
+}
+
+/// Runs `tarn build`: prints the report; a map built from a damaged log is an
+/// `Err(DamagedInput)` after the outputs were written (exit status 3).
 pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     check_output_dir(&a.out)?;
     if !is_log(&a.input) {
@@ -227,10 +260,7 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         print_log_summary(&r);
         print_extra(&extra);
     }
-    match &r.damage {
-        Some(d) => anyhow::bail!("the map holds what came before the damage: {d}"),
-        None => Ok(()),
-    }
+    damaged_input(&a.input, "the map holds", &r.damaged)
 }
 
 fn print_extra(files: &[&str]) {

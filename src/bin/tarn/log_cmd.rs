@@ -91,7 +91,7 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
             "frame_topic": cfg.frame_topic,
             "frames": stats,
             "errors": frame_errors,
-            "damage": summary.damage,
+            "damaged": summary.damaged,
         });
         if dump {
             let mut msgs = Vec::new();
@@ -103,10 +103,7 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
             out["messages_decoded"] = Value::Array(msgs);
         }
         println!("{}", serde_json::to_string(&out)?);
-        return match summary.damage {
-            Some(d) => Err(anyhow::anyhow!(d)),
-            None => Ok(()),
-        };
+        return crate::build_cmd::damaged_input(&log, "counted", &summary.damaged);
     }
     println!("{}", log.display());
     println!(
@@ -141,8 +138,5 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
     for e in &frame_errors {
         println!("  error: {e}");
     }
-    match summary.damage {
-        Some(d) => Err(anyhow::anyhow!(d)),
-        None => Ok(()),
-    }
+    crate::build_cmd::damaged_input(&log, "counted", &summary.damaged)
 }

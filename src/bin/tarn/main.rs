@@ -176,7 +176,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             for (t, n) in &s.skipped_unknown {
                 println!("skipped {n} messages of unknown type on {t}");
             }
-            Ok(())
+            build_cmd::damaged_input(&input, "wrote", &s.damaged)
         }
     }
 }
@@ -197,6 +197,11 @@ fn main() -> ExitCode {
     }
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
+        // Built, from a damaged input: the outputs are written and name what was skipped.
+        Err(e) if e.downcast_ref::<build_cmd::DamagedInput>().is_some() => {
+            eprintln!("tarn: warning: {e:#}");
+            ExitCode::from(3)
+        }
         Err(e) => {
             eprintln!("tarn: error: {e:#}");
             let interrupted = e

@@ -68,8 +68,5 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
         "  wrote map.ply terrain.ply water.ply map.png report.json into {}",
         out.display()
     );
-    if let Some(d) = &r.damage {
-        anyhow::bail!("the log was damaged: {d}");
-    }
-    Ok(())
+    build_cmd::damaged_input(&args.input, "the map holds", &r.damaged)
 }
