@@ -248,7 +248,7 @@ impl DryCells {
 
 /// The dry 3 × 3 neighbourhood of a cell (itself included), row by row from its lower-left
 /// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
-type Neighbourhood = [(f64, f64); 9];
+pub(crate) type Neighbourhood = [(f64, f64); 9];
 
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
 /// `nb`: the upper side of a step higher than `max_step` is an obstacle (class and
@@ -258,7 +258,7 @@ type Neighbourhood = [(f64, f64); 9];
 /// standard deviations of that difference, so far cells seen by a few noisy stereo points
 /// do not turn into obstacles.
 #[inline]
-fn terrain_hazard(
+pub(crate) fn terrain_hazard(
     nb: &Neighbourhood,
     (z, sz): (f64, f64),
     res: f64,
