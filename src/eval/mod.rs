@@ -1140,8 +1140,8 @@ mod tests {
     fn obstacles_are_scored_against_the_true_terrain_and_objects() {
         // 0.25 m cells, 40 × 5: ground at 0 up to key 19, a 0.5 m step up from key 20 on
         // (beyond the 0.25 m limit); key 35 is an object (truth hazard obstacle); key 30
-        // is water. The mapper's rule makes 20 (the upper side) a step and 19 (below it)
-        // a slope: the true obstacles are keys 19, 20 and 35.
+        // is water. The mapper's rule makes 20 (the upper side) a step: the true obstacles
+        // are keys 20 and 35.
         let mut truth = raster(0.25, 40, 5, |kx, _| kx == 30);
         for c in &mut truth.cells {
             if c.key.x >= 20 {
@@ -1152,7 +1152,7 @@ mod tests {
                 c.hazard = Hazard::Obstacle;
             }
         }
-        let true_keys = [19, 20, 35];
+        let true_keys = [20, 35];
         // The map calls the step's upper side (20) and a flat cell (5) obstacles.
         let mut map = truth.clone();
         for c in &mut map.cells {
@@ -1166,14 +1166,11 @@ mod tests {
         let r = evaluate(&map, &truth, &info(0.25, &[[0.0, 0.625]], None)).unwrap();
         let a = &r.all;
         assert_eq!(a.obstacle_cells, true_keys.len() * 5);
-        assert_eq!(
-            (a.obstacle_detected, a.obstacle_recall),
-            (5, Some(1.0 / 3.0))
-        );
+        assert_eq!((a.obstacle_detected, a.obstacle_recall), (5, Some(0.5)));
         assert_eq!((a.called_obstacle, a.false_obstacle), (10, 5));
         assert_eq!(a.obstacle_precision, Some(0.5));
-        // By range: key 5 (1.375 m) in 0-5, keys 19, 20 (4.875, 5.125 m) in 0-5 and 5-10.
-        assert_eq!((r.bins[0].obstacle_cells, r.bins[0].false_obstacle), (5, 5));
+        // By range: key 5 (1.375 m) in 0-5, keys 20, 35 (5.125, 8.875 m) in 5-10.
+        assert_eq!((r.bins[0].obstacle_cells, r.bins[0].false_obstacle), (0, 5));
         assert_eq!(
             (r.bins[1].obstacle_cells, r.bins[1].obstacle_detected),
             (10, 5)
