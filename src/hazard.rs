@@ -248,17 +248,25 @@ impl DryCells {
 
 /// The dry 3 × 3 neighbourhood of a cell (itself included), row by row from its lower-left
 /// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
-type Neighbourhood = [(f64, f64); 9];
+pub(crate) type Neighbourhood = [(f64, f64); 9];
 
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
 /// `nb`: the upper side of a step higher than `max_step` is an obstacle (class and
-/// hazard), a slope steeper than `max_grad` (rise over run, from a least-squares fit over
-/// the 3 × 3 neighbourhood) is a hazard on ground. Only what the elevations show beyond
-/// their noise counts: each difference to a neighbour is shrunk towards zero by two
-/// standard deviations of that difference, so far cells seen by a few noisy stereo points
-/// do not turn into obstacles.
+/// hazard), a slope steeper than `max_grad` (rise over run) is a hazard on ground. Only
+/// what the elevations show beyond their noise counts: each difference to a neighbour is
+/// shrunk towards zero by two standard deviations of that difference, so far cells seen by
+/// a few noisy stereo points do not turn into obstacles.
+///
+/// The slope along each axis is read on both sides of the cell: the mean rise from the
+/// column (row) of neighbours behind it and from the one ahead. The tilt is their mean
+/// (the least-squares slope) when both sides rise the same way, and none when one side is
+/// level or they disagree: a single cell above or
+/// below the cell (a step, a post, a phantom bump or hole of misplaced returns) tilts only
+/// one side and is the step test's business, not a slope of the cell. Where one side has
+/// no dry neighbour (the edge of what was seen) there is no tilt along that axis: one side
+/// cannot tell a slope from a bump.
 #[inline]
-fn terrain_hazard(
+pub(crate) fn terrain_hazard(
     nb: &Neighbourhood,
     (z, sz): (f64, f64),
     res: f64,
@@ -270,7 +278,9 @@ fn terrain_hazard(
         let sn = nb[j].1;
         2.0 * (sz * sz + sn * sn).sqrt()
     });
-    let (mut step, mut gx, mut gy, mut wx, mut wy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+    // Sums and counts of the shrunk rises towards −x, +x, −y, +y.
+    let mut step = 0.0f64;
+    let (mut sum, mut n) = ([0.0f64; 4], [0u32; 4]);
     for (j, (&(zn, _), &margin)) in nb.iter().zip(&margin).enumerate() {
         if zn.is_nan() {
             continue;
@@ -279,16 +289,27 @@ fn terrain_hazard(
         let d = zn - z;
         let d = d.signum() * (d.abs() - margin).max(0.0);
         step = step.max(-d);
-        gx += d * dx as f64;
-        wx += (dx * dx) as f64;
-        gy += d * dy as f64;
-        wy += (dy * dy) as f64;
+        for (side, on) in [(0, dx < 0), (1, dx > 0), (2, dy < 0), (3, dy > 0)] {
+            if on {
+                sum[side] += d;
+                n[side] += 1;
+            }
+        }
     }
     if step > max_step {
         return (Class::Obstacle, Hazard::Obstacle);
     }
-    let g = |s: f64, w: f64| if w > 0.0 { s / (w * res) } else { 0.0 };
-    let grad = g(gx, wx).hypot(g(gy, wy));
+    // Rise per metre going forward along the axis, from the side behind (−) and ahead (+).
+    let tilt = |behind: usize, ahead: usize| {
+        let g = |side: usize, sign: f64| {
+            (n[side] > 0).then(|| sign * sum[side] / (n[side] as f64 * res))
+        };
+        match (g(behind, -1.0), g(ahead, 1.0)) {
+            (Some(a), Some(b)) if a * b > 0.0 => 0.5 * (a + b),
+            _ => 0.0,
+        }
+    };
+    let grad = tilt(0, 1).hypot(tilt(2, 3));
     if grad > max_grad {
         (Class::Ground, Hazard::Obstacle)
     } else {
@@ -519,6 +540,113 @@ impl HazardMap {
 mod tests {
     use super::*;
     use crate::grid::Evidence;
+
+    /// The neighbourhood of a cell of a plane rising `gx`, `gy` per metre, at `res` m, all
+    /// with σ `s`, the cell's own elevation 0.
+    fn plane(gx: f64, gy: f64, res: f64, s: f64) -> Neighbourhood {
+        std::array::from_fn(|j| {
+            let (dx, dy) = ((j % 3) as f64 - 1.0, (j / 3) as f64 - 1.0);
+            ((dx * gx + dy * gy) * res, s)
+        })
+    }
+
+    const STEP: f64 = 0.25;
+
+    fn grad(deg: f64) -> f64 {
+        deg.to_radians().tan()
+    }
+
+    fn hazard_of(nb: &Neighbourhood, s: f64) -> (Class, Hazard) {
+        terrain_hazard(nb, (nb[4].0, s), 0.1, STEP, grad(25.0))
+    }
+
+    #[test]
+    fn a_step_beyond_the_limit_is_an_obstacle_on_its_upper_side() {
+        // 0.4 m down to the +x column.
+        let mut nb = plane(0.0, 0.0, 0.1, 0.01);
+        for j in [2, 5, 8] {
+            nb[j].0 = -0.4;
+        }
+        assert_eq!(hazard_of(&nb, 0.01), (Class::Obstacle, Hazard::Obstacle));
+        // The cell below it: the step rises on one side only, no slope of its own.
+        let mut low = plane(0.0, 0.0, 0.1, 0.01);
+        for j in [2, 5, 8] {
+            low[j].0 = 0.4;
+        }
+        assert_eq!(hazard_of(&low, 0.01), (Class::Ground, Hazard::Free));
+        // A step under the limit is none.
+        for j in [2, 5, 8] {
+            nb[j].0 = -0.2;
+        }
+        assert_ne!(hazard_of(&nb, 0.01).0, Class::Obstacle);
+    }
+
+    #[test]
+    fn a_step_counts_only_beyond_the_noise_of_the_difference() {
+        // 0.3 m down to one neighbour: beyond the limit by 0.05 m.
+        let mut nb = plane(0.0, 0.0, 0.1, 0.005);
+        nb[5].0 = -0.3;
+        assert_eq!(hazard_of(&nb, 0.005).1, Hazard::Obstacle);
+        // With σ 0.05 m on both cells the difference's 2σ margin is 0.14 m: 0.16 m left.
+        nb[5].1 = 0.05;
+        assert_eq!(hazard_of(&nb, 0.05), (Class::Ground, Hazard::Free));
+    }
+
+    #[test]
+    fn a_slope_is_a_tilt_on_both_sides_of_the_cell() {
+        for (deg, want) in [(30.0, Hazard::Obstacle), (20.0, Hazard::Free)] {
+            for (gx, gy) in [(1.0, 0.0), (0.0, -1.0), (0.6, 0.8)] {
+                let g = grad(deg);
+                let nb = plane(gx * g, gy * g, 0.1, 0.002);
+                assert_eq!(
+                    hazard_of(&nb, 0.002),
+                    (Class::Ground, want),
+                    "{deg} {gx} {gy}"
+                );
+            }
+        }
+        // On the edge of what was seen one side cannot tell a slope from a bump: no tilt
+        // along that axis, the other axis still counts.
+        let mut edge = plane(grad(30.0), 0.0, 0.1, 0.002);
+        for j in [0, 3, 6] {
+            edge[j].0 = f64::NAN;
+        }
+        assert_eq!(hazard_of(&edge, 0.002).1, Hazard::Free);
+        let mut edge = plane(0.0, grad(30.0), 0.1, 0.002);
+        for j in [0, 3, 6] {
+            edge[j].0 = f64::NAN;
+        }
+        assert_eq!(hazard_of(&edge, 0.002).1, Hazard::Obstacle);
+        // One neighbour 0.75 m up (a bump of misplaced returns) makes no slope of the
+        // level cells beside it; the bump itself is a step.
+        let mut bump = plane(0.0, 0.0, 0.1, 0.043);
+        bump[8].0 = 0.75;
+        assert_eq!(hazard_of(&bump, 0.043), (Class::Ground, Hazard::Free));
+        let top: Neighbourhood = std::array::from_fn(|j| (if j == 4 { 0.75 } else { 0.0 }, 0.043));
+        assert_eq!(hazard_of(&top, 0.043).0, Class::Obstacle);
+        // A valley floor (both sides rising) is no slope either.
+        let valley: Neighbourhood =
+            std::array::from_fn(|j| (if j % 3 == 1 { 0.0 } else { 0.2 }, 0.002));
+        assert_eq!(hazard_of(&valley, 0.002).1, Hazard::Free);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn a_noisy_flat_surface_has_no_obstacle(
+            s in 0.005f64..0.2,
+            tilt in -0.3f64..0.3,
+            noise in proptest::collection::vec(-1.0f64..1.0, 9),
+        ) {
+            // Level or gently tilted ground (under 17°), each cell off by up to √2 σ.
+            let mut nb = plane(tilt, 0.5 * tilt, 0.1, s);
+            for (c, e) in nb.iter_mut().zip(&noise) {
+                c.0 += e * std::f64::consts::SQRT_2 * s;
+            }
+            let z = nb[4].0;
+            let got = terrain_hazard(&nb, (z, s), 0.1, STEP, grad(25.0));
+            proptest::prop_assert_eq!(got, (Class::Ground, Hazard::Free));
+        }
+    }
 
     #[test]
     fn dry_cells_dense_and_sparse_answer_alike() {

@@ -18,7 +18,16 @@
 //!   without `seen_water` falls back to the observed water cells (same as water recall);
 //! - off-shore false rate: like the false-positive rate, but over the dry cells farther than
 //!   [`SHORE_MARGIN_M`] from all water, so that calling the water's edge wet is not counted;
-//! - precision: map cells called water whose truth is water / map cells called water.
+//! - precision: map cells called water whose truth is water / map cells called water;
+//! - obstacle recall and precision: a map cell "is called an obstacle" when its hazard is
+//!   obstacle (a step, or a slope on ground). Its truth is an obstacle when the truth cell
+//!   containing its centre is an obstacle in the truth raster (an object that is an
+//!   obstacle), or when the true terrain around it has a step or slope beyond the vehicle's
+//!   limits ([`ObstacleLimits`]) by the mapper's own rule, at the map's resolution: the true
+//!   elevations at the centre of the map cell and at the centres of its eight neighbours
+//!   (dry truth cells only, like the mapper's dry neighbourhood), with no noise margin.
+//!   Obstacle recall: true obstacles called obstacles / true obstacles observed; obstacle
+//!   precision: cells called obstacles whose truth is one / cells called obstacles.
 //!
 //! [`evaluate_matrix_bands`] scores the range bands of the evaluation matrix
 //! ([`MATRIX_BANDS`]) and their union.
@@ -31,7 +40,7 @@ use serde::Serialize;
 use crate::cues::BuildKeyHasher;
 use crate::error::{Error, Result};
 use crate::grid::CellKey;
-use crate::hazard::{Class, HazardMap, MapCell};
+use crate::hazard::{terrain_hazard, Class, Hazard, HazardMap, MapCell};
 use crate::sim::{ColourView, TruthInfo};
 
 /// Hash maps and sets of cell keys with a fast hasher (truth rasters run to millions of
@@ -86,6 +95,19 @@ pub struct BinMetrics {
     pub called_true: usize,
     /// `called_true / called_water`.
     pub precision: Option<f64>,
+    /// Observed cells with a truth cell whose truth is an obstacle (see the module's
+    /// documentation).
+    pub obstacle_cells: usize,
+    /// Of `obstacle_cells`, those the map calls obstacles (hazard obstacle).
+    pub obstacle_detected: usize,
+    /// `obstacle_detected / obstacle_cells`.
+    pub obstacle_recall: Option<f64>,
+    /// Observed cells with a truth cell that the map calls obstacles.
+    pub called_obstacle: usize,
+    /// Of `called_obstacle`, those whose truth is no obstacle.
+    pub false_obstacle: usize,
+    /// `(called_obstacle − false_obstacle) / called_obstacle`.
+    pub obstacle_precision: Option<f64>,
 }
 
 /// How far below the true terrain a dry cell's map z must be to count as sunk (m).
@@ -109,13 +131,23 @@ struct Acc {
 }
 
 impl Acc {
-    /// One observed map cell, its truth cell and whether that is off shore.
-    fn add(&mut self, cell: &MapCell, truth: Option<&MapCell>, offshore: bool) {
+    /// One observed map cell, its truth cell, whether that is off shore and whether its
+    /// truth is an obstacle.
+    fn add(&mut self, cell: &MapCell, truth: Option<&MapCell>, offshore: bool, obstacle: bool) {
         self.m.observed_cells += 1;
         let Some(t) = truth else {
             self.m.outside_truth += 1;
             return;
         };
+        let called_obstacle = cell.hazard == Hazard::Obstacle;
+        if obstacle {
+            self.m.obstacle_cells += 1;
+            self.m.obstacle_detected += usize::from(called_obstacle);
+        }
+        if called_obstacle {
+            self.m.called_obstacle += 1;
+            self.m.false_obstacle += usize::from(!obstacle);
+        }
         let called = cell.class == Class::Water;
         if called {
             self.m.called_water += 1;
@@ -169,6 +201,11 @@ impl Acc {
         self.m.seen_recall = ratio(self.m.seen_water_detected, self.m.seen_water_cells);
         self.m.false_rate_offshore = ratio(self.m.false_water_offshore, self.m.dry_offshore_cells);
         self.m.precision = ratio(self.m.called_true, self.m.called_water);
+        self.m.obstacle_recall = ratio(self.m.obstacle_detected, self.m.obstacle_cells);
+        self.m.obstacle_precision = ratio(
+            self.m.called_obstacle - self.m.false_obstacle,
+            self.m.called_obstacle,
+        );
         self.m.surface_rms_m = rms(self.surface2, self.m.surface_cells);
         self.m.depth_rms_m = rms(self.depth2, self.m.depth_cells);
         self.m.terrain_rms_m = rms(self.terrain2, self.m.terrain_cells);
@@ -180,12 +217,75 @@ fn ratio(a: usize, b: usize) -> Option<f64> {
     (b > 0).then(|| a as f64 / b as f64)
 }
 
+/// The vehicle's limits that make true terrain an obstacle: the mapper's defaults
+/// ([`crate::water::Vehicle`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ObstacleLimits {
+    pub max_step_m: f64,
+    pub max_slope_deg: f64,
+}
+
+impl Default for ObstacleLimits {
+    fn default() -> Self {
+        let v = crate::water::Vehicle::default();
+        ObstacleLimits {
+            max_step_m: v.max_step_m,
+            max_slope_deg: v.max_slope_deg,
+        }
+    }
+}
+
+impl ObstacleLimits {
+    /// Whether the true terrain makes the map cell centred at (x, y), of `mres` m, an
+    /// obstacle: its truth cell is one (an object), or the mapper's step and slope rule
+    /// over the true elevations at the centres of the cell and its eight neighbours says
+    /// so. Water truth cells are not terrain: a water centre is no obstacle, a water
+    /// neighbour is left out.
+    fn truth_obstacle(
+        &self,
+        index: &KeyMap<&MapCell>,
+        res: f64,
+        mres: f64,
+        x: f64,
+        y: f64,
+    ) -> bool {
+        let at = |x: f64, y: f64| {
+            index
+                .get(&CellKey::new(
+                    (x / res).floor() as i64,
+                    (y / res).floor() as i64,
+                ))
+                .copied()
+        };
+        let Some(t) = at(x, y) else {
+            return false;
+        };
+        if t.hazard == Hazard::Obstacle {
+            return true;
+        }
+        if t.class == Class::Water {
+            return false;
+        }
+        let nb: crate::hazard::Neighbourhood = std::array::from_fn(|j| {
+            let (dx, dy) = ((j % 3) as f64 - 1.0, (j / 3) as f64 - 1.0);
+            let z = at(x + dx * mres, y + dy * mres)
+                .filter(|n| n.class != Class::Water)
+                .map_or(f64::NAN, |n| n.z);
+            (z, 0.0)
+        });
+        let grad = self.max_slope_deg.to_radians().tan();
+        terrain_hazard(&nb, (t.z, 0.0), mres, self.max_step_m, grad).1 == Hazard::Obstacle
+    }
+}
+
 /// What `tarn eval` reports.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EvalReport {
     pub scene: String,
     pub map_resolution: f64,
     pub truth_resolution: f64,
+    /// The limits the obstacle truth is drawn with.
+    pub obstacle_limits: ObstacleLimits,
     pub bins: Vec<BinMetrics>,
     pub all: BinMetrics,
     /// Water recall split by what the colour camera saw of each water cell (all ranges),
@@ -264,6 +364,28 @@ impl EvalReport {
             f(&v.terrain),
             f(&v.unseen)
         ))
+    }
+
+    /// A Markdown table of the obstacle metrics by bin.
+    pub fn obstacle_markdown(&self) -> String {
+        let f = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
+        let mut s = String::from(
+            "| range (m) | true obstacles | detected | obstacle recall | called obstacles | false obstacles | obstacle precision |\n\
+             | --- | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+        );
+        for b in self.bins.iter().chain(std::iter::once(&self.all)) {
+            s.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} |\n",
+                b.range,
+                b.obstacle_cells,
+                b.obstacle_detected,
+                f(b.obstacle_recall),
+                b.called_obstacle,
+                b.false_obstacle,
+                f(b.obstacle_precision)
+            ));
+        }
+        s
     }
 
     /// A Markdown table of the bins (for READMEs).
@@ -449,6 +571,8 @@ struct Scored<'a> {
     offshore: bool,
     /// Distance of the map cell's centre to the path (m).
     d: f64,
+    /// The true terrain makes the cell an obstacle ([`ObstacleLimits`]).
+    obstacle: bool,
 }
 
 /// What every bin and band is scored from, computed once per map and truth.
@@ -474,6 +598,8 @@ impl<'a> Scorer<'a> {
         let index: KeyMap<&MapCell> = truth.cells.iter().map(|c| (c.key, c)).collect();
         let path: Vec<[f64; 2]> = info.trajectory.iter().map(|p| [p.x, p.y]).collect();
         let shore = Shore::new(truth);
+        let limits = ObstacleLimits::default();
+        let mres = map.resolution;
         let cells = map
             .cells
             .iter()
@@ -485,6 +611,7 @@ impl<'a> Scorer<'a> {
                     truth: t,
                     offshore: t.is_some_and(|t| t.class != Class::Water && !shore.near(key)),
                     d: distance_to_path(&path, c.x, c.y),
+                    obstacle: limits.truth_obstacle(&index, res, mres, c.x, c.y),
                 }
             })
             .collect();
@@ -528,7 +655,7 @@ impl<'a> Scorer<'a> {
     fn score(&self, keep: impl Fn(f64) -> bool) -> BinMetrics {
         let mut acc = Acc::default();
         for s in self.cells.iter().filter(|s| keep(s.d)) {
-            acc.add(s.cell, s.truth, s.offshore);
+            acc.add(s.cell, s.truth, s.offshore, s.obstacle);
         }
         for &(_, called) in self.seen.iter().flatten().filter(|(d, _)| keep(*d)) {
             acc.add_seen(called);
@@ -551,6 +678,7 @@ pub fn evaluate(map: &HazardMap, truth: &HazardMap, info: &TruthInfo) -> Result<
         scene: info.scene.clone(),
         map_resolution: map.resolution,
         truth_resolution: truth.resolution,
+        obstacle_limits: ObstacleLimits::default(),
         bins: (0..=BIN_EDGES.len())
             .map(|i| {
                 let mut m = s.score(|d| bin_of(d) == i);
@@ -1006,6 +1134,57 @@ mod tests {
             prop_assert_eq!(&evaluate(&shuffled, &truth, &info).unwrap(), &r);
             prop_assert_eq!(&evaluate_matrix_bands(&shuffled, &truth, &info).unwrap(), &m);
         }
+    }
+
+    #[test]
+    fn obstacles_are_scored_against_the_true_terrain_and_objects() {
+        // 0.25 m cells, 40 × 5: ground at 0 up to key 19, a 0.5 m step up from key 20 on
+        // (beyond the 0.25 m limit); key 35 is an object (truth hazard obstacle); key 30
+        // is water. The mapper's rule makes 20 (the upper side) a step: the true obstacles
+        // are keys 20 and 35.
+        let mut truth = raster(0.25, 40, 5, |kx, _| kx == 30);
+        for c in &mut truth.cells {
+            if c.key.x >= 20 {
+                c.z = 0.5;
+            }
+            if c.key.x == 35 {
+                c.class = Class::Obstacle;
+                c.hazard = Hazard::Obstacle;
+            }
+        }
+        let true_keys = [20, 35];
+        // The map calls the step's upper side (20) and a flat cell (5) obstacles.
+        let mut map = truth.clone();
+        for c in &mut map.cells {
+            c.class = Class::Ground;
+            c.hazard = if c.key.x == 20 || c.key.x == 5 {
+                Hazard::Obstacle
+            } else {
+                Hazard::Free
+            };
+        }
+        let r = evaluate(&map, &truth, &info(0.25, &[[0.0, 0.625]], None)).unwrap();
+        let a = &r.all;
+        assert_eq!(a.obstacle_cells, true_keys.len() * 5);
+        assert_eq!((a.obstacle_detected, a.obstacle_recall), (5, Some(0.5)));
+        assert_eq!((a.called_obstacle, a.false_obstacle), (10, 5));
+        assert_eq!(a.obstacle_precision, Some(0.5));
+        // By range: key 5 (1.375 m) in 0-5, keys 20, 35 (5.125, 8.875 m) in 5-10.
+        assert_eq!((r.bins[0].obstacle_cells, r.bins[0].false_obstacle), (0, 5));
+        assert_eq!(
+            (r.bins[1].obstacle_cells, r.bins[1].obstacle_detected),
+            (10, 5)
+        );
+        assert_eq!(r.bins[1].obstacle_precision, Some(1.0));
+        // A noisy flat map of a flat truth has no true obstacle and scores none.
+        let flat = raster(0.25, 40, 5, |_, _| false);
+        let r = evaluate(&flat, &flat, &info(0.25, &[[0.0, 0.625]], None)).unwrap();
+        assert_eq!((r.all.obstacle_cells, r.all.called_obstacle), (0, 0));
+        assert_eq!(
+            (r.all.obstacle_recall, r.all.obstacle_precision),
+            (None, None)
+        );
+        assert_eq!(r.obstacle_limits, ObstacleLimits::default());
     }
 
     #[test]

@@ -78,7 +78,8 @@ pub struct ColourView {
 /// The truth raster over every whole cell of the terrain: z is the terrain elevation, or
 /// the water surface for water cells; depth is the water depth (0 when dry); class from
 /// water, object footprints and surface materials; hazard from the fording depth (objects
-/// that are obstacles are hazard 3).
+/// of an obstacle material are hazard 3; a flat patch of such a material is not: `tarn
+/// eval` adds the obstacles of the terrain's own steps and slopes).
 pub fn truth_map(w: &World) -> HazardMap {
     let res = w.scene.truth_resolution;
     let t = &w.terrain;
@@ -103,7 +104,7 @@ pub fn truth_map(w: &World) -> HazardMap {
                 }
                 None => {
                     let c = w.dry_class(x, y);
-                    let hz = if c == Class::Obstacle {
+                    let hz = if w.object_obstacle(x, y) {
                         Hazard::Obstacle
                     } else {
                         Hazard::Free

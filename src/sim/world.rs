@@ -571,6 +571,14 @@ impl World {
             .max_by(|a, b| a.1.total_cmp(&b.1))
     }
 
+    /// Whether an object of an obstacle material (a rock, a building) stands at (x, y): a
+    /// geometric obstacle, unlike a flat patch of the same material.
+    pub fn object_obstacle(&self, x: f64, y: f64) -> bool {
+        self.footprints
+            .iter()
+            .any(|f| f.class == Class::Obstacle && f.covers(x, y))
+    }
+
     /// Truth class of the dry cell at (x, y): object footprints, then the surface material.
     pub fn dry_class(&self, x: f64, y: f64) -> Class {
         if let Some(f) = self.footprints.iter().find(|f| f.covers(x, y)) {

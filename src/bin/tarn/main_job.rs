@@ -61,6 +61,8 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
     let e = tarn::eval::evaluate_dirs(out, &sim_dir)?;
     println!("tarn: accuracy against the truth (by distance from the vehicle's path)");
     print!("{}", e.markdown());
+    println!("tarn: obstacles against the truth");
+    print!("{}", e.obstacle_markdown());
     if let Some(l) = e.colour_view_line() {
         println!("  {l}");
     }

@@ -99,6 +99,11 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
             r.scene, r.map_resolution, r.truth_resolution
         );
         print!("{}", r.markdown());
+        println!(
+            "obstacles (step > {} m or slope > {}° of the true terrain, or an object):",
+            r.obstacle_limits.max_step_m, r.obstacle_limits.max_slope_deg
+        );
+        print!("{}", r.obstacle_markdown());
         if let Some(l) = r.colour_view_line() {
             println!("{l}");
         }
