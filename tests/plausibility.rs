@@ -277,3 +277,32 @@ fn far_points_in_clouds_build_with_bounded_memory() {
         assert!(png.width() < 1000 && png.height() < 1000);
     }
 }
+
+/// Logs whose Schema or Channel records carry a corrupted length prefix (a string claiming
+/// 2–3 GB inside a record of a few hundred bytes, in a chunk or in the summary section):
+/// `tarn info` and `tarn build` read around them under a 2 GB address-space limit instead
+/// of asking for the claimed size.
+#[test]
+fn corrupted_length_prefixes_in_logs_allocate_nothing_they_claim() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/regressions/mcap");
+    let out = tempfile::tempdir().unwrap();
+    for name in [
+        "channel-string-claims-gigabytes.mcap",
+        "record-string-claims-gigabytes.mcap",
+    ] {
+        let log = dir.join(name);
+        for args in [
+            vec!["info", p(&log)],
+            vec!["build", p(&log), "--out", p(out.path())],
+        ] {
+            let o = run_capped(&args);
+            let err = text(&o.stderr);
+            assert!(
+                matches!(o.status.code(), Some(0 | 1 | 3)),
+                "{name} {args:?}: {:?}\n{err}",
+                o.status
+            );
+            assert!(!err.contains("memory allocation"), "{name}: {err}");
+        }
+    }
+}

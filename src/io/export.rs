@@ -637,7 +637,11 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         let hazard = |c: &MapCell| c.class == Class::Water || c.hazard != Hazard::Free;
         order.sort_by_key(|&i| hazard(&map.cells[i]));
     }
-    for c in order.into_iter().map(|i| &map.cells[i]) {
+    for (n, c) in order.into_iter().map(|i| &map.cells[i]).enumerate() {
+        // A stop request leaves the picture unfinished; `write_map_png` then writes nothing.
+        if n % 65_536 == 0 && crate::interrupt::stop_requested() {
+            break;
+        }
         // Slopes over two cells each way (where observed) to keep per-cell noise down.
         let z = |dx: i64, dy: i64| elev.get(&CellKey::new(c.key.x + dx, c.key.y + dy)).copied();
         let slope = |pts: [(i64, Option<f64>); 4]| {
@@ -801,6 +805,8 @@ pub const MAP_PNG_MAX_SIDE: u32 = 4096;
 pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {
     crate::interrupt::check(&format!("writing {}", path.display()))?;
     let img = render_map_png(map);
+    // Rendering stops early on a stop request: an unfinished picture is not written.
+    crate::interrupt::check(&format!("writing {}", path.display()))?;
     write_atomic(path, |w| {
         img.write_to(w, image::ImageFormat::Png)
             .map_err(std::io::Error::other)

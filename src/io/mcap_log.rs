@@ -993,11 +993,49 @@ pub fn summarize_quick(path: impl AsRef<Path>) -> Result<LogSummary> {
 
 /// [`LogSummary`] from the summary section's statistics record, if the file has a valid
 /// footer, a summary and statistics (`None` on any error: the caller streams instead).
+/// `Some` when every Schema and Channel record of the summary section has its
+/// length-prefixed fields inside the record ([`prefixed_fields_fit`]): the `mcap` crate's
+/// summary reader parses them itself and would reserve whatever a corrupted prefix claims.
+/// `None` for anything unexpected (the caller then reads the log in full, checked).
+fn summary_fields_fit(file: &mut File, size: u64) -> Option<()> {
+    use mcap::records::op;
+    use std::io::{Seek, SeekFrom};
+    // Footer record (opcode, length 20, summary start, summary offset start, CRC), magic.
+    const TAIL: u64 = 1 + 8 + 20 + 8;
+    file.seek(SeekFrom::Start(size.checked_sub(TAIL)?)).ok()?;
+    let mut tail = [0u8; TAIL as usize];
+    file.read_exact(&mut tail).ok()?;
+    let start = u64::from_le_bytes(tail[9..17].try_into().ok()?);
+    let end = size - TAIL;
+    if start == 0 {
+        return Some(());
+    }
+    if start >= end {
+        return None;
+    }
+    file.seek(SeekFrom::Start(start)).ok()?;
+    let mut body = vec![0u8; usize::try_from(end - start).ok()?];
+    file.read_exact(&mut body).ok()?;
+    let mut at = 0usize;
+    while at < body.len() {
+        let head = body.get(at..at.checked_add(9)?)?;
+        let opcode = head[0];
+        let len = usize::try_from(u64::from_le_bytes(head[1..9].try_into().ok()?)).ok()?;
+        let rec = body.get(at + 9..(at + 9).checked_add(len)?)?;
+        if matches!(opcode, op::SCHEMA | op::CHANNEL) && !prefixed_fields_fit(opcode, rec) {
+            return None;
+        }
+        at += 9 + len;
+    }
+    Some(())
+}
+
 fn summary_section(path: &Path) -> Option<LogSummary> {
     use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
     use std::io::Seek;
     let mut file = File::open(path).ok()?;
     let size = file.metadata().ok()?.len();
+    summary_fields_fit(&mut file, size)?;
     let mut reader = SummaryReader::new_with_options(
         SummaryReaderOptions::default()
             .with_file_size(size)
