@@ -609,60 +609,6 @@ impl LidarCueModel {
         }
     }
 
-    /// Whether raw point `p`, below the level `level`, lies no deeper than the optics can
-    /// see the bottom of water from where its beam meets the water.
-    fn could_be_bottom(&self, o: Point3<f64>, p: Point3<f64>, level: f64) -> bool {
-        let u = (p - o).normalize();
-        let c = o + u * ((o.z - level) / -u.z);
-        let d_c = crate::geom::hypot(c.x - o.x, c.y - o.y);
-        self.optics
-            .correct_bottom_return(o, p, level)
-            .is_ok_and(|q| level - q.z <= self.max_visible_depth(d_c) + self.cfg.depth_tolerance_m)
-    }
-
-    /// Whether a return below the level at `level` is brighter than any bottom under water
-    /// there could be: its normalised reflectivity above the brightest of the line's recent
-    /// dry ground (`bright`) times the optics' loss through the water (Fresnel transmission
-    /// in and out, absorption along the path: [`LidarWaterModel::return_ratio`] over
-    /// [`LidarWaterModel::dry_ratio`] at the depth the return would have). Water cannot
-    /// make a return brighter, so such a return is dry ground below the level. Says nothing
-    /// without a strength channel or recent ground to compare with.
-    #[allow(clippy::too_many_arguments)]
-    fn too_bright_for_water(
-        &self,
-        cloud: &PointCloud,
-        slot: usize,
-        cos_inc: f64,
-        range: f64,
-        level: f64,
-        o: Point3<f64>,
-        bright: &VecDeque<f64>,
-        channel: &ReflectivityConfig,
-    ) -> bool {
-        let Some(brightest) = bright.iter().copied().reduce(f64::max) else {
-            return false;
-        };
-        let Some(v) = normalised_reflectivity(cloud, slot, cos_inc, range, channel) else {
-            return false;
-        };
-        let p = cloud.point_in_map(slot);
-        let Ok(q) = self.optics.correct_bottom_return(o, p, level) else {
-            return false;
-        };
-        let depth = level - q.z;
-        // Lookahead where the beam meets the water.
-        let u = (p - o).normalize();
-        let c = o + u * ((o.z - level) / -u.z);
-        let d = crate::geom::hypot(c.x - o.x, c.y - o.y);
-        let (Ok(wet), Ok(dry)) = (
-            self.optics.return_ratio(d, depth.max(0.0)),
-            self.optics.dry_ratio(d),
-        ) else {
-            return false;
-        };
-        dry > 0.0 && v > brightest * (wet / dry)
-    }
-
     fn walk(
         &self,
         cloud: &PointCloud,
@@ -707,14 +653,7 @@ impl LidarCueModel {
                 let slack = if slope.is_some() { 0.0 } else { g_max * run };
                 let dz = p.z - expected;
                 let below = dz < -(cfg.below_gate_m + slack) && v.z < 0.0 && o.z > level;
-                // A return below the level that could be the bottom of water there but is
-                // brighter than any bottom under water could be is dry ground.
-                let dry_below = below
-                    && self.could_be_bottom(o, p, level)
-                    && self.too_bright_for_water(
-                        cloud, s, cos_inc, range, level, o, &bright, &channel,
-                    );
-                if below && !dry_below {
+                if below {
                     // Below the level: bottom or specular.
                     let u = v / range;
                     let t = (o.z - level) / -u.z;
@@ -749,11 +688,9 @@ impl LidarCueModel {
                             mirrored: Point3::new(p.x, p.y, 2.0 * level - p.z),
                         });
                     }
-                } else if dry_below || dz <= cfg.above_gate_m + slack {
-                    // Ground (or a return below the level as bright as dry ground, which no
-                    // water covers: the far side of a kerb, the floor of a dry ditch). The
-                    // slope of the recent ground, once it spans enough lookahead to measure
-                    // one, clamped to what ground does.
+                } else if dz <= cfg.above_gate_m + slack {
+                    // Ground. The slope of the recent ground, once it spans enough
+                    // lookahead to measure one, clamped to what ground does.
                     recent.push((d, p.z));
                     if let Some(g) = recent.slope() {
                         slope = Some(g.clamp(-g_max, g_max));
@@ -812,8 +749,8 @@ impl LidarCueModel {
     }
 }
 
-/// Ground returns along a scan line whose brightest bounds a bottom return
-/// ([`LidarCueModel::too_bright_for_water`]).
+/// Ground returns along a scan line whose brightest bounds what the shallowest water
+/// could return ([`LidarCueModel::shallowest_loss`]).
 const BRIGHT_WINDOW: usize = 16;
 
 /// What one slot of a scan line contributed.
