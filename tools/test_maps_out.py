@@ -45,18 +45,16 @@ def write_cloud(path, seed=3):
 
 
 def read_map_ply(path):
-    """map.ply's vertices (the contract's layout) with the origin comment added back."""
+    """map.ply's vertices, laid out as its header says (x y z are `double` in the map frame
+    when a `float` would lose millimetres), and their x and y in the map frame."""
     data = path.read_bytes()
     end = data.index(b"end_header\n") + len(b"end_header\n")
-    origin = np.zeros(2)
-    for line in data[:end].decode().splitlines():
-        if line.startswith("comment origin"):
-            origin = np.array([float(v) for v in line.split()[2:4]])
-    dt = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("elevation_std", "<f4"),
-                   ("water", "<f4"), ("depth", "<f4"), ("class", "u1"), ("hazard", "u1"),
-                   ("red", "u1"), ("green", "u1"), ("blue", "u1")])
-    v = np.frombuffer(data[end:], dtype=dt)
-    return v, v["x"].astype(np.float64) + origin[0], v["y"].astype(np.float64) + origin[1]
+    types = {"float": "<f4", "double": "<f8", "uchar": "u1", "int": "<i4", "uint": "<u4"}
+    fields = [(name, types[t]) for kind, t, name in
+              (line.split() for line in data[:end].decode().splitlines()
+               if line.startswith("property "))]
+    v = np.frombuffer(data[end:], dtype=np.dtype(fields))
+    return v, v["x"].astype(np.float64), v["y"].astype(np.float64)
 
 
 @pytest.fixture(scope="module")
