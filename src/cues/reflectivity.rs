@@ -115,19 +115,7 @@ pub fn normalised_reflectivity(
     if !(range >= cfg.min_range_m && range <= cfg.max_range_m && cos_inc >= cfg.min_cos_incidence) {
         return None;
     }
-    let (v, calibrated) = match cfg.channel {
-        Channel::Reflectivity => (cloud.reflectivity.as_ref()?[slot], true),
-        Channel::Intensity => (cloud.intensity.as_ref()?[slot], false),
-        Channel::Auto => match (&cloud.reflectivity, &cloud.intensity) {
-            (Some(r), _) => (r[slot], true),
-            (None, Some(i)) => (i[slot], false),
-            (None, None) => return None,
-        },
-    };
-    let v = v as f64;
-    if !(v.is_finite() && v > 0.0) {
-        return None;
-    }
+    let (v, calibrated) = channel_value(cloud, slot, cfg.channel)?;
     Some(if calibrated {
         v / cos_inc
     } else {
