@@ -3,11 +3,14 @@
 //! is refused; points at 1e12 m and 1e20 m in a PLY, a KITTI scan or a log build cleanly
 //! under a 2 GB address-space limit, dropped and counted.
 
+mod drive_common;
+use drive_common::{base, lidar_ext, scan};
+
 use std::path::Path;
 use std::process::{Command, Output};
 
-use nalgebra::{Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
-use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
+use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+use tarn::geom::Pose;
 use tarn::io::mcap_log::{LogWriter, WriteOptions};
 use tarn::io::ros::{Header, TfMessage, TransformStamped};
 
@@ -30,36 +33,6 @@ fn p(path: &Path) -> &str {
 
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
-}
-
-fn base(t: f64) -> Pose {
-    pose_xyz_rpy(2.0 * t, 0.2 * t, 0.0, 0.0, 0.0, 0.02 * t)
-}
-
-fn lidar_ext() -> Pose {
-    pose_xyz_rpy(0.2, 0.0, 1.8, 0.0, 0.0, 0.0)
-}
-
-/// A `rings` × `cols` scan of the plane z = 0 seen from `sensor_to_map`.
-fn scan(sensor_to_map: &Pose, rings: usize, cols: usize) -> PointCloud {
-    let o = sensor_to_map * Point3::origin();
-    let mut xyz = Vec::with_capacity(rings * cols);
-    for r in 0..rings {
-        let el = (-25.0 + 23.0 * r as f64 / (rings - 1) as f64).to_radians();
-        for c in 0..cols {
-            let az = (c as f64 * 360.0 / cols as f64).to_radians();
-            let ds = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-            let d = sensor_to_map * ds;
-            let t = -o.z / d.z;
-            xyz.push(if t > 0.5 && t < 30.0 {
-                let q = ds * t;
-                [q.x as f32, q.y as f32, q.z as f32]
-            } else {
-                [f32::NAN; 3]
-            });
-        }
-    }
-    PointCloud::organized(rings, cols, xyz).unwrap()
 }
 
 #[derive(Default, Clone, Copy)]

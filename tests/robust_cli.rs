@@ -3,11 +3,13 @@
 //! runs and thread counts; and the catalogue of bad input in README ("Bad input") — each
 //! row is a test here that checks the message on stderr and the failing exit code.
 
+mod drive_common;
+use drive_common::{base, lidar_ext, scan};
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use nalgebra::{Point3, Vector3};
-use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
+use nalgebra::Point3;
 use tarn::io::mcap_log::{LogWriter, WriteOptions};
 use tarn::io::ros::{Header, TfMessage, TransformStamped};
 
@@ -23,36 +25,6 @@ fn run(args: &[&str]) -> Output {
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
-}
-
-fn base(t: f64) -> Pose {
-    pose_xyz_rpy(2.0 * t, 0.2 * t, 0.0, 0.0, 0.0, 0.02 * t)
-}
-
-fn lidar_ext() -> Pose {
-    pose_xyz_rpy(0.2, 0.0, 1.8, 0.0, 0.0, 0.0)
-}
-
-/// A `rings` × `cols` scan of the plane z = 0 seen from `sensor_to_map`.
-fn scan(sensor_to_map: &Pose, rings: usize, cols: usize) -> PointCloud {
-    let o = sensor_to_map * Point3::origin();
-    let mut xyz = Vec::with_capacity(rings * cols);
-    for r in 0..rings {
-        let el = (-25.0 + 23.0 * r as f64 / (rings - 1) as f64).to_radians();
-        for c in 0..cols {
-            let az = (c as f64 * 360.0 / cols as f64).to_radians();
-            let ds = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-            let d = sensor_to_map * ds;
-            let t = -o.z / d.z;
-            xyz.push(if t > 0.5 && t < 30.0 {
-                let q = ds * t;
-                [q.x as f32, q.y as f32, q.z as f32]
-            } else {
-                [f32::NAN; 3]
-            });
-        }
-    }
-    PointCloud::organized(rings, cols, xyz).unwrap()
 }
 
 /// What a test log holds besides a plain drive.

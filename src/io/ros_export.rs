@@ -32,6 +32,7 @@ use std::path::Path;
 use super::mcap_log::{LogWriter, WriteOptions};
 use super::raster::{Layer, MapRaster};
 use super::ros::cdr::{CdrReader, CdrResult, CdrWriter, Endian};
+use super::ros::msgs::{with_deps, HEADER_DEF, TIME_DEF};
 use super::ros::{Header, Time};
 use crate::error::Result;
 use crate::hazard::{Hazard, HazardMap};
@@ -351,26 +352,8 @@ impl OccupancyGridMsg {
     }
 }
 
-const SEP: &str =
-    "================================================================================\n";
-
-fn with_deps(main: &str, deps: &[(&str, &str)]) -> String {
-    let mut s = String::from(main);
-    for (name, def) in deps {
-        s.push_str(SEP);
-        s.push_str("MSG: ");
-        s.push_str(name);
-        s.push('\n');
-        s.push_str(def);
-    }
-    s
-}
-
-const HEADER: (&str, &str) = (
-    "std_msgs/Header",
-    "builtin_interfaces/Time stamp\nstring frame_id\n",
-);
-const TIME: (&str, &str) = ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n");
+const HEADER: (&str, &str) = ("std_msgs/Header", HEADER_DEF);
+const TIME: (&str, &str) = ("builtin_interfaces/Time", TIME_DEF);
 const POSE: (&str, &str) = (
     "geometry_msgs/Pose",
     "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",

@@ -378,10 +378,11 @@ pub mod schema_name {
 const SEP: &str =
     "================================================================================\n";
 
-const TIME_DEF: &str = "int32 sec\nuint32 nanosec\n";
-const HEADER_DEF: &str = "builtin_interfaces/Time stamp\nstring frame_id\n";
+pub(crate) const TIME_DEF: &str = "int32 sec\nuint32 nanosec\n";
+pub(crate) const HEADER_DEF: &str = "builtin_interfaces/Time stamp\nstring frame_id\n";
 
-fn with_deps(main: &str, deps: &[(&str, &str)]) -> String {
+/// A ros2msg schema text: the main definition, then each dependency after a separator line.
+pub(crate) fn with_deps(main: &str, deps: &[(&str, &str)]) -> String {
     let mut s = String::from(main);
     for (name, def) in deps {
         s.push_str(SEP);
