@@ -222,7 +222,7 @@ kind = "level"
 level = -0.1
 centre = [24.0, 0.0]
 radius = 4.5
-attenuation = 4.0
+attenuation = 11.1
 colour = [0.12, 0.10, 0.07]
 
 [[water]]
@@ -230,7 +230,7 @@ kind = "level"
 level = -0.06
 centre = [8.0, 2.0]
 radius = 2.0
-attenuation = 4.0
+attenuation = 11.1
 colour = [0.12, 0.10, 0.07]
 
 [sky]

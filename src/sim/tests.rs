@@ -33,7 +33,7 @@ kind = "level"
 level = -0.2
 centre = [12.0, 0.0]
 radius = 9.0
-attenuation = 0.8
+attenuation = 7.9
 [[objects]]
 kind = "building"
 position = [30.0, 0.0]
@@ -112,7 +112,7 @@ fn bad_scenes_name_the_key() {
         (("level = -0.2\n", ""), "water[0].level"),
         (("radius = 9.0", "radius = 0.0"), "water[0].radius"),
         (
-            ("attenuation = 0.8", "attenuation = -1.0"),
+            ("attenuation = 7.9", "attenuation = -1.0"),
             "water[0].attenuation",
         ),
         (
@@ -331,9 +331,27 @@ fn bottom_returns_exactly_where_the_optics_model_says() {
 }
 
 #[test]
+fn water_clearer_than_pure_water_is_refused() {
+    let t = scene_text(1.5, "").replacen("attenuation = 7.9", "attenuation = 1.0", 1);
+    let e = World::build(&Scene::from_toml_str(&t).unwrap())
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        e.contains("water[0].attenuation") && e.contains("no water is clearer"),
+        "{e}"
+    );
+    let t = scene_text(1.5, "").replacen("attenuation = 7.9\n", "", 1);
+    let w = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
+    let nm = w.scene.rig.lidar.as_ref().unwrap().wavelength_nm;
+    let pure = crate::optics::absorption_per_m(nm).unwrap();
+    assert_eq!(w.water[0].attenuation, pure);
+}
+
+#[test]
 fn specular_bounce_lands_on_the_original_ray_at_the_total_path() {
     // Deep murky water: no bottom return; the beam bounces off the pond to the building.
-    let t = scene_text(1.5, "").replacen("attenuation = 0.8", "attenuation = 20.0", 1);
+    let t = scene_text(1.5, "").replacen("attenuation = 7.9", "attenuation = 20.0", 1);
     let w = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
     let l = Lidar::new(w.scene.rig.lidar.as_ref().unwrap()).unwrap();
     let o = Point3::new(0.0, 0.0, 1.5);
@@ -385,7 +403,7 @@ fn stereo_on_still_water_triangulates_the_mirror_image() {
     };
     assert_eq!(s.trace(&w, &o, &d2).is_some(), refl_hits);
     // Ripples break the reflection up.
-    let t = scene_text(0.5, "").replacen("attenuation = 0.8", "attenuation = 0.8\nripple = 0.1", 1);
+    let t = scene_text(0.5, "").replacen("attenuation = 7.9", "attenuation = 7.9\nripple = 0.1", 1);
     let w2 = World::build(&Scene::from_toml_str(&t).unwrap()).unwrap();
     assert!(s.trace(&w2, &o, &d).is_none());
 }
@@ -898,9 +916,9 @@ fn a_rig_cannot_carry_scene_truth() {
     )
     .unwrap();
     let mut outs = Vec::new();
-    for (i, (att, level, fording)) in [(0.8, -0.2, 0.3), (3.0, -0.1, 0.5)].iter().enumerate() {
+    for (i, (att, level, fording)) in [(7.9, -0.2, 0.3), (10.0, -0.1, 0.5)].iter().enumerate() {
         let t = scene_text(0.5, "")
-            .replacen("attenuation = 0.8", &format!("attenuation = {att}"), 1)
+            .replacen("attenuation = 7.9", &format!("attenuation = {att}"), 1)
             .replacen("level = -0.2", &format!("level = {level}"), 1)
             .replacen(
                 "seed = 7",

@@ -404,7 +404,8 @@ impl World {
         let water = scene
             .water
             .iter()
-            .map(|w| {
+            .enumerate()
+            .map(|(i, w)| {
                 let (point, normal) = match w.kind {
                     WaterKind::Level => {
                         let c = w.centre.unwrap_or_default();
@@ -422,17 +423,27 @@ impl World {
                         (Point3::new(a[0], a[1], a[2]), n)
                     }
                 };
+                // Pure water at the lidar's wavelength is the clearest water there is: a
+                // scene may make its water murkier, never clearer.
+                let nm = scene
+                    .rig
+                    .lidar
+                    .as_ref()
+                    .map(|l| l.wavelength_nm)
+                    .unwrap_or(905.0);
+                let pure = crate::optics::absorption_per_m(nm)?;
                 let attenuation = match w.attenuation {
-                    Some(a) => a,
-                    None => {
-                        let nm = scene
-                            .rig
-                            .lidar
-                            .as_ref()
-                            .map(|l| l.wavelength_nm)
-                            .unwrap_or(905.0);
-                        crate::optics::absorption_per_m(nm)?
+                    Some(a) if a < pure => {
+                        return Err(Error::invalid(
+                            format!("water[{i}].attenuation"),
+                            format!(
+                                "{a} /m is below pure water's absorption at the lidar's \
+                                 {nm} nm ({pure:.2} /m): no water is clearer"
+                            ),
+                        ))
                     }
+                    Some(a) => a,
+                    None => pure,
                 };
                 Ok(WaterBody {
                     spec: w.clone(),
