@@ -7,7 +7,7 @@
 
 use serde::Serialize;
 
-use super::lidar::{DryReach, LidarCueModel, LidarCueStats};
+use super::lidar::{LidarCueModel, LidarCueStats, ScanSurface};
 use super::stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig};
 use crate::error::Result;
 use crate::grid::{IngestStats, RangeNoise, RollingGrid};
@@ -76,14 +76,14 @@ impl FrameCues {
     }
 
     /// The lidar half of [`FrameCues::apply`]: runs only when a lidar cue model is
-    /// configured and the frame has a lidar cloud. Returns the scan's dry reach
-    /// ([`DryReach`]) for the image labels that follow.
+    /// configured and the frame has a lidar cloud. Returns what the scan says of the
+    /// surface ([`ScanSurface`]) for the image labels that follow.
     pub fn apply_lidar(
         &self,
         frame: &Frame,
         grid: &mut RollingGrid,
         rep: &mut FrameCuesReport,
-    ) -> Result<Option<DryReach>> {
+    ) -> Result<Option<ScanSurface>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(model), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
             let out = model.run(cloud, res, z_ref)?;
@@ -92,7 +92,7 @@ impl FrameCues {
             let batch = out.evidence.into_batch();
             rep.evidence_cells += batch.len();
             rep.evidence_dropped += grid.apply_evidence(&batch);
-            return Ok(out.reach);
+            return Ok(Some(out.surface));
         }
         Ok(None)
     }

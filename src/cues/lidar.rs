@@ -259,9 +259,26 @@ pub struct LidarCues {
     /// The channel's law fitted to this scan's ground returns, when the reflectivity cue
     /// ran.
     pub reflectivity_law: Option<super::reflectivity::ChannelLaw>,
+    /// What the scan says of the surface, for the image labels that follow.
+    pub surface: ScanSurface,
+}
+
+/// What one scan says of the surface, for the image labels
+/// ([`crate::project::FrameLabels`]): how far dry ground returned, and points (map frame)
+/// where it found dry ground or water.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ScanSurface {
     /// How far dry ground returned along each azimuth of this scan
     /// ([`LidarCueConfig::scan_dry_limit`]; `None` when that is off).
     pub reach: Option<DryReach>,
+    /// Ground returns brighter than any water there allows (at the walked level, or at
+    /// the depth below it they lie): returns no water could have given. (Inside the
+    /// diagnostic interval water shallower than the least depth the interval is drawn for
+    /// still returns, so a dim return there is not counted.)
+    pub dry: Vec<Point3<f64>>,
+    /// Where missing beams inside the interval (and short of the scan's dry limit) meet
+    /// the ground level, and where bottom and specular returns' beams cross the water.
+    pub wet: Vec<Point3<f64>>,
 }
 
 /// How far dry ground returned along each azimuth of one scan: the farthest lookahead of a
@@ -497,6 +514,7 @@ impl LidarCueModel {
             ..LidarCueStats::default()
         };
         let mut samples: Vec<ReflectivitySample> = Vec::new();
+        let mut surface = ScanSurface::default();
         let events = walked
             .iter()
             .zip(&dry_limit)
@@ -516,15 +534,20 @@ impl LidarCueModel {
                     let [lo, hi] = stats.noret_lookahead_mm.unwrap_or([mm, mm]);
                     stats.noret_lookahead_mm = Some([lo.min(mm), hi.max(mm)]);
                     ev.add_with_level(x, y, level, |e| e.noret = e.noret.saturating_add(1));
+                    surface.wet.push(Point3::new(x, y, level));
                 }
                 Event::Ground {
                     slot,
                     x,
                     y,
                     diag,
+                    bright,
                     cos_inc,
                     range,
                 } => {
+                    if bright {
+                        surface.dry.push(cloud.point_in_map(slot));
+                    }
                     if diag {
                         stats.diag_ret += 1;
                         if let Some(e) = ev.at(x, y) {
@@ -556,6 +579,7 @@ impl LidarCueModel {
                         None => e.add_depth(depth),
                     });
                     corrected.xyz[slot] = [f32::NAN; 3];
+                    surface.wet.push(Point3::new(x, y, level));
                 }
                 Event::Specular {
                     slot,
@@ -566,6 +590,7 @@ impl LidarCueModel {
                 } => {
                     stats.specular += 1;
                     ev.add_with_level(cx, cy, level, |e| e.reflect = e.reflect.saturating_add(1));
+                    surface.wet.push(Point3::new(cx, cy, level));
                     let p = to_frame * mirrored;
                     corrected.xyz[slot] = [p.x as f32, p.y as f32, p.z as f32];
                 }
@@ -580,7 +605,7 @@ impl LidarCueModel {
                 law = Some(r.law);
             }
         }
-        let reach = self.cfg.scan_dry_limit.then(|| {
+        surface.reach = self.cfg.scan_dry_limit.then(|| {
             let az = lines.iter().map(|line| {
                 line.iter()
                     .find_map(|&s| dirs[s as usize])
@@ -594,7 +619,7 @@ impl LidarCueModel {
             stats,
             reflectivity_threshold: reference,
             reflectivity_law: law,
-            reach,
+            surface,
         })
     }
 
@@ -700,10 +725,11 @@ impl LidarCueModel {
                     far = far.max(d);
                     let r = normalised_reflectivity(cloud, s, cos_inc, range, &channel);
                     // Brighter than the bottom of even the shallowest water there could
-                    // return: a return water would not give, as one inside the interval.
+                    // return, with a bed [`BED_BRIGHTER`] than the recent ground: a return
+                    // water would not give, as one inside the interval.
                     let dry_bright = r.is_some_and(|r| {
-                        let brightest = bright.iter().copied().fold(f64::NAN, f64::max);
-                        r > brightest * self.shallowest_loss(d)
+                        bright_reference(&bright)
+                            .is_some_and(|b| r > BED_BRIGHTER * b * self.shallowest_loss(d))
                     });
                     if let Some(r) = r {
                         if bright.len() == BRIGHT_WINDOW {
@@ -722,6 +748,7 @@ impl LidarCueModel {
                         x: p.x,
                         y: p.y,
                         diag,
+                        bright: dry_bright,
                         cos_inc,
                         range,
                     });
@@ -749,9 +776,38 @@ impl LidarCueModel {
     }
 }
 
-/// Ground returns along a scan line whose brightest bounds what the shallowest water
-/// could return ([`LidarCueModel::shallowest_loss`]).
+/// Ground returns along a scan line whose brightest bounds what the bottom of water there
+/// could return ([`bright_reference`]).
 const BRIGHT_WINDOW: usize = 16;
+
+/// How much brighter than the ground before it the bed of water may be, at the lidar's
+/// wavelength: natural surfaces span about 0.1 (wet dark soil) to 0.6 (pale sand, dry
+/// concrete) in albedo, and a bed three times its bank (sand or gravel under soil and
+/// grass) is allowed before a return at the level is called brighter than water allows.
+const BED_BRIGHTER: f64 = 3.0;
+
+/// The brightest of a line's recent ground returns after its two brightest: a return
+/// normalised as level ground that is not (a kerb's vertical face, met head-on and divided
+/// by the grazing incidence of the ground around it, comes out several times brighter
+/// than the ground) is one or two beams of a line, and must not raise the bound the
+/// ground after it is judged by. With fewer than three returns, the brightest.
+fn bright_reference(bright: &VecDeque<f64>) -> Option<f64> {
+    let mut top = [f64::NEG_INFINITY; 3];
+    for &v in bright.iter().filter(|v| !v.is_nan()) {
+        if v > top[0] {
+            top = [v, top[0], top[1]];
+        } else if v > top[1] {
+            top = [top[0], v, top[1]];
+        } else if v > top[2] {
+            top[2] = v;
+        }
+    }
+    match top {
+        [a, _, _] if a == f64::NEG_INFINITY => None,
+        [a, _, c] if c == f64::NEG_INFINITY => Some(a),
+        [_, _, c] => Some(c),
+    }
+}
 
 /// What one slot of a scan line contributed.
 #[derive(Debug, Clone, Copy)]
@@ -769,7 +825,10 @@ enum Event {
         slot: usize,
         x: f64,
         y: f64,
+        /// Inside the diagnostic interval, or brighter than water allows.
         diag: bool,
+        /// Brighter than water allows.
+        bright: bool,
         cos_inc: f64,
         range: f64,
     },

@@ -40,6 +40,7 @@ use crate::grid::{key_of, quantize_mm, CellKey, Evidence};
 pub use frame::{FrameCueConfig, FrameCues, FrameCuesReport};
 pub use lidar::{
     estimate_sensor_height, BeamModel, DryReach, LidarCueConfig, LidarCueModel, LidarCues,
+    ScanSurface,
 };
 pub use reflectivity::{normalised_reflectivity, ReflectivityConfig};
 pub use stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig, StereoCues};

@@ -582,3 +582,35 @@ proptest::proptest! {
         }
     }
 }
+
+#[test]
+fn bright_reference_drops_the_two_brightest() {
+    let r = |v: &[f64]| bright_reference(&v.iter().copied().collect());
+    assert_eq!(r(&[]), None);
+    assert_eq!(r(&[f64::NAN]), None);
+    assert_eq!(r(&[2.0]), Some(2.0));
+    assert_eq!(r(&[2.0, 5.0]), Some(5.0));
+    assert_eq!(r(&[1.0, 2.0, 3.0, 100.0, 200.0]), Some(3.0));
+    assert_eq!(r(&[1.0, f64::NAN, 3.0, 2.0, 9.0, 9.0]), Some(3.0));
+}
+
+proptest::proptest! {
+    /// A kerb's face, met head-on, comes out of the level-ground normalisation several
+    /// times brighter than the ground: one or two such returns do not move the bound.
+    #[test]
+    fn two_outliers_do_not_raise_the_bright_reference(
+        ground in proptest::collection::vec(0.1f64..10.0, 1..14),
+        k in 1usize..3,
+        spike in 11.0f64..1e6,
+    ) {
+        let mut line: std::collections::VecDeque<f64> = ground.iter().copied().collect();
+        for _ in 0..k {
+            line.push_back(spike);
+        }
+        let max = ground.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let r = bright_reference(&line).unwrap();
+        if ground.len() + k >= 3 {
+            proptest::prop_assert!(r <= max, "{r} > {max}");
+        }
+    }
+}
