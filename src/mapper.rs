@@ -911,7 +911,7 @@ impl Mapper {
 
         // 2. lidar
         let t = Instant::now();
-        let mut reach = None;
+        let mut surface = None;
         if let (Some(l), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
             if l.cues && self.cues.cfg.lidar.is_none() {
                 if let Some(h) = estimate_sensor_height(cloud) {
@@ -924,7 +924,7 @@ impl Mapper {
                 }
             }
             if self.cues.cfg.lidar.is_some() {
-                reach = self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
+                surface = self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
             } else {
                 rep.lidar_ingest = Some(grid.ingest(cloud, &l.noise)?);
             }
@@ -952,7 +952,7 @@ impl Mapper {
         // 4. labels: colour, SWIR and MWIR classification projected onto the map as votes.
         let t = Instant::now();
         if let Some(fl) = self.labels.as_mut() {
-            rep.labels = Some(fl.apply(frame, grid, reach.as_ref())?);
+            rep.labels = Some(fl.apply(frame, grid, surface.as_ref())?);
         }
         times.labels = t.elapsed().as_secs_f64();
 

@@ -26,7 +26,7 @@ use crate::classify::horizon::GroundGeometry;
 use crate::classify::lut::ColorLut;
 use crate::classify::thermal::{classify_mwir, classify_swir, MwirConfig, SwirConfig};
 use crate::classify::{Label, LabelImage, MonoImage};
-use crate::cues::DryReach;
+use crate::cues::ScanSurface;
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{pose_is_finite, PointCloud, Pose};
@@ -70,6 +70,9 @@ pub struct FrameLabelConfig {
     /// Check colour water against the sky it would reflect ([`reflection_check`]), reading
     /// the image with this encoding; `None`: no check.
     pub reflection_check: Option<Encoding>,
+    /// Check colour water against where the lidar found the surface dry or wet
+    /// ([`ColourCheck`]).
+    pub colour_check: bool,
 }
 
 /// How an 8-bit colour image encodes radiance.
@@ -110,6 +113,7 @@ impl Default for FrameLabelConfig {
             stereo_max_range: 10.0,
             surface_max_std: 0.1,
             reflection_check: Some(Encoding::Srgb),
+            colour_check: true,
         }
     }
 }
@@ -189,6 +193,9 @@ pub struct LabelsConfig {
     pub reflection_check: bool,
     /// How the colour camera encodes radiance (sRGB unless the camera says otherwise).
     pub encoding: Encoding,
+    /// Stop counting a colour as water in a log where the lidar finds it on dry ground
+    /// ([`ColourCheck`]).
+    pub colour_check: bool,
 }
 
 impl Default for LabelsConfig {
@@ -204,6 +211,7 @@ impl Default for LabelsConfig {
             surface_max_std_m: f.surface_max_std,
             reflection_check: true,
             encoding: Encoding::default(),
+            colour_check: true,
         }
     }
 }
@@ -221,6 +229,7 @@ impl LabelsConfig {
             max_range: self.max_range_m,
             surface_max_std: self.surface_max_std_m,
             reflection_check: self.reflection_check.then_some(self.encoding),
+            colour_check: self.colour_check,
             ..FrameLabelConfig::default()
         };
         for s in &self.sensors {
@@ -278,6 +287,9 @@ pub struct SensorLabelStats {
     /// Water pixels whose ray crossed a hole in the map beyond the lidar's dry reach
     /// ([`crate::cues::DryReach`]): a hole that range alone explains places no vote.
     pub beyond_reach: u64,
+    /// Colour water pixels whose colour the log's lidar finds on dry ground
+    /// ([`ColourCheck`]): no vote.
+    pub colour_check_vetoed: u64,
 }
 
 impl SensorLabelStats {
@@ -293,6 +305,7 @@ impl SensorLabelStats {
         self.cells_dry += o.cells_dry;
         self.reflection_vetoed += o.reflection_vetoed;
         self.beyond_reach += o.beyond_reach;
+        self.colour_check_vetoed += o.colour_check_vetoed;
     }
 }
 
@@ -358,6 +371,95 @@ pub struct FrameLabels {
     touched: Vec<u32>,
     /// The storage of the last frame's elevation raster.
     raster: Vec<f32>,
+    /// What the log's range sensors said of the ground under each colour so far.
+    colour_check: ColourCheck,
+}
+
+/// Bits per channel of the colour bins the [`ColourCheck`] counts in.
+const CHECK_BITS: u32 = 4;
+/// One-sided 5 % point of the standard normal: the [`ColourCheck`]'s sign test.
+const CHECK_Z: f64 = 1.645;
+
+/// The colour classifier checked by the lidar, over a log. The paper's rule calls whatever
+/// is bright and weakly saturated water, which pale concrete, a pale slab and snow are too:
+/// the cue's false-alarm rate is then not the few per cent the fusion rule assumes but a
+/// property of the scene. The lidar measures it. Each frame, the points where the scan
+/// found dry ground (returns water would not give) and water (missing beams inside the
+/// diagnostic interval, bottom and specular returns where their beams cross the water) are
+/// projected into the colour image; a water pixel there counts for its colour bin (4 bits
+/// a channel) as seen on dry ground or on water. A colour the lidar finds on dry ground
+/// more often than on water, by a one-sided sign test at 5 % (`dry − wet ≥ 1.645
+/// √(dry + wet + 1)`, the normal form: four dry samples and none wet suffice), is not
+/// evidence of water in this log: its pixels become `Unknown` and place no vote, near or
+/// beyond the lidar's reach. The counts
+/// go on whether a colour is vetoed or not, so a verdict follows the log. Without a lidar
+/// nothing is counted and nothing vetoed: the check says nothing where it cannot tell.
+#[derive(Debug, Clone, Default)]
+struct ColourCheck {
+    /// Per bin: lidar samples on dry ground and on water whose pixel is colour water.
+    dry: Vec<u32>,
+    wet: Vec<u32>,
+}
+
+impl ColourCheck {
+    fn bin([r, g, b]: [u8; 3]) -> usize {
+        let k = 8 - CHECK_BITS;
+        ((r as usize >> k) << (2 * CHECK_BITS))
+            | ((g as usize >> k) << CHECK_BITS)
+            | (b as usize >> k)
+    }
+
+    fn vetoed(&self, bin: usize) -> bool {
+        let (d, w) = (f64::from(self.dry[bin]), f64::from(self.wet[bin]));
+        d - w >= CHECK_Z * (d + w + 1.0).sqrt()
+    }
+
+    /// Counts the frame's lidar samples that land on colour water, then takes the water
+    /// label from pixels of vetoed colours. Returns the pixels vetoed.
+    fn run(
+        &mut self,
+        labels: &mut LabelImage,
+        px: &[[u8; 3]],
+        camera: &CameraModel,
+        cam_to_map: &Pose,
+        lidar: &ScanSurface,
+    ) -> u64 {
+        let bins = 1 << (3 * CHECK_BITS);
+        self.dry.resize(bins, 0);
+        self.wet.resize(bins, 0);
+        let (w, h) = (labels.width, labels.height);
+        let to_cam = cam_to_map.inverse();
+        for (points, dry) in [(&lidar.dry, true), (&lidar.wet, false)] {
+            for p in points {
+                let Some([u, v]) = camera.project(&(to_cam * p)) else {
+                    continue;
+                };
+                let (u, v) = (u.round(), v.round());
+                if !(u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64) {
+                    continue;
+                }
+                let i = v as usize * w + u as usize;
+                if labels.data[i] != Label::Water {
+                    continue;
+                }
+                let b = Self::bin(px[i]);
+                let n = if dry {
+                    &mut self.dry[b]
+                } else {
+                    &mut self.wet[b]
+                };
+                *n = n.saturating_add(1);
+            }
+        }
+        let mut vetoed = 0;
+        for (l, &c) in labels.data.iter_mut().zip(px) {
+            if *l == Label::Water && self.vetoed(Self::bin(c)) {
+                *l = Label::Unknown;
+                vetoed += 1;
+            }
+        }
+        vetoed
+    }
 }
 
 /// Sky-above-horizon rule with the cached rays: the same as
@@ -736,6 +838,7 @@ impl FrameLabels {
             tally: Vec::new(),
             touched: Vec::new(),
             raster: Vec::new(),
+            colour_check: ColourCheck::default(),
         })
     }
 
@@ -745,7 +848,7 @@ impl FrameLabels {
         &mut self,
         frame: &Frame,
         grid: &mut RollingGrid,
-        reach: Option<&DryReach>,
+        lidar: Option<&ScanSurface>,
     ) -> Result<FrameLabelsReport> {
         let mut rep = FrameLabelsReport::default();
         let any = self.cfg.colour.is_some() || self.cfg.swir.is_some() || self.cfg.mwir.is_some();
@@ -789,7 +892,7 @@ impl FrameLabels {
                         None
                     };
                     rep.dropped += self.run(
-                        cue, img, cam, &pose, stereo, ground_z, &surface, reach, grid, &mut st,
+                        cue, img, cam, &pose, stereo, ground_z, &surface, lidar, grid, &mut st,
                     )?;
                 }
             }
@@ -813,7 +916,7 @@ impl FrameLabels {
         stereo: Option<&PointCloud>,
         ground_z: f64,
         surface: &GridSurface,
-        reach: Option<&DryReach>,
+        lidar: Option<&ScanSurface>,
         grid: &mut RollingGrid,
         st: &mut SensorLabelStats,
     ) -> Result<u64> {
@@ -850,6 +953,10 @@ impl FrameLabels {
                     st.reflection_vetoed +=
                         reflection_check(&mut l, px, map_rays, camera, cam_to_map, enc);
                 }
+                if let Some(lidar) = lidar.filter(|_| self.cfg.colour_check) {
+                    st.colour_check_vetoed +=
+                        self.colour_check.run(&mut l, px, camera, cam_to_map, lidar);
+                }
                 l
             }
             Cue::Swir => {
@@ -875,6 +982,7 @@ impl FrameLabels {
             _ => None,
         };
         let origin = Point3::from(cam_to_map.translation.vector);
+        let reach = lidar.and_then(|l| l.reach.as_ref());
         let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);
         let stereo_range = self.cfg.stereo_max_range.min(max_range);
         let cols: Vec<usize> = (0..w).step_by(s).collect();

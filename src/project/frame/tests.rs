@@ -683,3 +683,51 @@ fn holes_beyond_the_lidars_dry_reach_take_no_vote() {
     assert!(votes[0].1 > 50 && votes[0].2 == 0, "{votes:?}");
     assert!(votes[1].1 == 0 && votes[1].2 > 50, "{votes:?}");
 }
+
+#[test]
+fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
+    let (cam, pose) = camera();
+    let (w, h) = (cam.width, cam.height);
+    const PALE: [u8; 3] = [200, 200, 190];
+    let px: Vec<[u8; 3]> = (0..w * h)
+        .map(|i| if i % w < w / 2 { PALE } else { SKY })
+        .collect();
+    let ground_at = |u: usize, v: usize| {
+        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
+        let t = pose.translation.z / -r.z;
+        Point3::from(pose.translation.vector + r * t)
+    };
+    // Ground under pale pixels near the bottom of the image, and a point behind the
+    // camera, which no pixel sees.
+    let on_pale: Vec<Point3<f64>> = (0..6).map(|k| ground_at(5 + k, h - 5)).collect();
+    let behind = Point3::new(-5.0, 0.0, 0.0);
+    let run = |dry: usize, wet: usize| -> (u64, LabelImage) {
+        let mut labels = LabelImage::filled(w, h, Label::Water);
+        let mut check = ColourCheck::default();
+        let mut d = on_pale[..dry].to_vec();
+        d.push(behind);
+        let lidar = ScanSurface {
+            reach: None,
+            dry: d,
+            wet: on_pale[..wet].to_vec(),
+        };
+        let n = check.run(&mut labels, &px, &cam, &pose, &lidar);
+        (n, labels)
+    };
+    // Three dry samples and none wet: the sign test cannot rule yet.
+    assert_eq!(run(3, 0).0, 0);
+    // Four: the pale colour is not water in this log, anywhere in the image; the sky's
+    // colour, which the lidar never found on dry ground, still is.
+    let (n, labels) = run(4, 0);
+    assert_eq!(n as usize, w / 2 * h);
+    for (i, l) in labels.data.iter().enumerate() {
+        let want = if i % w < w / 2 {
+            Label::Unknown
+        } else {
+            Label::Water
+        };
+        assert_eq!(*l, want, "pixel {i}");
+    }
+    // Found as often on water as on dry ground: the colour keeps its votes.
+    assert_eq!(run(6, 6).0, 0);
+}
