@@ -665,9 +665,12 @@ fn holes_beyond_the_lidars_dry_reach_take_no_vote() {
     for far in [8.0, 3.0] {
         let mut g = ground_grid();
         let mut fl = FrameLabels::new(colour_cfg(1)).unwrap();
-        let reach = DryReach::new([0.0, 0.0], lines(far));
+        let lidar = ScanSurface {
+            reach: Some(DryReach::new([0.0, 0.0], lines(far))),
+            ..ScanSurface::default()
+        };
         let st = fl
-            .apply(&frame(), &mut g, Some(&reach))
+            .apply(&frame(), &mut g, Some(&lidar))
             .unwrap()
             .colour
             .unwrap();
