@@ -3,7 +3,7 @@
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 
-use super::cdr::{CdrReader, CdrResult, CdrWriter, Endian};
+use super::cdr::{CdrReader, CdrResult, CdrWriter, Endian, Wire};
 use crate::geom::Pose;
 
 /// `builtin_interfaces/msg/Time`.
@@ -60,6 +60,19 @@ impl Header {
     }
 
     fn read(r: &mut CdrReader) -> CdrResult<Self> {
+        if r.wire() == Wire::Ros1 {
+            // ROS 1 std_msgs/Header: uint32 seq, time stamp (uint32 secs, nsecs), frame_id.
+            let _seq = r.u32()?;
+            let sec = r.u32()?;
+            return Ok(Header {
+                stamp: Time {
+                    sec: i32::try_from(sec)
+                        .map_err(|_| r.err(format!("stamp {sec} s is past 2038")))?,
+                    nanosec: r.u32()?,
+                },
+                frame_id: r.string()?,
+            });
+        }
         Ok(Header {
             stamp: Time::read(r)?,
             frame_id: r.string()?,
@@ -100,7 +113,12 @@ pub struct TfMessage {
 
 impl TfMessage {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         // Each TransformStamped is at least 4+4+4+4+7*8 bytes.
         let n = r.seq_len(72, "transforms")?;
         let mut transforms = Vec::with_capacity(n);
@@ -204,7 +222,12 @@ pub struct PointCloud2Msg {
 
 impl PointCloud2Msg {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         let header = Header::read(&mut r)?;
         let height = r.u32()?;
         let width = r.u32()?;
@@ -271,7 +294,12 @@ pub struct ImageMsg {
 
 impl ImageMsg {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         Ok(ImageMsg {
             header: Header::read(&mut r)?,
             height: r.u32()?,
@@ -324,7 +352,12 @@ pub struct CameraInfoMsg {
 
 impl CameraInfoMsg {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         Ok(CameraInfoMsg {
             header: Header::read(&mut r)?,
             height: r.u32()?,
