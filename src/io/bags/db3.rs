@@ -36,12 +36,38 @@ pub struct Db3Reader {
     finished: bool,
 }
 
+/// Whether the file is as long as its SQLite header says: a truncated bag is named as such
+/// rather than as whatever page SQLite then fails to read.
+fn check_size(head: &[u8], len: u64) -> std::result::Result<(), String> {
+    if head.len() < 100 {
+        return Err(format!(
+            "truncated: {len} bytes, shorter than the 100-byte SQLite header"
+        ));
+    }
+    let page = match u16::from_be_bytes([head[16], head[17]]) {
+        1 => 65536u64,
+        p if p >= 512 && p.is_power_of_two() => p as u64,
+        p => return Err(format!("SQLite header gives page size {p}: damaged")),
+    };
+    let be32 = |at: usize| u32::from_be_bytes([head[at], head[at + 1], head[at + 2], head[at + 3]]);
+    // The page count is valid when the change counter matches "version valid for".
+    let pages = be32(28) as u64;
+    if be32(24) == be32(92) && pages > 0 && len < pages * page {
+        return Err(format!(
+            "truncated: the SQLite header says {pages} pages of {page} bytes ({} bytes), the file has {len}",
+            pages * page
+        ));
+    }
+    if len % page != 0 {
+        return Err(format!(
+            "truncated: {len} bytes is not a whole number of {page}-byte SQLite pages"
+        ));
+    }
+    Ok(())
+}
+
 fn sql_err(path: &Path, what: &str, e: rusqlite::Error) -> Error {
-    Error::format(
-        path,
-        what,
-        format!("{e} (not a readable rosbag2 sqlite3 bag)"),
-    )
+    Error::format(path, what, format!("SQLite: {e}"))
 }
 
 impl Db3Reader {
@@ -51,9 +77,16 @@ impl Db3Reader {
         let path = path.as_ref().to_path_buf();
         let mut f = std::fs::File::open(&path).map_err(|e| Error::io(&path, e))?;
         let total_bytes = f.metadata().map_err(|e| Error::io(&path, e))?.len();
-        let mut head = [0u8; 16];
-        let got = f.read(&mut head).map_err(|e| Error::io(&path, e))?;
-        if got < 16 || &head != SQLITE_MAGIC {
+        let mut head = [0u8; 100];
+        let mut got = 0;
+        while got < head.len() {
+            let n = f.read(&mut head[got..]).map_err(|e| Error::io(&path, e))?;
+            if n == 0 {
+                break;
+            }
+            got += n;
+        }
+        if got < 16 || &head[..16] != SQLITE_MAGIC {
             return Err(Error::format(
                 &path,
                 "file header",
@@ -61,6 +94,7 @@ impl Db3Reader {
             ));
         }
         drop(f);
+        check_size(&head[..got], total_bytes).map_err(|e| Error::format(&path, "file size", e))?;
         let conn = Connection::open_with_flags(
             &path,
             OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
