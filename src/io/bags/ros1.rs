@@ -99,7 +99,7 @@ fn le_u32(b: &[u8], at: usize) -> Option<u32> {
 /// A streaming reader of a ROS 1 bag (format 2.0).
 pub struct Ros1Reader {
     path: PathBuf,
-    src: BufReader<File>,
+    src: BufReader<Box<dyn Read + Send>>,
     pos: u64,
     total_bytes: u64,
     limit: usize,
@@ -127,7 +127,23 @@ impl Ros1Reader {
         let path = path.as_ref().to_path_buf();
         let file = File::open(&path).map_err(|e| Error::io(&path, e))?;
         let total_bytes = file.metadata().map_err(|e| Error::io(&path, e))?.len();
-        let mut src = BufReader::with_capacity(256 * 1024, file);
+        Self::from_reader(path, Box::new(file), total_bytes)
+    }
+
+    /// A reader of a bag held in memory; `name` is used in error messages only.
+    pub fn from_bytes(bytes: Vec<u8>, name: impl AsRef<Path>) -> Result<Self> {
+        let total = bytes.len() as u64;
+        Self::from_reader(name, Box::new(std::io::Cursor::new(bytes)), total)
+    }
+
+    /// A reader of a bag of `total_bytes` from any byte source (read front to back).
+    pub fn from_reader(
+        name: impl AsRef<Path>,
+        source: Box<dyn Read + Send>,
+        total_bytes: u64,
+    ) -> Result<Self> {
+        let path = name.as_ref().to_path_buf();
+        let mut src = BufReader::with_capacity(256 * 1024, source);
         let mut magic = [0u8; 13];
         let mut got = 0;
         while got < magic.len() {
@@ -444,5 +460,113 @@ impl MessageSource for Ros1Reader {
     }
     fn damaged(&self) -> &[DamagedRange] {
         &self.damaged
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(name: &str, value: &[u8]) -> Vec<u8> {
+        let mut f = name.as_bytes().to_vec();
+        f.push(b'=');
+        f.extend_from_slice(value);
+        let mut v = (f.len() as u32).to_le_bytes().to_vec();
+        v.extend(f);
+        v
+    }
+
+    fn record(header: &[Vec<u8>], data: &[u8]) -> Vec<u8> {
+        let h: Vec<u8> = header.concat();
+        let mut v = (h.len() as u32).to_le_bytes().to_vec();
+        v.extend(h);
+        v.extend((data.len() as u32).to_le_bytes());
+        v.extend_from_slice(data);
+        v
+    }
+
+    /// A bag of one uncompressed chunk: a connection on /x of an unread type and one
+    /// message of 3 bytes at 5.5 s.
+    fn bag() -> Vec<u8> {
+        let conn = record(
+            &[
+                field("op", &[op::CONNECTION]),
+                field("conn", &0u32.to_le_bytes()),
+                field("topic", b"/x"),
+            ],
+            &[field("topic", b"/x"), field("type", b"std_msgs/String")].concat(),
+        );
+        let mut t = 5u32.to_le_bytes().to_vec();
+        t.extend(500_000_000u32.to_le_bytes());
+        let msg = record(
+            &[
+                field("op", &[op::MESSAGE]),
+                field("conn", &0u32.to_le_bytes()),
+                field("time", &t),
+            ],
+            b"abc",
+        );
+        let inner = [conn, msg].concat();
+        let chunk = record(
+            &[
+                field("op", &[op::CHUNK]),
+                field("compression", b"none"),
+                field("size", &(inner.len() as u32).to_le_bytes()),
+            ],
+            &inner,
+        );
+        [MAGIC.to_vec(), chunk].concat()
+    }
+
+    fn read_all(b: Vec<u8>) -> (Vec<RawMessage>, Vec<DamagedRange>) {
+        let mut r = Ros1Reader::from_bytes(b, "t.bag").unwrap();
+        let mut v = Vec::new();
+        while let Some(m) = r.next_message() {
+            v.push(m.unwrap());
+        }
+        (v, r.damaged().to_vec())
+    }
+
+    #[test]
+    fn reads_connections_and_messages_of_a_chunk() {
+        let (m, d) = read_all(bag());
+        assert!(d.is_empty());
+        assert_eq!(m.len(), 1);
+        assert_eq!(m[0].channel.topic, "/x");
+        assert_eq!(m[0].channel.schema, "std_msgs/String");
+        assert_eq!(m[0].channel.message_encoding, "ros1");
+        assert_eq!(m[0].log_time, 5_500_000_000);
+        assert_eq!(m[0].data, b"abc");
+    }
+
+    #[test]
+    fn a_cut_bag_reports_the_cut_and_a_bad_chunk_is_skipped() {
+        let b = bag();
+        for cut in MAGIC.len() + 1..b.len() {
+            let (m, d) = read_all(b[..cut].to_vec());
+            assert!(m.is_empty());
+            assert_eq!(d.len(), 1, "cut at {cut}");
+            assert_eq!(d[0].end_byte, cut as u64);
+            assert_eq!(d[0].resumed_by, "end");
+        }
+        // A chunk whose declared size disagrees with its data: skipped whole.
+        let mut b = bag();
+        let at = b.windows(5).position(|w| w == b"size=").unwrap() + 5;
+        b[at] ^= 1;
+        let (m, d) = read_all(b);
+        assert!(m.is_empty());
+        assert!(d[0].what.contains("chunk"), "{}", d[0].what);
+    }
+
+    #[test]
+    fn not_a_bag_or_another_version_is_refused() {
+        let e = Ros1Reader::from_bytes(b"#ROSBAG V1.2\n".to_vec(), "old.bag")
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("version 1.2"), "{e}");
+        let e = Ros1Reader::from_bytes(b"hello".to_vec(), "x.bag")
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("not a ROS 1 bag"), "{e}");
     }
 }

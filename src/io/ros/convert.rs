@@ -524,6 +524,60 @@ mod tests {
     use crate::io::ros::msgs::Time;
     use proptest::prelude::*;
 
+    #[test]
+    fn ring_numbers_must_be_small_whole_numbers() {
+        let c = PointCloud::unorganized(vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        for bad in [-1.0, 0.5, f64::NAN, MAX_RINGS as f64] {
+            let e = organize_by_ring(&c, &[0.0, bad]).unwrap_err();
+            assert!(e.contains("not a ring number"), "{e}");
+        }
+        assert!(organize_by_ring(&c, &[0.0]).is_err());
+    }
+
+    #[test]
+    fn rings_of_equal_count_keep_their_order_and_channels() {
+        // Two rings of three points, published interleaved.
+        let xyz: Vec<[f32; 3]> = (0..6).map(|i| [1.0 + i as f32, 0.5, 0.0]).collect();
+        let mut c = PointCloud::unorganized(xyz.clone());
+        c.intensity = Some((0..6).map(|i| i as f32).collect());
+        let rings = [1.0, 0.0, 1.0, 0.0, 1.0, 0.0];
+        let o = organize_by_ring(&c, &rings).unwrap();
+        assert_eq!((o.rows, o.cols), (2, 3));
+        assert_eq!(o.xyz, vec![xyz[1], xyz[3], xyz[5], xyz[0], xyz[2], xyz[4]]);
+        assert_eq!(o.intensity.unwrap(), vec![1.0, 3.0, 5.0, 0.0, 2.0, 4.0]);
+    }
+
+    #[test]
+    fn dropped_returns_leave_empty_azimuth_bins() {
+        // 8 columns at 45° steps; ring 1 lacks columns 2 and 5.
+        let at = |c: usize, z: f32| {
+            let a = c as f64 * std::f64::consts::FRAC_PI_4;
+            [10.0 * a.cos() as f32, 10.0 * a.sin() as f32, z]
+        };
+        let mut xyz = Vec::new();
+        let mut rings = Vec::new();
+        for r in 0..2 {
+            for c in 0..8 {
+                if r == 1 && (c == 2 || c == 5) {
+                    continue;
+                }
+                xyz.push(at(c, r as f32));
+                rings.push(r as f64);
+            }
+        }
+        let o = organize_by_ring(&PointCloud::unorganized(xyz), &rings).unwrap();
+        assert_eq!((o.rows, o.cols), (2, 8));
+        for c in 0..8 {
+            assert_eq!(o.xyz[c], at(c, 0.0));
+            let slot = o.xyz[8 + c];
+            if c == 2 || c == 5 {
+                assert!(slot[0].is_nan());
+            } else {
+                assert_eq!(slot, at(c, 1.0));
+            }
+        }
+    }
+
     fn put(data: &mut [u8], at: usize, dt: u8, big: bool, v: f64) {
         macro_rules! w {
             ($t:ty) => {{

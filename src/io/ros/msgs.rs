@@ -496,6 +496,49 @@ mod tests {
         }
     }
 
+    /// A ROS 1 serialized CameraInfo: header with seq, packed, strings without NUL.
+    #[test]
+    fn ros1_wire_decodes_header_seq_and_packed_fields() {
+        let mut b = Vec::new();
+        let u32s = |b: &mut Vec<u8>, v: u32| b.extend_from_slice(&v.to_le_bytes());
+        let string = |b: &mut Vec<u8>, s: &str| {
+            b.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            b.extend_from_slice(s.as_bytes());
+        };
+        u32s(&mut b, 7); // seq
+        u32s(&mut b, 1700); // secs
+        u32s(&mut b, 250); // nsecs
+        string(&mut b, "cam");
+        u32s(&mut b, 480);
+        u32s(&mut b, 640);
+        string(&mut b, "plumb_bob");
+        u32s(&mut b, 5);
+        for i in 0..(5 + 9 + 9 + 12) {
+            b.extend_from_slice(&(i as f64).to_le_bytes());
+        }
+        for v in [1u32, 1, 0, 0, 0, 0] {
+            u32s(&mut b, v);
+        }
+        b.push(0);
+        let m = CameraInfoMsg::decode_wire(&b, Wire::Ros1).unwrap();
+        assert_eq!(
+            m.header.stamp,
+            Time {
+                sec: 1700,
+                nanosec: 250
+            }
+        );
+        assert_eq!(m.header.frame_id, "cam");
+        assert_eq!((m.height, m.width), (480, 640));
+        assert_eq!(m.d, vec![0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(m.k[0], 5.0);
+        assert_eq!(m.p[11], 34.0);
+        // The same bytes are not CDR (no encapsulation header), and a cut payload is an
+        // error, not a panic.
+        assert!(CameraInfoMsg::decode(&b).is_err());
+        assert!(CameraInfoMsg::decode_wire(&b[..b.len() - 3], Wire::Ros1).is_err());
+    }
+
     #[test]
     fn time_nanos_round_trip() {
         for ns in [
