@@ -336,3 +336,27 @@ fn an_unorganized_scan_without_ring_warns_that_the_lidar_cues_cannot_run() {
         "{err}"
     );
 }
+
+#[test]
+fn unknown_inputs_name_the_supported_formats() {
+    let d = tempfile::tempdir().unwrap();
+    let odd = d.path().join("drive.xyz");
+    std::fs::write(&odd, b"x").unwrap();
+    let empty_dir = d.path().join("not_a_bag");
+    std::fs::create_dir(&empty_dir).unwrap();
+    for input in [&odd, &empty_dir] {
+        for args in [
+            vec!["info", p(input)],
+            vec!["build", p(input), "--out", p(&d.path().join("out"))],
+        ] {
+            let o = run(&args);
+            assert_eq!(o.status.code(), Some(1), "{args:?}");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(
+                err.contains("supported: .mcap, .db3, rosbag2 directory, .bag, .ply, .bin")
+                    && err.contains(input.file_name().unwrap().to_str().unwrap()),
+                "{args:?}: {err}"
+            );
+        }
+    }
+}

@@ -3,12 +3,12 @@
 clearly.
 
 1. A short simulated drive (lidar, stereo, colour camera) is written by `tarn simulate` to
-   an MCAP log. Its messages are copied as they are (CDR) into a rosbag2 directory with
-   sqlite3 storage by `rosbags`' rosbag2 writer, and that bag is converted by `rosbags`
-   into ROS 1 bags (uncompressed, bz2 and lz4 chunks).
+   an MCAP log. Its messages are copied as they are (CDR) into rosbag2 directories with
+   sqlite3 and with MCAP storage by `rosbags`' rosbag2 writer, and the sqlite3 bag is
+   converted by `rosbags` into ROS 1 bags (uncompressed, bz2 and lz4 chunks).
 2. `tarn info --json` counts the same messages and frames in each; `tarn build` makes the
    same map.ply (its header comments, which name the input, aside) from the MCAP log, the
-   rosbag2 directory, its .db3 file and each ROS 1 bag.
+   rosbag2 directories, the .db3 file and each ROS 1 bag.
 3. Truncated and overwritten .db3 and .bag files, and files that are not bags at all, end
    with exit status 1 (nothing built) or 3 (built from what could be read), a message that
    names the file, and never a panic.
@@ -107,13 +107,12 @@ def tarn(*args):
     return subprocess.run([conftest.tarn_bin(), *map(str, args)], capture_output=True, text=True)
 
 
-def mcap_to_db3(mcap_path, bag_dir):
+def mcap_to_rosbag2(mcap_path, bag_dir, storage=StoragePlugin.SQLITE3):
     """Copies every message of the MCAP log (CDR bytes as they are, log times) into a
-    rosbag2 directory with sqlite3 storage."""
+    rosbag2 directory with `storage`."""
     store = get_typestore(Stores.ROS2_HUMBLE)
     conns = {}
-    with open(mcap_path, "rb") as f, Writer2(bag_dir, version=8,
-                                           storage_plugin=StoragePlugin.SQLITE3) as w:
+    with open(mcap_path, "rb") as f, Writer2(bag_dir, version=8, storage_plugin=storage) as w:
         for schema, channel, m in make_reader(f).iter_messages(log_time_order=False):
             assert schema.name in ROS2_TYPES, schema.name
             if channel.topic not in conns:
@@ -143,9 +142,10 @@ def logs(tmp_path_factory):
     r = tarn("simulate", d / "scene.toml", "--out", d / "sim")
     assert r.returncode == 0, r.stderr
     mcap = d / "sim" / "log.mcap"
-    mcap_to_db3(mcap, d / "rosbag2")
+    mcap_to_rosbag2(mcap, d / "rosbag2")
+    mcap_to_rosbag2(mcap, d / "rosbag2-mcap", StoragePlugin.MCAP)
     db3 = next((d / "rosbag2").glob("*.db3"))
-    out = {"mcap": mcap, "rosbag2": d / "rosbag2", "db3": db3}
+    out = {"mcap": mcap, "rosbag2": d / "rosbag2", "db3": db3, "rosbag2-mcap": d / "rosbag2-mcap"}
     for c in (None, "bz2", "lz4"):
         bag = d / f"drive-{c or 'none'}.bag"
         db3_to_bag(d / "rosbag2", bag, c)

@@ -54,10 +54,7 @@ pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
         _ => Err(Error::format(
             path,
             "file name",
-            format!(
-                "unknown format: the extension must be .ply or .bin (KITTI) for a point cloud ({})",
-                log::SUPPORTED
-            ),
+            format!("not an input tarn reads ({})", log::SUPPORTED),
         )),
     }
 }
