@@ -131,7 +131,7 @@ mod tests {
         assert_eq!(read_point_cloud(&bin).unwrap().xyz, vec![[4.0, 5.0, 6.0]]);
         for name in ["cloud.pcd", "cloud"] {
             let e = read_point_cloud(&dir.path().join(name)).unwrap_err();
-            assert!(e.to_string().contains(".ply or .bin"), "{e}");
+            assert!(e.to_string().contains(log::SUPPORTED), "{e}");
             assert!(e.to_string().contains(name), "{e}");
         }
     }

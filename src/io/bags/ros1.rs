@@ -391,7 +391,7 @@ impl Ros1Reader {
             op::CHUNK => self.chunk(&f, &rec.data).map(|ms| self.pending.extend(ms)),
             op::CONNECTION => self.connection(&f, &rec.data),
             op::MESSAGE => self
-                .message(&f, rec.data.clone())
+                .message(&f, rec.data)
                 .map(|m| self.pending.push_back(m)),
             op::BAG_HEADER => Ok(()),
             // Index data and chunk info: the index, not needed front to back.
@@ -412,7 +412,8 @@ impl Ros1Reader {
 
 /// Decompresses exactly `size` bytes from `r`, or says why not.
 fn inflate(r: impl Read, size: usize, what: &str) -> std::result::Result<Vec<u8>, String> {
-    let mut out = Vec::with_capacity(size);
+    // Grown as the data decompresses: the declared size is only checked, never reserved.
+    let mut out = Vec::new();
     r.take(size as u64 + 1)
         .read_to_end(&mut out)
         .map_err(|e| format!("{what} chunk does not decompress: {e}"))?;
