@@ -199,6 +199,16 @@ pub fn organize_by_ring(cloud: &PointCloud, ring: &[f64]) -> Result<PointCloud, 
     if ring.len() != n {
         return Err(format!("{} ring values for {n} points", ring.len()));
     }
+    let lens = [
+        ("intensity", cloud.intensity.as_ref().map(Vec::len)),
+        ("reflectivity", cloud.reflectivity.as_ref().map(Vec::len)),
+        ("rgb", cloud.rgb.as_ref().map(Vec::len)),
+    ];
+    for (name, len) in lens {
+        if len.is_some_and(|l| l != n) {
+            return Err(format!("{name} has {len:?} values for {n} points"));
+        }
+    }
     let mut by_ring: Vec<Vec<usize>> = Vec::new();
     for (i, &r) in ring.iter().enumerate() {
         if !(r.is_finite() && r >= 0.0 && r.fract() == 0.0 && (r as usize) < MAX_RINGS) {
@@ -532,6 +542,9 @@ mod tests {
             assert!(e.contains("not a ring number"), "{e}");
         }
         assert!(organize_by_ring(&c, &[0.0]).is_err());
+        let mut short = c.clone();
+        short.intensity = Some(vec![1.0]);
+        assert!(organize_by_ring(&short, &[0.0, 0.0]).is_err());
     }
 
     #[test]
