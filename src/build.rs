@@ -802,13 +802,16 @@ pub struct LogBuildConfig {
     /// Use this topic for frames; by default the lidar topic, or the stereo topic when the
     /// log has no lidar messages.
     pub frame_topic: Option<String>,
+    /// Sensor topics chosen by name ([`crate::io::frames::LogConfig::with_topics_of`]
+    /// finds the others by type).
+    pub topics: crate::io::frames::NamedTopics,
     /// Publish the window's hazard map after every frame, as on the vehicle, and report the
     /// water stage's per-frame latency. Off (the default), the water stage runs once, on
     /// the whole map at the end; the exported map is the same either way.
     pub per_frame_maps: bool,
 }
 
-/// Builds the map of a ROS 2 log through the online [`Mapper`] (one code path for online
+/// Builds the map of a robot log (any storage [`crate::io::log::open`] reads) through the online [`Mapper`] (one code path for online
 /// and offline): each frame is fused at its pose into a rolling window centred on the
 /// vehicle, with the configured cues; cells that leave it go to the global tile map. At the
 /// end the hazard map of everything is exported. `progress(bytes_read, bytes_total)`.
@@ -823,30 +826,16 @@ pub fn build_log(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<LogBuildReport> {
     use crate::io::frames::FrameStream;
-    use crate::io::mcap_log;
 
     let t0 = Instant::now();
     let mut mapper = Mapper::new(cfg.mapper.clone())?;
     mapper.set_publish(cfg.per_frame_maps);
-    let summary = mcap_log::summarize_quick(input)?;
-    let mut log_cfg = cfg.log.clone();
-    log_cfg.frame_topic = match &cfg.frame_topic {
-        Some(t) => t.clone(),
-        None => {
-            let count = |t: &str| {
-                summary
-                    .topics
-                    .iter()
-                    .find(|i| i.topic == t)
-                    .map_or(0, |i| i.count)
-            };
-            if count(&log_cfg.lidar_topic) == 0 && count(&log_cfg.stereo_topic) > 0 {
-                log_cfg.stereo_topic.clone()
-            } else {
-                log_cfg.lidar_topic.clone()
-            }
-        }
-    };
+    let summary = crate::io::log::summarize_quick(input)?;
+    let mut named = cfg.topics.clone();
+    if named.frame.is_none() {
+        named.frame = cfg.frame_topic.clone();
+    }
+    let log_cfg = cfg.log.with_topics_of(&summary, &named, input)?;
     let mut stream = FrameStream::open(input, &log_cfg)?;
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
     let mut counts = CueCounts::default();

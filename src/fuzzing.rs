@@ -88,6 +88,52 @@ pub fn mcap(data: &[u8]) -> bool {
     ok
 }
 
+/// A ROS 1 bag ([`crate::io::bags::Ros1Reader`]): every message read, then the frame
+/// stream over it, whose decoders read the ROS 1 wire.
+#[cfg(feature = "bags")]
+pub fn ros1_bag(data: &[u8]) -> bool {
+    use crate::io::bags::Ros1Reader;
+    use crate::io::log::MessageSource;
+    let mut ok = true;
+    let Ok(mut reader) = Ros1Reader::from_bytes(data.to_vec(), "fuzz.bag") else {
+        return false;
+    };
+    let mut n = 0;
+    while let Some(m) = reader.next_message() {
+        n += 1;
+        if m.is_err() || n > MAX_ITEMS {
+            ok = false;
+            break;
+        }
+    }
+    for d in reader.damaged() {
+        assert!(
+            d.start_byte <= d.end_byte && d.end_byte <= data.len() as u64,
+            "{d:?}"
+        );
+        ok = false;
+    }
+    let Ok(reader) = Ros1Reader::from_bytes(data.to_vec(), "fuzz.bag") else {
+        return false;
+    };
+    let stream = match FrameStream::from_source(Box::new(reader), &LogConfig::default()) {
+        Ok(s) => s,
+        Err(_) => return false,
+    };
+    for f in stream.take(MAX_ITEMS) {
+        match f {
+            Ok(f) => {
+                assert!(f.stamp.is_finite(), "frame stamp {}", f.stamp);
+                for c in [&f.lidar, &f.stereo].into_iter().flatten() {
+                    check_cloud(c);
+                }
+            }
+            Err(_) => ok = false,
+        }
+    }
+    ok
+}
+
 /// One CDR message; the first byte chooses the type (TFMessage, PointCloud2, Image,
 /// CameraInfo), the rest is the serialized message. Decoded messages are converted the
 /// way [`FrameStream`] converts them.

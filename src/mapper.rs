@@ -739,6 +739,8 @@ pub struct Mapper {
     /// Buffers of the water stage, kept between frames.
     scratch: crate::hazard::WindowScratch,
     frames: u64,
+    /// Whether the warning that the lidar cues cannot run on an unorganized scan was given.
+    warned_unorganized: bool,
 }
 
 impl Mapper {
@@ -828,6 +830,7 @@ impl Mapper {
             publish: true,
             scratch: Default::default(),
             frames: 0,
+            warned_unorganized: false,
         })
     }
 
@@ -923,9 +926,22 @@ impl Mapper {
                     }
                 }
             }
-            if self.cues.cfg.lidar.is_some() {
+            // An unorganized scan (one row of many points: a driver's flat cloud without a
+            // `ring` field to organize it by) has no scan lines for the cues to walk.
+            let unorganized = cloud.rows == 1 && cloud.cols > 1;
+            if self.cues.cfg.lidar.is_some() && !unorganized {
                 surface = self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
             } else {
+                if unorganized && l.cues && !self.warned_unorganized {
+                    self.warned_unorganized = true;
+                    rep.warnings.push(format!(
+                        "lidar cues (no-return, bottom, specular) cannot run: the scan is \
+                         unorganized ({} points in one row) and has no `ring` field to \
+                         organize it into rings and azimuth columns; its points are fused \
+                         without them",
+                        cloud.cols
+                    ));
+                }
                 rep.lidar_ingest = Some(grid.ingest(cloud, &l.noise)?);
             }
         }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 type Entry = fn(&[u8]) -> bool;
 
-const TARGETS: [(&str, Entry); 9] = [
+const TARGETS: [(&str, Entry); 10] = [
     ("ply", tarn::fuzzing::ply),
     ("kitti", tarn::fuzzing::kitti),
     ("mcap", tarn::fuzzing::mcap),
@@ -18,6 +18,7 @@ const TARGETS: [(&str, Entry); 9] = [
     ("cloud_build", tarn::fuzzing::cloud_build),
     ("mapper_update", tarn::fuzzing::mapper_update),
     ("exports", tarn::fuzzing::exports),
+    ("ros1_bag", tarn::fuzzing::ros1_bag),
 ];
 
 fn inputs(kind: &str, target: &str) -> Vec<PathBuf> {

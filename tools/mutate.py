@@ -11,13 +11,16 @@ mutations of the seeds):
     ply_bin, ply_ascii, kitti   tarn build CLOUD --out DIR
     mcap_build                  tarn build LOG --out DIR
     mcap_info                   tarn info LOG --json
+    db3_build, db3_info         the same on a rosbag2 sqlite3 file (.db3)
+    bag_build, bag_info         the same on a ROS 1 bag (.bag)
     config                      tarn build SEED_LOG --config CFG.toml --out DIR
     colour_model                tarn classify IMG.png --model MODEL.json --out MASK.png
     scene                       tarn simulate SCENE.toml --out DIR --no-noise
 
 Seeds are made here: small clouds written by this script, a short simulated log
 (`tarn simulate` of a 3-frame copy of maps/default.toml), its config and scene, and the
-committed `fuzz/corpus` files of each kind. Byte mutations are bit flips, bytes set to
+committed `fuzz/corpus` files of each kind (the ROS 1 bags: `fuzz/corpus/ros1_bag`; the
+.db3 seed is the simulated log's messages copied into rosbag2's tables). Byte mutations are bit flips, bytes set to
 0/0xff/random, truncations, overwritten runs, duplicated and deleted ranges, and (text
 kinds) numbers replaced by 1e30, -1e30, inf, nan, 0, -1 or a 20-digit integer. Semantic
 log cases rewrite messages of the seed log through mcap_ros2 (needs the `mcap` and
@@ -45,6 +48,7 @@ import shutil
 import signal
 import struct
 import subprocess
+import sqlite3
 import sys
 import time
 import zlib
@@ -261,6 +265,33 @@ max_window_cells = 2048
 """
 
 
+def db3_of(mcap_path, db3_path):
+    """The messages of an MCAP log (CDR as they are) in rosbag2's sqlite3 tables; the
+    file's bytes."""
+    from mcap.reader import make_reader
+
+    if db3_path.exists():
+        db3_path.unlink()
+    db = sqlite3.connect(db3_path)
+    db.executescript(
+        "CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT NOT NULL,"
+        " serialization_format TEXT NOT NULL, offered_qos_profiles TEXT NOT NULL);"
+        "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL,"
+        " timestamp INTEGER NOT NULL, data BLOB NOT NULL);")
+    ids = {}
+    with open(mcap_path, "rb") as f:
+        for schema, channel, m in make_reader(f).iter_messages(log_time_order=False):
+            if channel.topic not in ids:
+                ids[channel.topic] = len(ids) + 1
+                db.execute("INSERT INTO topics VALUES (?, ?, ?, 'cdr', '')",
+                           (ids[channel.topic], channel.topic, schema.name))
+            db.execute("INSERT INTO messages(topic_id, timestamp, data) VALUES (?, ?, ?)",
+                       (ids[channel.topic], m.log_time, m.data))
+    db.commit()
+    db.close()
+    return db3_path.read_bytes()
+
+
 def corpus(name):
     d = ROOT / "fuzz" / "corpus" / name
     return sorted(p for p in d.iterdir() if p.name.startswith("seed-")) if d.exists() else []
@@ -291,6 +322,8 @@ def make_seeds(tarn, work):
             sys.exit("tarn simulate failed: " + r.stderr.decode())
     log = (sim / "log.mcap").read_bytes()
     seeds["mcap"] = [("log.mcap", log)] + [(p.name, p.read_bytes()) for p in corpus("mcap")]
+    seeds["db3"] = [("log.db3", db3_of(sim / "log.mcap", s / "log.db3"))]
+    seeds["bag"] = [(p.name, p.read_bytes()) for p in corpus("ros1_bag")]
     seeds["scene"] = [("scene.toml", scene.encode())] + [(p.name, p.read_bytes()) for p in corpus("scene_toml")]
     seeds["config"] = [("tarn.toml", CONFIG_SEED.encode())]
     seeds["colour_model"] = [(p.name, p.read_bytes()) for p in corpus("color_model_json")]
@@ -594,6 +627,10 @@ def main():
         "kitti": (".bin", seeds["kitti"], cloud_semantics("kitti"), False, cmd_build),
         "mcap_build": (".mcap", seeds["mcap"], None, False, cmd_build),
         "mcap_info": (".mcap", seeds["mcap"], None, False, lambda f, out: [tarn, "info", f, "--json"]),
+        "db3_build": (".db3", seeds["db3"], [], False, cmd_build),
+        "db3_info": (".db3", seeds["db3"], [], False, lambda f, out: [tarn, "info", f, "--json"]),
+        "bag_build": (".bag", seeds["bag"], [], False, cmd_build),
+        "bag_info": (".bag", seeds["bag"], [], False, lambda f, out: [tarn, "info", f, "--json"]),
         "config": (".toml", seeds["config"], config_semantics(), True, lambda f, out: [tarn, "build", seed_log, "--config", f, "--out", out]),
         "colour_model": (".json", seeds["colour_model"], colour_semantics(seeds["colour_model"]), True, lambda f, out: [tarn, "classify", img, "--model", f, "--out", out / "mask.png"]),
         "scene": (".toml", seeds["scene"], scene_semantics(seeds["scene"][0][1].decode()), True, lambda f, out: [tarn, "simulate", f, "--out", out, "--no-noise"]),
@@ -621,7 +658,7 @@ def main():
             f = case_dir / ("%04d%s" % (i, suffix))
             f.write_bytes(data)
             out = work / "runs" / ("%s-%04d" % (kind, i))
-            out_dir = out if kind != "mcap_info" else None
+            out_dir = out if not kind.endswith("_info") else None
             if kind == "colour_model":
                 out.mkdir(parents=True, exist_ok=True)
                 # classify writes one file: the output directory exists, the file must not.

@@ -17,4 +17,4 @@ if [ ! -x .venv/bin/python ] || ! cmp -s tools/requirements.txt "$stamp"; then
   .venv/bin/pip install -q -r tools/requirements.txt
   cp tools/requirements.txt "$stamp"
 fi
-.venv/bin/python -c "import open3d, trimesh, mcap_ros2" >/dev/null
+.venv/bin/python -c "import open3d, trimesh, mcap_ros2, rosbags" >/dev/null

@@ -12,6 +12,7 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 
+use super::log::{canonical_type, wire_of, MessageSource};
 use super::mcap_log::{DamagedRange, LogReader, RawMessage};
 use super::ros::{
     camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, Image,
@@ -120,6 +121,167 @@ impl LogConfig {
     }
 }
 
+/// Topics named by the user (`--lidar-topic`, `--stereo-topic`, `--camera-topic`,
+/// `--frame-topic`): each must be in the log with the right type.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NamedTopics {
+    pub lidar: Option<String>,
+    pub stereo: Option<String>,
+    pub camera: Option<String>,
+    /// Which cloud topic makes frames; a point cloud topic that is not the stereo topic
+    /// is taken as the lidar.
+    pub frame: Option<String>,
+}
+
+impl LogConfig {
+    /// The config with its sensor topics set for `summary`'s log, and the frame topic.
+    ///
+    /// A named topic is used as it is (it must be in the log with its type). Otherwise a
+    /// topic of the config (the defaults of DESIGN.md, or a log config's) is kept when the
+    /// log has it, and else found by message type: the stereo cloud is the one
+    /// `PointCloud2` topic with `stereo` in its name; the lidar is the one `PointCloud2`
+    /// topic that is not the stereo cloud; the colour camera the one `Image` topic that is
+    /// not the SWIR or MWIR one, with the `camera_info` beside it. More than one candidate
+    /// is an error naming them and the option that chooses. Frames come from the lidar,
+    /// or from the stereo cloud when the log has no lidar.
+    pub fn with_topics_of(
+        &self,
+        summary: &super::mcap_log::LogSummary,
+        named: &NamedTopics,
+        log: &Path,
+    ) -> Result<LogConfig> {
+        let of_type = |ty: &str| -> Vec<String> {
+            summary
+                .topics
+                .iter()
+                .filter(|t| t.count > 0 && canonical_type(&t.schema) == Some(ty))
+                .map(|t| t.topic.clone())
+                .collect()
+        };
+        let clouds = of_type(schema_name::POINT_CLOUD2);
+        let images = of_type(schema_name::IMAGE);
+        let infos = of_type(schema_name::CAMERA_INFO);
+        let has = |list: &[String], t: &str| list.iter().any(|x| x == t);
+        let err = |msg: String| Error::format(log, "topics", msg);
+        let check = |t: &Option<String>, list: &[String], opt: &str, ty: &str| -> Result<()> {
+            match t {
+                Some(t) if !has(list, t) => Err(err(format!(
+                    "{opt} {t}: the log has no {ty} messages on it (its {ty} topics: {})",
+                    list_or_none(list)
+                ))),
+                _ => Ok(()),
+            }
+        };
+        check(&named.lidar, &clouds, "--lidar-topic", "PointCloud2")?;
+        check(&named.stereo, &clouds, "--stereo-topic", "PointCloud2")?;
+        check(&named.camera, &images, "--camera-topic", "Image")?;
+        check(&named.frame, &clouds, "--frame-topic", "PointCloud2")?;
+        let mut c = self.clone();
+        let one_of = |cands: Vec<String>, what: &str, opt: &str| -> Result<Option<String>> {
+            match cands.len() {
+                0 => Ok(None),
+                1 => Ok(cands.into_iter().next()),
+                _ => Err(err(format!(
+                    "the log has {} topics that may be the {what}: {}; choose one with {opt}",
+                    cands.len(),
+                    cands.join(", ")
+                ))),
+            }
+        };
+        // Stereo.
+        if let Some(t) = &named.stereo {
+            c.stereo_topic = t.clone();
+        } else if !has(&clouds, &c.stereo_topic) {
+            let cands: Vec<String> = clouds
+                .iter()
+                .filter(|t| t.contains("stereo") && Some(*t) != named.lidar.as_ref())
+                .cloned()
+                .collect();
+            if let Some(t) = one_of(cands, "stereo cloud", "--stereo-topic")? {
+                c.stereo_topic = t;
+            }
+        }
+        // Lidar.
+        let frame_as_lidar = named
+            .frame
+            .as_ref()
+            .filter(|f| **f != c.stereo_topic && named.lidar.is_none());
+        if let Some(t) = named.lidar.as_ref().or(frame_as_lidar) {
+            c.lidar_topic = t.clone();
+        } else if !has(&clouds, &c.lidar_topic) {
+            let cands: Vec<String> = clouds
+                .iter()
+                .filter(|t| **t != c.stereo_topic)
+                .cloned()
+                .collect();
+            let what = "lidar (--stereo-topic names the stereo cloud)";
+            if let Some(t) = one_of(cands, what, "--lidar-topic")? {
+                c.lidar_topic = t;
+            }
+        }
+        if c.lidar_topic == c.stereo_topic {
+            return Err(err(format!(
+                "{} cannot be both the lidar and the stereo topic",
+                c.lidar_topic
+            )));
+        }
+        // Colour camera and its CameraInfo.
+        let camera = if let Some(t) = &named.camera {
+            Some(t.clone())
+        } else if !has(&images, &c.image_topic) {
+            let cands: Vec<String> = images
+                .iter()
+                .filter(|t| **t != c.swir_topic && **t != c.mwir_topic)
+                .cloned()
+                .collect();
+            one_of(cands, "colour camera", "--camera-topic")?
+        } else {
+            None
+        };
+        if let Some(t) = camera {
+            if t != c.image_topic {
+                c.image_topic = t;
+                let ns = c.image_topic.rsplit_once('/').map_or("", |(a, _)| a);
+                let beside = format!("{ns}/camera_info");
+                if has(&infos, &beside) {
+                    c.camera_info_topic = beside;
+                } else if !has(&infos, &c.camera_info_topic) {
+                    let others = [
+                        &c.right_camera_info_topic,
+                        &c.swir_info_topic,
+                        &c.mwir_info_topic,
+                    ];
+                    let cands: Vec<String> = infos
+                        .iter()
+                        .filter(|t| !others.contains(t))
+                        .cloned()
+                        .collect();
+                    if cands.len() == 1 {
+                        c.camera_info_topic = cands[0].clone();
+                    }
+                }
+            }
+        }
+        c.frame_topic = match &named.frame {
+            Some(f) => f.clone(),
+            None if !has(&clouds, &c.lidar_topic) && has(&clouds, &c.stereo_topic) => {
+                c.stereo_topic.clone()
+            }
+            None => c.lidar_topic.clone(),
+        };
+        c.validate()?;
+        Ok(c)
+    }
+}
+
+fn list_or_none(list: &[String]) -> String {
+    if list.is_empty() {
+        "none".into()
+    } else {
+        list.join(", ")
+    }
+}
+
 /// The baseline (m) of a stereo pair from its right camera's rectified projection:
 /// ROS stereo drivers publish `P[0][3] = −f·B` (`f = P[0][0]`).
 pub fn stereo_baseline(right: &CameraInfoMsg) -> std::result::Result<f64, String> {
@@ -213,7 +375,7 @@ struct Pending<T> {
 /// stream with an `Err` (after the frames of everything before it).
 pub struct FrameStream {
     cfg: LogConfig,
-    reader: LogReader,
+    reader: Box<dyn MessageSource>,
     tf: TfBuffer,
     /// Scans of the frame topic waiting for the log to move past them.
     scans: VecDeque<Pending<(PointCloud, String)>>,
@@ -239,13 +401,19 @@ fn secs(ns: i64) -> f64 {
 }
 
 impl FrameStream {
+    /// The frame stream of the log at `path`: any storage [`super::log::open`] reads.
     pub fn open(path: impl AsRef<Path>, cfg: &LogConfig) -> Result<Self> {
         cfg.validate()?;
-        Self::from_reader(LogReader::open(path)?, cfg)
+        Self::from_source(super::log::open(path)?, cfg)
     }
 
-    /// The frame stream of an already opened log (e.g. [`LogReader::from_bytes`]).
+    /// The frame stream of an already opened MCAP log (e.g. [`LogReader::from_bytes`]).
     pub fn from_reader(reader: LogReader, cfg: &LogConfig) -> Result<Self> {
+        Self::from_source(Box::new(reader), cfg)
+    }
+
+    /// The frame stream of any opened log.
+    pub fn from_source(reader: Box<dyn MessageSource>, cfg: &LogConfig) -> Result<Self> {
         cfg.validate()?;
         Ok(FrameStream {
             cfg: cfg.clone(),
@@ -330,15 +498,8 @@ impl FrameStream {
         self.stats.messages += 1;
         self.now_ns = self.now_ns.max(m.log_time as i64);
         let ch = m.channel.clone();
-        let known = ch.message_encoding == "cdr"
-            && matches!(
-                ch.schema.as_str(),
-                schema_name::TF_MESSAGE
-                    | schema_name::POINT_CLOUD2
-                    | schema_name::IMAGE
-                    | schema_name::CAMERA_INFO
-            );
-        if !known {
+        let (Some(kind), Some(wire)) = (canonical_type(&ch.schema), wire_of(&ch.message_encoding))
+        else {
             *self
                 .stats
                 .unknown_type
@@ -353,13 +514,13 @@ impl FrameStream {
                 ))
                 .or_insert(0) += 1;
             return Ok(());
-        }
+        };
         let stamp_or_log = |ns: i64| if ns == 0 { m.log_time as i64 } else { ns };
-        match ch.schema.as_str() {
+        match kind {
             schema_name::TF_MESSAGE => {
                 let is_static = ch.topic == self.cfg.tf_static_topic;
                 if is_static || ch.topic == self.cfg.tf_topic {
-                    let tf = TfMessage::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                    let tf = TfMessage::decode_wire(&m.data, wire).map_err(|e| self.bad(&m, e))?;
                     for t in &tf.transforms {
                         self.tf.insert(t, is_static);
                     }
@@ -367,7 +528,8 @@ impl FrameStream {
             }
             schema_name::CAMERA_INFO => {
                 if ch.topic == self.cfg.right_camera_info_topic {
-                    let info = CameraInfoMsg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                    let info =
+                        CameraInfoMsg::decode_wire(&m.data, wire).map_err(|e| self.bad(&m, e))?;
                     self.baseline_m = Some(stereo_baseline(&info).map_err(|e| self.bad(&m, e))?);
                     return Ok(());
                 }
@@ -380,14 +542,16 @@ impl FrameStream {
                 } else {
                     return Ok(());
                 };
-                let info = CameraInfoMsg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                let info =
+                    CameraInfoMsg::decode_wire(&m.data, wire).map_err(|e| self.bad(&m, e))?;
                 self.infos[k] = Some(camera_from_info(&info).map_err(|e| self.bad(&m, e))?);
             }
             schema_name::POINT_CLOUD2 => {
                 if !matches!(self.slot(&ch.topic), Some(Slot::Lidar | Slot::Stereo)) {
                     return Ok(());
                 }
-                let msg = PointCloud2Msg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                let msg =
+                    PointCloud2Msg::decode_wire(&m.data, wire).map_err(|e| self.bad(&m, e))?;
                 let mut cloud = pointcloud2_to_cloud(&msg).map_err(|e| self.bad(&m, e))?;
                 let ns = stamp_or_log(msg.header.stamp.to_nanos());
                 cloud.stamp = secs(ns);
@@ -409,7 +573,7 @@ impl FrameStream {
                     Some(Slot::Mwir) => 2,
                     _ => return Ok(()),
                 };
-                let msg = ImageMsg::decode(&m.data).map_err(|e| self.bad(&m, e))?;
+                let msg = ImageMsg::decode_wire(&m.data, wire).map_err(|e| self.bad(&m, e))?;
                 let img = decode_image(&msg).map_err(|e| self.bad(&m, e))?;
                 let ns = stamp_or_log(msg.header.stamp.to_nanos());
                 self.images[k].push_back(Pending {

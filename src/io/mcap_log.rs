@@ -952,7 +952,7 @@ pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
 
 impl LogSummary {
     /// From the (schema, message count) of each topic and the first and last log times.
-    fn of(
+    pub(crate) fn of(
         counts: BTreeMap<String, (String, u64)>,
         start: Option<u64>,
         end: Option<u64>,
@@ -1308,7 +1308,8 @@ pub struct RecodeStats {
     pub damaged: Vec<DamagedRange>,
 }
 
-/// Reads every TF, PointCloud2, Image and CameraInfo message of `input`, decodes it and
+/// Reads every TF, PointCloud2, Image and CameraInfo message of `input` (any log
+/// [`super::log::open`] reads, ROS 1 bags included), decodes it and
 /// writes it again with tarn's encoder into `output` (with `opts`' compression, chunking
 /// and byte order). Messages of other types are skipped and counted; damaged parts of the
 /// input are skipped and listed in [`RecodeStats::damaged`].
@@ -1317,7 +1318,7 @@ pub fn recode(
     output: impl AsRef<Path>,
     opts: &WriteOptions,
 ) -> Result<RecodeStats> {
-    let mut r = LogReader::open(input)?;
+    let mut r = super::log::open(input)?;
     let mut w = LogWriter::create(output, opts)?;
     let mut stats = RecodeStats::default();
     while let Some(m) = r.next_message() {
@@ -1332,29 +1333,32 @@ pub fn recode(
             )
         };
         let bad = |e: super::ros::CdrError| Error::format(r.path(), loc(), e.to_string());
-        if ch.message_encoding != "cdr" {
+        let (Some(kind), Some(wire)) = (
+            super::log::canonical_type(&ch.schema),
+            super::log::wire_of(&ch.message_encoding),
+        ) else {
             *stats.skipped_unknown.entry(ch.topic.clone()).or_insert(0) += 1;
             continue;
-        }
-        match ch.schema.as_str() {
+        };
+        match kind {
             schema_name::TF_MESSAGE => w.write_tf(
                 &ch.topic,
-                &TfMessage::decode(&m.data).map_err(bad)?,
+                &TfMessage::decode_wire(&m.data, wire).map_err(bad)?,
                 m.log_time,
             )?,
             schema_name::POINT_CLOUD2 => w.write_pointcloud2(
                 &ch.topic,
-                &PointCloud2Msg::decode(&m.data).map_err(bad)?,
+                &PointCloud2Msg::decode_wire(&m.data, wire).map_err(bad)?,
                 m.log_time,
             )?,
             schema_name::IMAGE => w.write_image_msg(
                 &ch.topic,
-                &ImageMsg::decode(&m.data).map_err(bad)?,
+                &ImageMsg::decode_wire(&m.data, wire).map_err(bad)?,
                 m.log_time,
             )?,
             schema_name::CAMERA_INFO => w.write_camera_info_msg(
                 &ch.topic,
-                &CameraInfoMsg::decode(&m.data).map_err(bad)?,
+                &CameraInfoMsg::decode_wire(&m.data, wire).map_err(bad)?,
                 m.log_time,
             )?,
             _ => {

@@ -7,6 +7,9 @@
 //! - [`mcap_log`]: [`mcap_log::LogReader`] streams messages from chunked or unchunked,
 //!   zstd / lz4 / uncompressed files, with or without summary; [`mcap_log::LogWriter`]
 //!   writes `ros2`-profile logs; [`mcap_log::summarize`], [`mcap_log::recode`].
+//! - [`log`]: every log storage behind [`log::MessageSource`]: MCAP, rosbag2 directories,
+//!   and with the `bags` feature rosbag2 `.db3` files and ROS 1 `.bag` files ([`bags`]);
+//!   [`log::open`], [`log::summarize`].
 //! - [`tf`]: [`tf::TfBuffer`], interpolating transforms, never extrapolating.
 //! - [`frames`]: [`frames::FrameStream`], the time-synchronized [`frames::Frame`]s a map
 //!   is built from, with [`frames::FrameStats`] and progress in bytes.
@@ -18,10 +21,13 @@
 //! frame stream (`examples/mcap_memory.rs`) was 8588 kB for a 100-scan log and 8648 kB
 //! for a 1000-scan log.
 
+#[cfg(feature = "bags")]
+pub mod bags;
 pub mod export;
 pub mod frames;
 pub mod geotiff;
 pub mod kitti;
+pub mod log;
 pub mod mapfile;
 pub mod mcap_log;
 pub mod ply;
@@ -48,7 +54,7 @@ pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
         _ => Err(Error::format(
             path,
             "file name",
-            "unknown point cloud format: the extension must be .ply or .bin (KITTI)",
+            format!("not an input tarn reads ({})", log::SUPPORTED),
         )),
     }
 }
@@ -125,7 +131,7 @@ mod tests {
         assert_eq!(read_point_cloud(&bin).unwrap().xyz, vec![[4.0, 5.0, 6.0]]);
         for name in ["cloud.pcd", "cloud"] {
             let e = read_point_cloud(&dir.path().join(name)).unwrap_err();
-            assert!(e.to_string().contains(".ply or .bin"), "{e}");
+            assert!(e.to_string().contains(log::SUPPORTED), "{e}");
             assert!(e.to_string().contains(name), "{e}");
         }
     }

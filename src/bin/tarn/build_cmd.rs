@@ -17,7 +17,8 @@ use tarn::sim::RigSpec;
 
 #[derive(Args)]
 pub struct BuildArgs {
-    /// Input: a ROS 2 log (.mcap), or a cloud in the map frame (.ply ascii/binary, KITTI .bin).
+    /// Input: a robot log (.mcap; rosbag2 directory or .db3; ROS 1 .bag), or a cloud in the
+    /// map frame (.ply ascii/binary, KITTI .bin).
     pub input: PathBuf,
     /// Output directory (created if needed; files are replaced atomically).
     #[arg(long)]
@@ -48,6 +49,18 @@ pub struct BuildArgs {
     /// (log) Topic whose clouds make frames (default: lidar, or stereo if the log has no lidar).
     #[arg(long)]
     pub frame_topic: Option<String>,
+    /// (log) The lidar's PointCloud2 topic [default: /lidar/points, else the one
+    /// PointCloud2 topic that is not the stereo cloud].
+    #[arg(long)]
+    pub lidar_topic: Option<String>,
+    /// (log) The stereo PointCloud2 topic [default: /stereo/points, else the one
+    /// PointCloud2 topic named *stereo*].
+    #[arg(long)]
+    pub stereo_topic: Option<String>,
+    /// (log) The colour camera's Image topic (its CameraInfo: `camera_info` beside it)
+    /// [default: /camera/image, else the one Image topic that is not SWIR or MWIR].
+    #[arg(long)]
+    pub camera_topic: Option<String>,
     /// (log) Which water cues run: all, none, or a list of lidar, reflectivity, stereo,
     /// mirror [default: the config's; all without a config].
     #[arg(long)]
@@ -107,6 +120,9 @@ impl BuildArgs {
             max_window_cells: None,
             window_cells: None,
             frame_topic: None,
+            lidar_topic: None,
+            stereo_topic: None,
+            camera_topic: None,
             cues: None,
             log_config: None,
             labels: Vec::new(),
@@ -182,12 +198,6 @@ fn progress_bar(template: &str) -> ProgressBar {
     bar
 }
 
-fn is_log(p: &Path) -> bool {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
-}
-
 /// The map was built, but from a damaged input: the process exits with status 3 (the
 /// report names what was skipped).
 #[derive(Debug)]
@@ -225,10 +235,10 @@ pub fn damaged_input(
 /// `Err(DamagedInput)` after the outputs were written (exit status 3).
 pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     check_output_dir(&a.out)?;
-    if !is_log(&a.input) {
+    if !tarn::io::log::is_log(&a.input) {
         if a.cues.is_some() || a.log_config.is_some() || a.rig.is_some() {
             anyhow::bail!(
-                "--cues, --rig and --log-config are for logs (.mcap); {} is a cloud",
+                "--cues, --rig and --log-config are for logs; {} is a cloud",
                 a.input.display()
             );
         }
@@ -247,7 +257,7 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     let cfg = mapper_config(a)?;
     let extra = if cfg.build.ros_map || cfg.build.geotiff {
         // The map's log time: the last message of the log.
-        let end = tarn::io::mcap_log::summarize_quick(&a.input)
+        let end = tarn::io::log::summarize_quick(&a.input)
             .ok()
             .and_then(|s| s.end_ns);
         crate::maps_out::write(&a.maps_out, &cfg, &a.out, end.unwrap_or(0))?
@@ -256,6 +266,9 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
+        for w in r.warnings.iter().filter(|w| w.contains("cannot run")) {
+            eprintln!("warning: {w}");
+        }
     } else {
         print_log_summary(&r);
         print_extra(&extra);
@@ -323,6 +336,12 @@ pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
     let cfg = LogBuildConfig {
         log: mapper.log.clone(),
         frame_topic,
+        topics: tarn::io::frames::NamedTopics {
+            lidar: a.lidar_topic.clone(),
+            stereo: a.stereo_topic.clone(),
+            camera: a.camera_topic.clone(),
+            frame: None,
+        },
         per_frame_maps: mapper.build.per_frame_maps,
         mapper,
     };

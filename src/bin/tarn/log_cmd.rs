@@ -1,11 +1,11 @@
-//! `tarn info LOG.mcap` and `tarn recode`: what a ROS 2 log holds.
+//! `tarn info LOG` and `tarn recode`: what a robot log holds.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use serde_json::{json, Value};
-use tarn::io::frames::{FrameStream, LogConfig};
-use tarn::io::mcap_log::{self, LogReader};
+use tarn::io::frames::{FrameStream, LogConfig, NamedTopics};
+use tarn::io::mcap_log;
 use tarn::io::ros::{self, schema_name};
 
 fn f64s(v: &[f64]) -> Value {
@@ -23,9 +23,15 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
     };
     let stamp = |h: &ros::Header| json!([h.stamp.sec, h.stamp.nanosec]);
     let at = || format!("{} at log time {} ns", ch.topic, m.log_time);
-    Ok(Some(match ch.schema.as_str() {
+    let (Some(kind), Some(wire)) = (
+        tarn::io::log::canonical_type(&ch.schema),
+        tarn::io::log::wire_of(&ch.message_encoding),
+    ) else {
+        return Ok(None);
+    };
+    Ok(Some(match kind {
         schema_name::TF_MESSAGE => {
-            let tf = ros::TfMessage::decode(&m.data).with_context(at)?;
+            let tf = ros::TfMessage::decode_wire(&m.data, wire).with_context(at)?;
             base(json!({"transforms": tf.transforms.iter().map(|t| {
                 let v = t.child_to_parent.translation.vector;
                 let q = t.child_to_parent.rotation.quaternion().coords;
@@ -34,7 +40,7 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
             }).collect::<Vec<_>>()}))
         }
         schema_name::POINT_CLOUD2 => {
-            let msg = ros::PointCloud2Msg::decode(&m.data).with_context(at)?;
+            let msg = ros::PointCloud2Msg::decode_wire(&m.data, wire).with_context(at)?;
             let c = ros::pointcloud2_to_cloud(&msg)
                 .map_err(anyhow::Error::msg)
                 .with_context(at)?;
@@ -45,7 +51,7 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
             )
         }
         schema_name::IMAGE => {
-            let msg = ros::ImageMsg::decode(&m.data).with_context(at)?;
+            let msg = ros::ImageMsg::decode_wire(&m.data, wire).with_context(at)?;
             let img = ros::decode_image(&msg)
                 .map_err(anyhow::Error::msg)
                 .with_context(at)?;
@@ -60,7 +66,7 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
             )
         }
         schema_name::CAMERA_INFO => {
-            let msg = ros::CameraInfoMsg::decode(&m.data).with_context(at)?;
+            let msg = ros::CameraInfoMsg::decode_wire(&m.data, wire).with_context(at)?;
             base(
                 json!({"stamp": stamp(&msg.header), "frame_id": msg.header.frame_id,
                 "width": msg.width, "height": msg.height, "distortion_model": msg.distortion_model,
@@ -71,8 +77,15 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
     }))
 }
 
-pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::Result<()> {
-    let summary = mcap_log::summarize(&log)?;
+pub fn info(
+    log: PathBuf,
+    as_json: bool,
+    dump: bool,
+    cfg: LogConfig,
+    named: &NamedTopics,
+) -> anyhow::Result<()> {
+    let summary = tarn::io::log::summarize(&log)?;
+    let cfg = cfg.with_topics_of(&summary, named, &log)?;
     let mut stream = FrameStream::open(&log, &cfg)?;
     let mut frame_errors = Vec::new();
     for f in stream.by_ref() {
@@ -89,13 +102,16 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
             "messages": summary.messages,
             "topics": summary.topics,
             "frame_topic": cfg.frame_topic,
+            "sensor_topics": {"lidar": cfg.lidar_topic, "stereo": cfg.stereo_topic,
+                "camera": cfg.image_topic, "camera_info": cfg.camera_info_topic},
             "frames": stats,
             "errors": frame_errors,
             "damaged": summary.damaged,
         });
         if dump {
             let mut msgs = Vec::new();
-            for m in LogReader::open(&log)? {
+            let mut r = tarn::io::log::open(&log)?;
+            while let Some(m) = r.next_message() {
                 if let Some(v) = dump_message(&m?)? {
                     msgs.push(v);
                 }
@@ -103,6 +119,7 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
             out["messages_decoded"] = Value::Array(msgs);
         }
         println!("{}", serde_json::to_string(&out)?);
+        no_frames_warning(&cfg, &stats);
         return crate::build_cmd::damaged_input(&log, "counted", &summary.damaged);
     }
     println!("{}", log.display());
@@ -119,6 +136,10 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
     for t in &summary.topics {
         println!("  {:<w$}  {:>8}  {}", t.topic, t.count, t.schema);
     }
+    println!(
+        "  lidar {}, stereo {}, camera {}",
+        cfg.lidar_topic, cfg.stereo_topic, cfg.image_topic
+    );
     println!(
         "  frames (from {}): {} would be built, {} skipped for want of a transform",
         cfg.frame_topic, stats.frames_built, stats.frames_skipped_no_tf
@@ -138,5 +159,17 @@ pub fn info(log: PathBuf, as_json: bool, dump: bool, cfg: LogConfig) -> anyhow::
     for e in &frame_errors {
         println!("  error: {e}");
     }
+    no_frames_warning(&cfg, &stats);
     crate::build_cmd::damaged_input(&log, "counted", &summary.damaged)
+}
+
+/// On stderr when no frame would be built: `tarn build` would refuse the log.
+fn no_frames_warning(cfg: &LogConfig, stats: &tarn::io::frames::FrameStats) {
+    if stats.frames_built == 0 {
+        eprintln!(
+            "warning: no frame would be built from {} ({} skipped without a transform); \
+             `tarn build` would exit 1",
+            cfg.frame_topic, stats.frames_skipped_no_tf
+        );
+    }
 }

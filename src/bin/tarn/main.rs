@@ -45,9 +45,9 @@ enum Compression {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Build a map from a ROS 2 log (.mcap: the full pipeline with water cues) or a point
-    /// cloud in the map frame (.ply or KITTI .bin) and write the contract files: map.ply,
-    /// terrain.ply, map.png, report.json.
+    /// Build a map from a robot log (.mcap, rosbag2 directory or .db3, ROS 1 .bag: the full
+    /// pipeline with water cues) or a point cloud in the map frame (.ply or KITTI .bin) and
+    /// write the contract files: map.ply, terrain.ply, map.png, report.json.
     Build(Box<BuildArgs>),
     /// Lidar propagation over water: bottom returns, maximum measurable depth, and the
     /// lookahead interval where a missing return is diagnostic of water.
@@ -57,8 +57,9 @@ enum Command {
     Cues(cues_cmd::CuesArgs),
     /// Per-stage time per frame (medians), whole-log throughput, peak memory, bytes per cell.
     Bench(bench_cmd::BenchArgs),
-    /// What a file holds. A ROS 2 log (.mcap): topics, types, counts, time span, frames that
-    /// would be built. A point cloud (.ply, KITTI .bin): points, returns, channels, bounds.
+    /// What a file holds. A robot log (.mcap, rosbag2 directory or .db3, ROS 1 .bag): topics,
+    /// types, counts, time span, frames that would be built. A point cloud (.ply, KITTI
+    /// .bin): points, returns, channels, bounds.
     Info {
         input: PathBuf,
         /// (log) Print JSON: {"duration_s", "topics": [{"topic", "type", "count"}], "frames": {...}}.
@@ -67,9 +68,19 @@ enum Command {
         /// (log) With --json: also every TF, PointCloud2, Image and CameraInfo message, decoded.
         #[arg(long, requires = "json")]
         dump_messages: bool,
-        /// (log) Topic whose clouds make frames (default: the lidar topic, /lidar/points).
+        /// (log) Topic whose clouds make frames (default: the lidar, or the stereo cloud when
+        /// the log has no lidar).
         #[arg(long)]
         frame_topic: Option<String>,
+        /// (log) The lidar's PointCloud2 topic (default: found by type, as `tarn build`).
+        #[arg(long)]
+        lidar_topic: Option<String>,
+        /// (log) The stereo PointCloud2 topic.
+        #[arg(long)]
+        stereo_topic: Option<String>,
+        /// (log) The colour camera's Image topic.
+        #[arg(long)]
+        camera_topic: Option<String>,
         /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
         #[arg(long)]
         config: Option<PathBuf>,
@@ -89,8 +100,9 @@ enum Command {
     TrainColor(classify_cmd::TrainArgs),
     /// Classify an image's pixels as water or not (8-bit mask, 255 = water).
     Classify(classify_cmd::ClassifyArgs),
-    /// Decodes the TF, PointCloud2, Image and CameraInfo messages of a log and writes them
-    /// again with tarn's encoder (other types are skipped and counted).
+    /// Decodes the TF, PointCloud2, Image and CameraInfo messages of a log (any input log:
+    /// MCAP, rosbag2, ROS 1 bag) and writes them to an MCAP log with tarn's encoder (other
+    /// types are skipped and counted).
     Recode {
         input: PathBuf,
         output: PathBuf,
@@ -103,12 +115,6 @@ enum Command {
         #[arg(long)]
         big_endian: bool,
     },
-}
-
-fn is_log(p: &std::path::Path) -> bool {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -130,13 +136,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             json,
             dump_messages,
             frame_topic,
+            lidar_topic,
+            stereo_topic,
+            camera_topic,
             config,
             rings,
         }) => {
-            if !is_log(&input) {
+            if !tarn::io::log::is_log(&input) {
                 return cloud_cmd::info(&input, rings);
             }
-            let mut cfg = match config {
+            let cfg = match config {
                 Some(p) => {
                     let text =
                         std::fs::read_to_string(&p).with_context(|| p.display().to_string())?;
@@ -145,10 +154,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 }
                 None => LogConfig::default(),
             };
-            if let Some(t) = frame_topic {
-                cfg.frame_topic = t;
-            }
-            log_cmd::info(input, json, dump_messages, cfg)
+            let named = tarn::io::frames::NamedTopics {
+                lidar: lidar_topic,
+                stereo: stereo_topic,
+                camera: camera_topic,
+                frame: frame_topic.or_else(|| {
+                    (cfg.frame_topic != LogConfig::default().frame_topic)
+                        .then(|| cfg.frame_topic.clone())
+                }),
+            };
+            log_cmd::info(input, json, dump_messages, cfg, &named)
         }
         Some(Command::Recode {
             input,

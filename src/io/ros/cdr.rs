@@ -6,6 +6,11 @@
 //! (8 for `f64`/`u64`) *relative to the first byte after that header*. Strings are a
 //! `u32` length that counts the terminating NUL, the bytes, then the NUL; sequences are
 //! a `u32` element count followed by the elements; fixed arrays have no count.
+//!
+//! The same reader decodes ROS 1 serialization ([`Wire::Ros1`], as stored in `.bag` files):
+//! no encapsulation header, little endian, no alignment padding, strings without a NUL.
+//! The message layouts of the types tarn reads are the same on both wires except
+//! `std_msgs/Header`, which carries a `seq` in ROS 1.
 
 /// Why a CDR payload could not be decoded, and at which byte of the payload.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -32,13 +37,24 @@ pub enum Endian {
     Big,
 }
 
+/// How a message is serialized.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wire {
+    /// ROS 2: CDR with its encapsulation header and alignment.
+    Cdr,
+    /// ROS 1: little endian, packed, strings without a NUL.
+    Ros1,
+}
+
 const HEADER: usize = 4;
 
-/// Reads primitives from a CDR payload, keeping alignment.
+/// Reads primitives from a CDR payload, keeping alignment (or from a ROS 1 message:
+/// [`CdrReader::ros1`]).
 pub struct CdrReader<'a> {
     buf: &'a [u8],
     pos: usize,
     endian: Endian,
+    wire: Wire,
 }
 
 macro_rules! read_prim {
@@ -83,7 +99,30 @@ impl<'a> CdrReader<'a> {
             buf,
             pos: HEADER,
             endian,
+            wire: Wire::Cdr,
         })
+    }
+
+    /// A reader of a ROS 1 serialized message (no header, little endian, packed).
+    pub fn ros1(buf: &'a [u8]) -> Self {
+        CdrReader {
+            buf,
+            pos: 0,
+            endian: Endian::Little,
+            wire: Wire::Ros1,
+        }
+    }
+
+    /// A reader of `buf` serialized as `wire`.
+    pub fn for_wire(buf: &'a [u8], wire: Wire) -> CdrResult<Self> {
+        match wire {
+            Wire::Cdr => Self::new(buf),
+            Wire::Ros1 => Ok(Self::ros1(buf)),
+        }
+    }
+
+    pub fn wire(&self) -> Wire {
+        self.wire
     }
 
     pub fn endian(&self) -> Endian {
@@ -108,6 +147,9 @@ impl<'a> CdrReader<'a> {
     }
 
     fn align(&mut self, n: usize) -> CdrResult<()> {
+        if self.wire == Wire::Ros1 {
+            return Ok(());
+        }
         let rel = self.pos - HEADER;
         let pad = (n - rel % n) % n;
         if pad > self.remaining() {
@@ -148,10 +190,18 @@ impl<'a> CdrReader<'a> {
     read_prim!(f32, f32, 4);
     read_prim!(f64, f64, 8);
 
-    /// A string: u32 length (counting the NUL), bytes, NUL. Invalid UTF-8 is an error.
+    /// A string: u32 length (counting the NUL), bytes, NUL (ROS 1: u32 length, bytes).
+    /// Invalid UTF-8 is an error.
     pub fn string(&mut self) -> CdrResult<String> {
         let start = self.pos;
         let n = self.u32()? as usize;
+        if self.wire == Wire::Ros1 {
+            let b = self.take(n, "string")?;
+            return String::from_utf8(b.to_vec()).map_err(|_| CdrError {
+                offset: start,
+                message: "string is not UTF-8".into(),
+            });
+        }
         if n == 0 {
             // Some writers emit 0 for an empty string; accept it.
             return Ok(String::new());

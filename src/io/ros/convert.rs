@@ -65,6 +65,8 @@ fn field(msg: &PointCloud2Msg, name: &str) -> Result<Option<FieldReader>, String
 /// Any field order, datatype and endianness; `x`, `y`, `z` are required; `intensity`,
 /// `reflectivity` and a packed `rgb`/`rgba` float are mapped when present. A point with a
 /// non-finite coordinate or with x = y = z = 0 is a missing return and becomes NaN.
+/// An unorganized cloud (height 1) with a `ring` field is organized by it
+/// ([`organize_by_ring`]).
 pub fn pointcloud2_to_cloud(msg: &PointCloud2Msg) -> Result<PointCloud, String> {
     let (h, w) = (msg.height as usize, msg.width as usize);
     let ps = msg.point_step as usize;
@@ -157,7 +159,154 @@ pub fn pointcloud2_to_cloud(msg: &PointCloud2Msg) -> Result<PointCloud, String> 
     c.reflectivity = refl;
     c.rgb = rgb;
     c.stamp = msg.header.stamp.to_sec();
+    if h == 1 && w > 1 {
+        if let Some(fr) = field(msg, "ring")? {
+            let rings: Vec<f64> = (0..w)
+                .map(|col| read_scalar(d, col * ps + fr.offset, fr.datatype, big))
+                .collect();
+            c = organize_by_ring(&c, &rings)?;
+        }
+    }
     Ok(c)
+}
+
+/// Most rings an unorganized cloud's `ring` field may name.
+pub const MAX_RINGS: usize = 1024;
+
+fn wrap_pi(a: f64) -> f64 {
+    let t = std::f64::consts::TAU;
+    let r = a.rem_euclid(t);
+    if r > std::f64::consts::PI {
+        r - t
+    } else {
+        r
+    }
+}
+
+/// Organizes an unorganized scan (one row) into rows by `ring[i]` (the ring of point `i`,
+/// as Velodyne and Ouster drivers publish it) and columns by azimuth, so that the scan
+/// lines the lidar cues walk exist.
+///
+/// When every ring holds the same number of points (a driver that keeps missing returns
+/// as NaN or zero points), each ring's points keep their order: column `k` is the ring's
+/// `k`-th point. Otherwise (a driver that drops missing returns) columns are azimuth bins:
+/// the bin width is the median azimuth step between successive returns of a ring, the
+/// columns run in the scan's direction from the first return of the fullest ring, and a
+/// slot no return falls in is a missing return (NaN). Of two returns in one slot the first
+/// is kept. Per-point channels move with their points (0 in an empty slot).
+pub fn organize_by_ring(cloud: &PointCloud, ring: &[f64]) -> Result<PointCloud, String> {
+    let n = cloud.len();
+    if ring.len() != n {
+        return Err(format!("{} ring values for {n} points", ring.len()));
+    }
+    let lens = [
+        ("intensity", cloud.intensity.as_ref().map(Vec::len)),
+        ("reflectivity", cloud.reflectivity.as_ref().map(Vec::len)),
+        ("rgb", cloud.rgb.as_ref().map(Vec::len)),
+    ];
+    for (name, len) in lens {
+        if len.is_some_and(|l| l != n) {
+            return Err(format!("{name} has {len:?} values for {n} points"));
+        }
+    }
+    let mut by_ring: Vec<Vec<usize>> = Vec::new();
+    for (i, &r) in ring.iter().enumerate() {
+        if !(r.is_finite() && r >= 0.0 && r.fract() == 0.0 && (r as usize) < MAX_RINGS) {
+            return Err(format!(
+                "point {i} has ring {r}: not a ring number (0..{MAX_RINGS})"
+            ));
+        }
+        let r = r as usize;
+        if by_ring.len() <= r {
+            by_ring.resize_with(r + 1, Vec::new);
+        }
+        by_ring[r].push(i);
+    }
+    let rows = by_ring.len().max(1);
+    let max_count = by_ring.iter().map(Vec::len).max().unwrap_or(0);
+    let same = by_ring.iter().all(|v| v.len() == max_count);
+    let azimuth = |i: usize| {
+        let [x, y, _] = cloud.xyz[i];
+        (y as f64).atan2(x as f64)
+    };
+    // slots[r * cols + c] = the point there.
+    let (cols, slots): (usize, Vec<Option<usize>>) = if same {
+        (
+            max_count,
+            by_ring.iter().flatten().map(|&i| Some(i)).collect(),
+        )
+    } else {
+        // Signed azimuth steps between successive returns of each ring.
+        let mut steps: Vec<f64> = Vec::new();
+        for v in &by_ring {
+            let valid: Vec<usize> = v.iter().copied().filter(|&i| cloud.is_valid(i)).collect();
+            for w in valid.windows(2) {
+                let d = wrap_pi(azimuth(w[1]) - azimuth(w[0]));
+                if d.abs() > 1e-9 {
+                    steps.push(d);
+                }
+            }
+        }
+        let dir = if steps.iter().filter(|d| **d < 0.0).count() * 2 > steps.len() {
+            -1.0
+        } else {
+            1.0
+        };
+        let mut mags: Vec<f64> = steps.iter().map(|d| d * dir).filter(|d| *d > 0.0).collect();
+        mags.sort_by(f64::total_cmp);
+        let step = mags.get(mags.len() / 2).copied().unwrap_or(0.0);
+        let cols = if step > 0.0 {
+            ((std::f64::consts::TAU / step).round() as usize).clamp(max_count, max_count * 8)
+        } else {
+            max_count
+        };
+        if rows.saturating_mul(cols) > n.saturating_mul(8).max(4096) {
+            return Err(format!(
+                "{rows} rings × {cols} azimuth steps of {step:.3e} rad is too many slots for {n} points"
+            ));
+        }
+        let fullest = by_ring
+            .iter()
+            .max_by_key(|v| v.len())
+            .and_then(|v| v.iter().copied().find(|&i| cloud.is_valid(i)));
+        let mut slots = vec![None; rows * cols];
+        match (fullest, step > 0.0) {
+            (Some(first), true) => {
+                let az0 = azimuth(first);
+                for (r, v) in by_ring.iter().enumerate() {
+                    for &i in v.iter().filter(|&&i| cloud.is_valid(i)) {
+                        let a = (dir * (azimuth(i) - az0)).rem_euclid(std::f64::consts::TAU);
+                        let c = ((a / step).round() as usize) % cols;
+                        slots[r * cols + c].get_or_insert(i);
+                    }
+                }
+            }
+            _ => {
+                for (r, v) in by_ring.iter().enumerate() {
+                    for (c, &i) in v.iter().enumerate() {
+                        slots[r * cols + c] = Some(i);
+                    }
+                }
+            }
+        }
+        (cols, slots)
+    };
+    let xyz = slots
+        .iter()
+        .map(|s| s.map_or([f32::NAN; 3], |i| cloud.xyz[i]))
+        .collect();
+    let mut out = PointCloud::organized(rows, cols, xyz).map_err(|e| e.to_string())?;
+    let pick = |v: &Vec<f32>| slots.iter().map(|s| s.map_or(0.0, |i| v[i])).collect();
+    out.intensity = cloud.intensity.as_ref().map(pick);
+    out.reflectivity = cloud.reflectivity.as_ref().map(pick);
+    out.rgb = cloud
+        .rgb
+        .as_ref()
+        .map(|v| slots.iter().map(|s| s.map_or([0; 3], |i| v[i])).collect());
+    out.frame_to_map = cloud.frame_to_map;
+    out.sensor_origin = cloud.sensor_origin;
+    out.stamp = cloud.stamp;
+    Ok(out)
 }
 
 /// Encodes a [`PointCloud`] as a little-endian `PointCloud2` with float32 `x y z`, then
@@ -384,6 +533,63 @@ mod tests {
     use super::*;
     use crate::io::ros::msgs::Time;
     use proptest::prelude::*;
+
+    #[test]
+    fn ring_numbers_must_be_small_whole_numbers() {
+        let c = PointCloud::unorganized(vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        for bad in [-1.0, 0.5, f64::NAN, MAX_RINGS as f64] {
+            let e = organize_by_ring(&c, &[0.0, bad]).unwrap_err();
+            assert!(e.contains("not a ring number"), "{e}");
+        }
+        assert!(organize_by_ring(&c, &[0.0]).is_err());
+        let mut short = c.clone();
+        short.intensity = Some(vec![1.0]);
+        assert!(organize_by_ring(&short, &[0.0, 0.0]).is_err());
+    }
+
+    #[test]
+    fn rings_of_equal_count_keep_their_order_and_channels() {
+        // Two rings of three points, published interleaved.
+        let xyz: Vec<[f32; 3]> = (0..6).map(|i| [1.0 + i as f32, 0.5, 0.0]).collect();
+        let mut c = PointCloud::unorganized(xyz.clone());
+        c.intensity = Some((0..6).map(|i| i as f32).collect());
+        let rings = [1.0, 0.0, 1.0, 0.0, 1.0, 0.0];
+        let o = organize_by_ring(&c, &rings).unwrap();
+        assert_eq!((o.rows, o.cols), (2, 3));
+        assert_eq!(o.xyz, vec![xyz[1], xyz[3], xyz[5], xyz[0], xyz[2], xyz[4]]);
+        assert_eq!(o.intensity.unwrap(), vec![1.0, 3.0, 5.0, 0.0, 2.0, 4.0]);
+    }
+
+    #[test]
+    fn dropped_returns_leave_empty_azimuth_bins() {
+        // 8 columns at 45° steps; ring 1 lacks columns 2 and 5.
+        let at = |c: usize, z: f32| {
+            let a = c as f64 * std::f64::consts::FRAC_PI_4;
+            [10.0 * a.cos() as f32, 10.0 * a.sin() as f32, z]
+        };
+        let mut xyz = Vec::new();
+        let mut rings = Vec::new();
+        for r in 0..2 {
+            for c in 0..8 {
+                if r == 1 && (c == 2 || c == 5) {
+                    continue;
+                }
+                xyz.push(at(c, r as f32));
+                rings.push(r as f64);
+            }
+        }
+        let o = organize_by_ring(&PointCloud::unorganized(xyz), &rings).unwrap();
+        assert_eq!((o.rows, o.cols), (2, 8));
+        for c in 0..8 {
+            assert_eq!(o.xyz[c], at(c, 0.0));
+            let slot = o.xyz[8 + c];
+            if c == 2 || c == 5 {
+                assert!(slot[0].is_nan());
+            } else {
+                assert_eq!(slot, at(c, 1.0));
+            }
+        }
+    }
 
     fn put(data: &mut [u8], at: usize, dt: u8, big: bool, v: f64) {
         macro_rules! w {

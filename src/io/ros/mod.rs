@@ -5,10 +5,10 @@ pub mod cdr;
 pub mod convert;
 pub mod msgs;
 
-pub use cdr::{CdrError, Endian};
+pub use cdr::{CdrError, Endian, Wire};
 pub use convert::{
     camera_from_info, camera_to_info, cloud_to_pointcloud2, decode_image, encode_image,
-    pointcloud2_to_cloud, Image, Pixels,
+    organize_by_ring, pointcloud2_to_cloud, Image, Pixels,
 };
 pub use msgs::{
     schema_name, schema_text, CameraInfoMsg, Header, ImageMsg, PointCloud2Msg, PointField,

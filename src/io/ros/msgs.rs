@@ -3,7 +3,7 @@
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 
-use super::cdr::{CdrReader, CdrResult, CdrWriter, Endian};
+use super::cdr::{CdrReader, CdrResult, CdrWriter, Endian, Wire};
 use crate::geom::Pose;
 
 /// `builtin_interfaces/msg/Time`.
@@ -60,6 +60,19 @@ impl Header {
     }
 
     fn read(r: &mut CdrReader) -> CdrResult<Self> {
+        if r.wire() == Wire::Ros1 {
+            // ROS 1 std_msgs/Header: uint32 seq, time stamp (uint32 secs, nsecs), frame_id.
+            let _seq = r.u32()?;
+            let sec = r.u32()?;
+            return Ok(Header {
+                stamp: Time {
+                    sec: i32::try_from(sec)
+                        .map_err(|_| r.err(format!("stamp {sec} s is past 2038")))?,
+                    nanosec: r.u32()?,
+                },
+                frame_id: r.string()?,
+            });
+        }
         Ok(Header {
             stamp: Time::read(r)?,
             frame_id: r.string()?,
@@ -100,7 +113,12 @@ pub struct TfMessage {
 
 impl TfMessage {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         // Each TransformStamped is at least 4+4+4+4+7*8 bytes.
         let n = r.seq_len(72, "transforms")?;
         let mut transforms = Vec::with_capacity(n);
@@ -204,7 +222,12 @@ pub struct PointCloud2Msg {
 
 impl PointCloud2Msg {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         let header = Header::read(&mut r)?;
         let height = r.u32()?;
         let width = r.u32()?;
@@ -271,7 +294,12 @@ pub struct ImageMsg {
 
 impl ImageMsg {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         Ok(ImageMsg {
             header: Header::read(&mut r)?,
             height: r.u32()?,
@@ -324,7 +352,12 @@ pub struct CameraInfoMsg {
 
 impl CameraInfoMsg {
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
-        let mut r = CdrReader::new(buf)?;
+        Self::decode_wire(buf, Wire::Cdr)
+    }
+
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
         Ok(CameraInfoMsg {
             header: Header::read(&mut r)?,
             height: r.u32()?,
@@ -461,6 +494,49 @@ mod tests {
             stamp: Time::from_nanos(ns),
             frame_id: f.into(),
         }
+    }
+
+    /// A ROS 1 serialized CameraInfo: header with seq, packed, strings without NUL.
+    #[test]
+    fn ros1_wire_decodes_header_seq_and_packed_fields() {
+        let mut b = Vec::new();
+        let u32s = |b: &mut Vec<u8>, v: u32| b.extend_from_slice(&v.to_le_bytes());
+        let string = |b: &mut Vec<u8>, s: &str| {
+            b.extend_from_slice(&(s.len() as u32).to_le_bytes());
+            b.extend_from_slice(s.as_bytes());
+        };
+        u32s(&mut b, 7); // seq
+        u32s(&mut b, 1700); // secs
+        u32s(&mut b, 250); // nsecs
+        string(&mut b, "cam");
+        u32s(&mut b, 480);
+        u32s(&mut b, 640);
+        string(&mut b, "plumb_bob");
+        u32s(&mut b, 5);
+        for i in 0..(5 + 9 + 9 + 12) {
+            b.extend_from_slice(&(i as f64).to_le_bytes());
+        }
+        for v in [1u32, 1, 0, 0, 0, 0] {
+            u32s(&mut b, v);
+        }
+        b.push(0);
+        let m = CameraInfoMsg::decode_wire(&b, Wire::Ros1).unwrap();
+        assert_eq!(
+            m.header.stamp,
+            Time {
+                sec: 1700,
+                nanosec: 250
+            }
+        );
+        assert_eq!(m.header.frame_id, "cam");
+        assert_eq!((m.height, m.width), (480, 640));
+        assert_eq!(m.d, vec![0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(m.k[0], 5.0);
+        assert_eq!(m.p[11], 34.0);
+        // The same bytes are not CDR (no encapsulation header), and a cut payload is an
+        // error, not a panic.
+        assert!(CameraInfoMsg::decode(&b).is_err());
+        assert!(CameraInfoMsg::decode_wire(&b[..b.len() - 3], Wire::Ros1).is_err());
     }
 
     #[test]

@@ -1,0 +1,7 @@
+#![no_main]
+//! `cargo fuzz run ros1_bag`: the entry point is shared with tests/fuzz_smoke.rs.
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let _ = tarn::fuzzing::ros1_bag(data);
+});
