@@ -81,7 +81,7 @@ kind = "level"
 level = -0.08
 centre = [8.0, 1.0]
 radius = 2.5
-attenuation = 4.0
+attenuation = 11.1
 colour = [0.12, 0.10, 0.07]
 
 [sky]
