@@ -84,29 +84,33 @@ def build_many(
         client.submit(_tiles_of_log, p, cfg, parts, key=f"tarn-tiles-{i}", pure=False)
         for i, p in enumerate(paths)
     ]
-    intermediates = []
+    picks = []
+    merges = []
     roots = []
     for r in range(parts):
         level = [client.submit(_pick, f, r, pure=False) for f in per_log]
-        intermediates.extend(level)
+        picks.extend(level)
         while len(level) > 1:
             nxt = [
                 client.submit(_merge2, level[k], level[k + 1], pure=False)
                 for k in range(0, len(level) - 1, 2)
             ]
+            merges.extend(nxt)
             if len(level) % 2:
                 nxt.append(level[-1])
-            intermediates.extend(f for f in nxt if f not in level)
             level = nxt
         roots.append(level[0])
     if stats is not None:
-        sizes = client.gather([client.submit(_nbytes, f, pure=False) for f in intermediates])
-        n_log = len(per_log) * parts
-        stats["log_bytes"] = int(sum(sizes[:n_log]))
-        stats["merge_bytes"] = int(sum(sizes[n_log:]))
-        stats["result_bytes"] = int(
-            sum(client.gather([client.submit(_nbytes, f, pure=False) for f in roots]))
-        )
+
+        def total(futures):
+            sizes = client.gather([client.submit(_nbytes, f, pure=False) for f in futures])
+            return int(sum(sizes))
+
+        # Each per-log part goes into a merge (or to the client when it is alone); each
+        # merge result into the next merge or to the client.
+        stats["log_bytes"] = total(picks)
+        stats["merge_bytes"] = total(merges)
+        stats["result_bytes"] = total(roots)
         stats["points"] = int(
             sum(client.gather([client.submit(_points, f, pure=False) for f in per_log]))
         )
