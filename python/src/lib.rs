@@ -44,6 +44,9 @@ fn config_of(config: Option<PathBuf>) -> PyResult<MapperConfig> {
     }
 }
 
+/// Largest layer [`Map::layer`] makes, in cells (4 GB of `f64`).
+const MAX_LAYER_CELLS: usize = 500_000_000;
+
 /// The names of [`Map::layer`], in order.
 const LAYERS: [&str; 6] = ["elevation", "sigma", "water", "class", "hazard", "depth"];
 
@@ -65,15 +68,22 @@ impl Map {
         &self,
         empty: T,
         value: impl Fn(&tarn::hazard::MapCell) -> T,
-    ) -> Array2<T> {
+    ) -> PyResult<Array2<T>> {
         let (lo, hi) = self.bounds();
         let (w, h) = ((hi.x - lo.x + 1) as usize, (hi.y - lo.y + 1) as usize);
+        // Maps of logs far apart span a bounding box far larger than their cells.
+        if w.saturating_mul(h) > MAX_LAYER_CELLS {
+            return Err(TarnError::new_err(format!(
+                "a layer of {h} × {w} cells is more than {MAX_LAYER_CELLS}: the map's cells \
+                 are too far apart for one array; read them by keys()"
+            )));
+        }
         let mut a = Array2::from_elem((h, w), empty);
         for c in &self.map.cells {
             let (r, col) = ((c.key.y - lo.y) as usize, (c.key.x - lo.x) as usize);
             a[[r, col]] = value(c);
         }
-        a
+        Ok(a)
     }
 }
 
@@ -125,19 +135,25 @@ impl Map {
     /// `class`; 255 in `hazard`.
     fn layer<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
         Ok(match name {
-            "elevation" => self.grid(f64::NAN, |c| c.z).into_pyarray(py).into_any(),
+            "elevation" => self.grid(f64::NAN, |c| c.z)?.into_pyarray(py).into_any(),
             "sigma" => self
-                .grid(f64::NAN, |c| c.elevation_std)
+                .grid(f64::NAN, |c| c.elevation_std)?
                 .into_pyarray(py)
                 .into_any(),
-            "water" => self.grid(f32::NAN, |c| c.water).into_pyarray(py).into_any(),
-            "depth" => self.grid(f32::NAN, |c| c.depth).into_pyarray(py).into_any(),
+            "water" => self
+                .grid(f32::NAN, |c| c.water)?
+                .into_pyarray(py)
+                .into_any(),
+            "depth" => self
+                .grid(f32::NAN, |c| c.depth)?
+                .into_pyarray(py)
+                .into_any(),
             "class" => self
-                .grid(0u8, |c| c.class as u8)
+                .grid(0u8, |c| c.class as u8)?
                 .into_pyarray(py)
                 .into_any(),
             "hazard" => self
-                .grid(255u8, |c| c.hazard as u8)
+                .grid(255u8, |c| c.hazard as u8)?
                 .into_pyarray(py)
                 .into_any(),
             _ => {
