@@ -20,9 +20,9 @@ if [ ! -x .venv/bin/python ] || ! cat tools/requirements*.txt | cmp -s - "$stamp
 fi
 .venv/bin/python -c "import open3d, trimesh, mcap_ros2, dask.distributed" >/dev/null
 # The Python package `tarn` (python/): built by maturin with the dev profile into this
-# checkout's target folder, so it reuses the dependencies `cargo test` compiles (the
-# profiles match); only tarn itself and the bindings compile again. Cargo skips the build
-# when nothing changed.
+# checkout's target folder, whose profiles python/Cargo.toml repeats, so most dependencies
+# are compiled once for it and for `cargo build` (docs/distributed.md has the count).
+# Cargo skips the build when nothing changed.
 echo "tools/setup.sh: pip install ./python"
 PATH="$PWD/.venv/bin:$PATH" CARGO_TARGET_DIR="$PWD/target" MATURIN_PEP517_ARGS="--profile dev" \
   .venv/bin/pip install -q --no-build-isolation ./python
