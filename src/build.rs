@@ -1072,9 +1072,9 @@ pub struct TileBuild {
 /// seconds), with a mapper that starts empty at the first of them. That is **not** the
 /// same as the part of a whole-log build those frames contributed: the cues of a frame
 /// read the window the earlier frames left (the local ground, the below-surface gate, the
-/// lidar height estimated from the first scans), so the merged time chunks of a log differ
-/// from its one-pass build in the cells near chunk starts. Chunk by log when the result
-/// must be exact.
+/// lidar height estimated from the first scans), so the merged time chunks of a log can
+/// differ from its one-pass build where the first frames of a chunk looked
+/// (`docs/distributed.md` has numbers). Chunk by log when the result must be exact.
 ///
 /// A log none of whose frames (in the range) could be fused gives an empty tile map, not
 /// an error; a file that is not a log is an error.
