@@ -811,6 +811,24 @@ pub struct LogBuildConfig {
     pub per_frame_maps: bool,
 }
 
+impl LogBuildConfig {
+    /// The log build of a mapper config as `tarn build` makes it: the config's `[log]`
+    /// settings, its frame topic when it names one other than the default (else the topic
+    /// is chosen from the log), and per-frame maps as its `[build]` section says.
+    pub fn of_mapper(mapper: MapperConfig) -> Self {
+        let frame_topic = (mapper.log.frame_topic
+            != crate::io::frames::LogConfig::default().frame_topic)
+            .then(|| mapper.log.frame_topic.clone());
+        LogBuildConfig {
+            log: mapper.log.clone(),
+            frame_topic,
+            topics: crate::io::frames::NamedTopics::default(),
+            per_frame_maps: mapper.build.per_frame_maps,
+            mapper,
+        }
+    }
+}
+
 /// Builds the map of a robot log (any storage [`crate::io::log::open`] reads) through the online [`Mapper`] (one code path for online
 /// and offline): each frame is fused at its pose into a rolling window centred on the
 /// vehicle, with the configured cues; cells that leave it go to the global tile map. At the
@@ -831,11 +849,7 @@ pub fn build_log(
     let mut mapper = Mapper::new(cfg.mapper.clone())?;
     mapper.set_publish(cfg.per_frame_maps);
     let summary = crate::io::log::summarize_quick(input)?;
-    let mut named = cfg.topics.clone();
-    if named.frame.is_none() {
-        named.frame = cfg.frame_topic.clone();
-    }
-    let log_cfg = cfg.log.with_topics_of(&summary, &named, input)?;
+    let log_cfg = frame_log_config(cfg, &summary, input)?;
     let mut stream = FrameStream::open(input, &log_cfg)?;
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
     let mut counts = CueCounts::default();
@@ -1004,6 +1018,134 @@ pub fn build_log(
     crate::interrupt::check("writing the outputs")?;
     stage.commit()?;
     Ok(report)
+}
+
+/// The log settings of a build: [`LogBuildConfig::log`] with its sensor topics chosen
+/// ([`crate::io::frames::LogConfig::with_topics_of`]: named ones, else by message type).
+pub fn frame_log_config(
+    cfg: &LogBuildConfig,
+    summary: &crate::io::mcap_log::LogSummary,
+    input: &Path,
+) -> Result<crate::io::frames::LogConfig> {
+    let mut named = cfg.topics.clone();
+    if named.frame.is_none() {
+        named.frame = cfg.frame_topic.clone();
+    }
+    cfg.log.with_topics_of(summary, &named, input)
+}
+
+/// The cells of one log (or of the frames of one time range of it), before the water
+/// stage: what [`build_tiles`] gives.
+#[derive(Debug, Clone)]
+pub struct TileBuild {
+    /// Every cell the frames observed, with its elevation statistics and water evidence.
+    pub tiles: TileMap,
+    /// Frames fused into `tiles`.
+    pub frames_fused: u64,
+    /// Frames read from the log but outside the time range, not fused.
+    pub frames_outside: u64,
+    /// Frames that could not be read or fused, with why.
+    pub errors: Vec<String>,
+    /// The damaged parts of the log, skipped.
+    pub damaged: Vec<crate::io::mcap_log::DamagedRange>,
+    /// The lidar height the cue model used.
+    pub lidar_height_m: Option<f64>,
+}
+
+/// The cells of a log as [`build_log`] fuses them, without the water stage and without
+/// writing anything: [`finish_tiles`] of the result is the map `build_log` writes, cell for
+/// cell. Tile maps of many logs merge exactly ([`TileMap::merge`]: integer sums, in any
+/// order), so the map of many logs is a map-reduce: `build_tiles` per log, merge, finish.
+///
+/// `range_s = Some((t0, t1))` fuses only the frames stamped in `t0 <= t < t1` (log time,
+/// seconds), with a mapper that starts empty at the first of them. That is **not** the
+/// same as the part of a whole-log build those frames contributed: the cues of a frame
+/// read the window the earlier frames left (the local ground, the below-surface gate, the
+/// lidar height estimated from the first scans), so the merged time chunks of a log can
+/// differ from its one-pass build where the first frames of a chunk looked
+/// (`docs/distributed.md` has numbers). Chunk by log when the result must be exact.
+///
+/// A log none of whose frames (in the range) could be fused gives an empty tile map, not
+/// an error; a file that is not a log is an error.
+pub fn build_tiles(
+    input: &Path,
+    cfg: &LogBuildConfig,
+    range_s: Option<(f64, f64)>,
+) -> Result<TileBuild> {
+    use crate::io::frames::FrameStream;
+    if let Some((t0, t1)) = range_s {
+        if t0.is_nan() || t1.is_nan() || t0 > t1 {
+            return Err(Error::invalid(
+                "time range",
+                format!("{t0} s .. {t1} s is not a range"),
+            ));
+        }
+    }
+    let mut mapper = Mapper::new(cfg.mapper.clone())?;
+    mapper.set_publish(false);
+    let summary = crate::io::log::summarize_quick(input)?;
+    let log_cfg = frame_log_config(cfg, &summary, input)?;
+    let mut stream = FrameStream::open(input, &log_cfg)?;
+    let (mut frames_fused, mut frames_outside) = (0u64, 0u64);
+    let mut errors = Vec::new();
+    for item in stream.by_ref() {
+        crate::interrupt::check("reading the log")?;
+        let frame = match item {
+            Ok(f) => f,
+            Err(e) => {
+                errors.push(e.to_string());
+                continue;
+            }
+        };
+        if let Some((t0, t1)) = range_s {
+            if !(frame.stamp >= t0 && frame.stamp < t1) {
+                frames_outside += 1;
+                continue;
+            }
+        }
+        match mapper.update(&frame) {
+            Ok(_) => frames_fused += 1,
+            Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
+        }
+    }
+    if let Some(e) = stream.fatal_error() {
+        return Err(Error::format(
+            input,
+            format!("topic {}", log_cfg.frame_topic),
+            format!("no map built: {e}"),
+        ));
+    }
+    let damaged = stream.damaged().to_vec();
+    let lidar_height_m = mapper.lidar_height();
+    Ok(TileBuild {
+        tiles: mapper.finish(),
+        frames_fused,
+        frames_outside,
+        errors,
+        damaged,
+        lidar_height_m,
+    })
+}
+
+/// The water stage over a (merged) tile map: water bodies, classes, hazards and depth
+/// under `cfg`'s fusion, water and vehicle settings, as [`build_log`] runs it at the end of
+/// a log. It runs on the whole map at once, so a water body that crosses tile borders, or
+/// the areas of several logs, is found whole.
+pub fn finish_tiles(tiles: &TileMap, cfg: &MapperConfig) -> Result<HazardMap> {
+    let expect = (cfg.grid.resolution, cfg.grid.z_ref);
+    if (tiles.resolution(), tiles.z_ref()) != expect {
+        return Err(Error::invalid(
+            "tile map",
+            format!(
+                "resolution/z_ref {} m / {} m, the config says {} m / {} m",
+                tiles.resolution(),
+                tiles.z_ref(),
+                expect.0,
+                expect.1
+            ),
+        ));
+    }
+    HazardMap::from_tiles(tiles, &cfg.hazard_config())
 }
 
 /// The comment lines that mark `map.ply` of a map built from a damaged log: the input, how

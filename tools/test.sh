@@ -9,4 +9,4 @@ export PROPTEST_RNG_SEED="${PROPTEST_RNG_SEED:-20261121}"
 tools/setup.sh
 cargo build --bins
 cargo test
-TARN_BIN="$PWD/target/debug/tarn" .venv/bin/python -m pytest -q -p no:dash tools
+TARN_BIN="$PWD/target/debug/tarn" .venv/bin/python -m pytest -q -p no:dash tools python/tests

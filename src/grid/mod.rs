@@ -20,7 +20,7 @@ pub use evidence::{
     CueLogOdds, Evidence, Fusion, FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS,
 };
 pub use ingest::{IngestStats, RangeNoise};
-pub use tiles::{TileMap, TILE_CELLS};
+pub use tiles::{TileMap, TILESET_MAGIC, TILESET_VERSION, TILE_CELLS};
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

@@ -6,6 +6,11 @@ use std::collections::BTreeMap;
 use super::{centre_of, CellKey, CellSink, CellStats, GridConfig, RollingGrid};
 use crate::error::{Error, Result};
 
+#[path = "tiles_codec.rs"]
+mod codec;
+
+pub use codec::{TILESET_MAGIC, TILESET_VERSION};
+
 /// Cells per tile side.
 pub const TILE_CELLS: i64 = 64;
 

@@ -10,7 +10,6 @@ use tarn::build::{
     LogBuildReport, WaterSummary,
 };
 use tarn::grid::{GridConfig, RangeNoise};
-use tarn::io::frames::LogConfig;
 use tarn::mapper::MapperConfig;
 use tarn::project::{LabelSensor, LabelsConfig};
 use tarn::sim::RigSpec;
@@ -329,21 +328,13 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
 
 /// Builds a log with a progress bar (frames and bytes); returns the report.
 pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
-    let mapper = mapper_config(a)?;
     // The frame topic is chosen from the log unless it was named.
-    let frame_topic = (mapper.log.frame_topic != LogConfig::default().frame_topic)
-        .then(|| mapper.log.frame_topic.clone());
-    let cfg = LogBuildConfig {
-        log: mapper.log.clone(),
-        frame_topic,
-        topics: tarn::io::frames::NamedTopics {
-            lidar: a.lidar_topic.clone(),
-            stereo: a.stereo_topic.clone(),
-            camera: a.camera_topic.clone(),
-            frame: None,
-        },
-        per_frame_maps: mapper.build.per_frame_maps,
-        mapper,
+    let mut cfg = LogBuildConfig::of_mapper(mapper_config(a)?);
+    cfg.topics = tarn::io::frames::NamedTopics {
+        lidar: a.lidar_topic.clone(),
+        stereo: a.stereo_topic.clone(),
+        camera: a.camera_topic.clone(),
+        frame: None,
     };
     let bar =
         progress_bar("{spinner} mapping {bar:40} {binary_bytes}/{binary_total_bytes} ({eta})");

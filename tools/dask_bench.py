@@ -1,0 +1,111 @@
+"""Measures `tarn.dask.build_many` on this machine: wall time with 1, 2 and 4 workers
+against the one-process build, and the bytes of tile sets that travel per million points.
+Writes the tables of docs/distributed.md to stdout (markdown).
+
+    .venv/bin/python tools/dask_bench.py [--logs 4] [--frames 12] [--workers 1,2,4]
+
+The logs are simulated with `tarn simulate` (TARN_BIN, default target/debug/tarn) from
+maps/default.toml with drives along parallel lines past the pond.
+"""
+
+import argparse
+import os
+import pathlib
+import subprocess
+import sys
+import tempfile
+import time
+
+import tarn
+import tarn.dask
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+def tarn_bin() -> str:
+    return os.environ.get("TARN_BIN") or str(ROOT / "target" / "debug" / "tarn")
+
+
+def simulate(d: pathlib.Path, n: int, frames: int) -> list:
+    text = (ROOT / "maps" / "default.toml").read_text()
+    head, _ = text.split("[trajectory]")
+    head = head.replace('rig = "rigs/small.toml"', f'rig = "{ROOT / "maps" / "rigs" / "small.toml"}"')
+    logs = []
+    for i in range(n):
+        y = -4.0 + 18.0 * i / max(1, n - 1)
+        s = d / f"drive{i}.toml"
+        s.write_text(
+            head
+            + f"[trajectory]\nwaypoints = [[2.0, {y}], [40.0, {y}]]\nspeed = 3.0\n"
+            f"rate_hz = 5.0\nframes = {frames}\n"
+        )
+        out = d / f"drive{i}"
+        subprocess.run([tarn_bin(), "simulate", str(s), "--out", str(out)], check=True, capture_output=True)
+        logs.append(str(out / "log.mcap"))
+    return logs
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--logs", type=int, default=4)
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--workers", default="1,2,4")
+    ap.add_argument("--repeat", type=int, default=2, help="runs per row; the fastest is kept")
+    a = ap.parse_args()
+    from dask.distributed import Client, LocalCluster
+
+    with tempfile.TemporaryDirectory() as tmp:
+        logs = simulate(pathlib.Path(tmp), a.logs, a.frames)
+        best = None
+        for _ in range(a.repeat):
+            t = time.perf_counter()
+            ref = tarn.build_many(logs)
+            dt = time.perf_counter() - t
+            best = dt if best is None else min(best, dt)
+        ref_bytes = ref.ply_bytes()
+        rows = []
+        for w in [int(x) for x in a.workers.split(",")]:
+            cluster = LocalCluster(n_workers=w, threads_per_worker=1, processes=True, dashboard_address=None)
+            client = Client(cluster)
+            try:
+                # Warm the workers (imports) before timing.
+                tarn.dask.build_many(logs[:1], client)
+                times = []
+                for _ in range(a.repeat):
+                    stats = {}
+                    t = time.perf_counter()
+                    m = tarn.dask.build_many(logs, client)
+                    times.append(time.perf_counter() - t)
+                assert m.ply_bytes() == ref_bytes, "the Dask map differs from the one-process map"
+                stats = {}
+                tarn.dask.build_many(logs, client, stats=stats)
+            finally:
+                client.close()
+                cluster.close()
+            rows.append((w, min(times), stats))
+        pts = rows[0][2]["points"]
+        print(f"{a.logs} logs, {a.frames} frames each, {pts:,} points in their cells; "
+              f"one-process `tarn.build_many`: {best:.2f} s ({pts / best:,.0f} points/s)\n")
+        print("| workers | wall time / one-process time | speed-up over 1 worker | map identical |")
+        print("| --- | --- | --- | --- |")
+        for w, t, _ in rows:
+            print(f"| {w} | {t / best:.2f} | {rows[0][1] / t:.2f} | yes |")
+        print()
+        print("| workers (= regions) | per-log tile sets (bytes) | merge results | gathered by the client | total | total per million points |")
+        print("| --- | --- | --- | --- | --- | --- |")
+        for w, _, s in rows:
+            tot = s["log_bytes"] + s["merge_bytes"] + s["result_bytes"]
+            print(
+                f"| {w} | {s['log_bytes']:,} | {s['merge_bytes']:,} | {s['result_bytes']:,} | "
+                f"{tot:,} | {tot / (s['points'] / 1e6):,.0f} |"
+            )
+        one = tarn.merge([tarn.build_tiles(p) for p in logs])
+        print(f"\nmerged map: {len(one)} cells, {one.tile_count} tiles, "
+              f"{len(one.to_bytes()):,} bytes as a tile set ({len(one.to_bytes()) / len(one):.1f} bytes/cell); "
+              f"one log on its own: {len(tarn.build_tiles(logs[0]).to_bytes()):,} bytes for "
+              f"{tarn.build_tiles(logs[0]).points:,} points")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
