@@ -321,18 +321,20 @@ impl MessageSource for Chain {
     }
 }
 
-/// Counts messages per topic in one streaming pass over any log ([`open`]); for an MCAP
-/// file see also [`super::mcap_log::summarize`].
+/// Counts messages per topic in one streaming pass over any log ([`open`]). A truncated
+/// or damaged file gives the counts of the messages it could read and says what was
+/// skipped in [`LogSummary::damaged`].
 pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
-    let path = path.as_ref();
-    if log_format(path) == Some(LogFormat::Mcap) {
-        return super::mcap_log::summarize(path);
-    }
-    let mut r = open(path)?;
+    count_messages(open(path)?.as_mut())
+}
+
+/// Counts the messages of a source per topic, with their time span and the damage skipped.
+pub(crate) fn count_messages(r: &mut dyn MessageSource) -> Result<LogSummary> {
     let mut counts: BTreeMap<String, (String, u64)> = BTreeMap::new();
     let (mut start, mut end) = (None::<u64>, None::<u64>);
     while let Some(m) = r.next_message() {
         let m = m?;
+        // A log without a summary section is counted in a pass of its own before a build.
         crate::interrupt::check("counting the log's messages")?;
         let e = counts
             .entry(m.channel.topic.clone())

@@ -933,21 +933,7 @@ pub struct LogSummary {
 /// [`LogSummary::damaged`]; a file that cannot be opened or read, or that is not an MCAP
 /// log, is an error.
 pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
-    let mut r = LogReader::open(path)?;
-    let mut counts: BTreeMap<String, (String, u64)> = BTreeMap::new();
-    let (mut start, mut end) = (None::<u64>, None::<u64>);
-    while let Some(m) = r.next_message() {
-        let m = m?;
-        // A log without a summary section is counted in a pass of its own before a build.
-        crate::interrupt::check("counting the log's messages")?;
-        let e = counts
-            .entry(m.channel.topic.clone())
-            .or_insert_with(|| (m.channel.schema.clone(), 0));
-        e.1 += 1;
-        start = Some(start.map_or(m.log_time, |s| s.min(m.log_time)));
-        end = Some(end.map_or(m.log_time, |s| s.max(m.log_time)));
-    }
-    Ok(LogSummary::of(counts, start, end, r.damaged().to_vec()))
+    super::log::count_messages(&mut LogReader::open(path)?)
 }
 
 impl LogSummary {
