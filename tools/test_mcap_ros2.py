@@ -319,6 +319,9 @@ def test_python_reads_what_tarn_wrote(tmp_path, flags):
     for a, b in zip(original, rewritten):
         assert a == b
 
+    report = json.loads(run_tarn("recode", src, tmp_path / "again.mcap", *flags, "--json"))
+    assert report == {"written": len(original), "skipped_unknown": {"/diagnostics": 2}, "damaged": []}
+
     with open(dst, "rb") as f:
         reader = make_reader(f)
         header = reader.get_header()

@@ -114,6 +114,9 @@ enum Command {
         /// Encode CDR big endian (ROS 2 itself writes little endian).
         #[arg(long)]
         big_endian: bool,
+        /// Print what was written, skipped and damaged as JSON.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -171,6 +174,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             compression,
             unchunked,
             big_endian,
+            json,
         }) => {
             let opts = WriteOptions {
                 compression: match compression {
@@ -187,9 +191,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 ..Default::default()
             };
             let s = mcap_log::recode(&input, &output, &opts)?;
-            println!("wrote {} messages to {}", s.written, output.display());
-            for (t, n) in &s.skipped_unknown {
-                println!("skipped {n} messages of unknown type on {t}");
+            if json {
+                println!("{}", serde_json::to_string_pretty(&s)?);
+            } else {
+                println!("wrote {} messages to {}", s.written, output.display());
+                for (t, n) in &s.skipped_unknown {
+                    println!("skipped {n} messages of unknown type on {t}");
+                }
             }
             build_cmd::damaged_input(&input, "wrote", &s.damaged)
         }
