@@ -801,6 +801,7 @@ impl Mapper {
             lidar_noise: cfg.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise),
             stereo: cfg.stereo.as_ref().filter(|s| s.reflections).map(|s| s.cue),
             mirror_check: cfg.stereo.as_ref().is_some_and(|s| s.mirror_check),
+            surface_points: false,
         };
         let mut lidar_height = None;
         if let Some(l) = cfg.lidar.as_ref().filter(|l| l.cues) {
@@ -816,6 +817,9 @@ impl Mapper {
             (None, Some(l)) => Some(l.compile()?),
             (None, None) => None,
         };
+        fc.surface_points = models
+            .as_ref()
+            .is_some_and(|m| m.colour.is_some() && m.colour_check);
         let labels = models.map(crate::project::FrameLabels::new).transpose()?;
         Ok(Mapper {
             cfg,

@@ -1,10 +1,42 @@
 //! A simulated drive for the command-line robustness tests: the vehicle's path, the lidar's
-//! mount, and an organized scan of level ground. Shared by `tests/robust_cli.rs` and
-//! `tests/plausibility.rs`.
+//! mount, an organized scan of level ground, and the log's transforms. Shared by
+//! `tests/robust_cli.rs`, `tests/plausibility.rs` and `tests/robot_logs.rs`.
 #![allow(dead_code)]
+
+use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
+use tarn::io::mcap_log::{LogWriter, WriteOptions};
+use tarn::io::ros::{TfMessage, TransformStamped};
+
+/// A log at `path` that starts with the lidar's mount ([`lidar_ext`]) on `/tf_static`.
+pub fn log_with_mount(path: &Path) -> LogWriter {
+    let mut w = LogWriter::create(path, &WriteOptions::default()).unwrap();
+    let ext = TransformStamped::new("base_link", "lidar", 0, lidar_ext());
+    w.write_tf(
+        "/tf_static",
+        &TfMessage {
+            transforms: vec![ext],
+        },
+        0,
+    )
+    .unwrap();
+    w
+}
+
+/// The vehicle's pose (base_link in map) at `ns` on `/tf`.
+pub fn write_vehicle_tf(w: &mut LogWriter, ns: u64, pose: Pose) {
+    let tf = TransformStamped::new("map", "base_link", ns as i64, pose);
+    w.write_tf(
+        "/tf",
+        &TfMessage {
+            transforms: vec![tf],
+        },
+        ns,
+    )
+    .unwrap();
+}
 
 /// The vehicle's pose at time `t` (s): 2 m/s along x, drifting in y and turning slowly.
 pub fn base(t: f64) -> Pose {

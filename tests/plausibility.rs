@@ -4,15 +4,14 @@
 //! under a 2 GB address-space limit, dropped and counted.
 
 mod drive_common;
-use drive_common::{base, lidar_ext, scan};
+use drive_common::{base, lidar_ext, log_with_mount, scan, write_vehicle_tf};
 
 use std::path::Path;
 use std::process::{Command, Output};
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use tarn::geom::Pose;
-use tarn::io::mcap_log::{LogWriter, WriteOptions};
-use tarn::io::ros::{Header, TfMessage, TransformStamped};
+use tarn::io::ros::Header;
 
 const NS: u64 = 1_000_000_000;
 
@@ -47,16 +46,7 @@ struct Twist {
 
 /// A drive of `frames` scans (10 Hz) with TF at every scan.
 fn write_log(path: &Path, frames: u64, tw: Twist) {
-    let mut w = LogWriter::create(path, &WriteOptions::default()).unwrap();
-    let ext = TransformStamped::new("base_link", "lidar", 0, lidar_ext());
-    w.write_tf(
-        "/tf_static",
-        &TfMessage {
-            transforms: vec![ext],
-        },
-        0,
-    )
-    .unwrap();
+    let mut w = log_with_mount(path);
     for k in 0..=frames {
         let ns = k * NS / 10;
         let t = ns as f64 * 1e-9;
@@ -70,15 +60,7 @@ fn write_log(path: &Path, frames: u64, tw: Twist) {
                 UnitQuaternion::new_unchecked(Quaternion::new(f64::NAN, 0.0, 0.0, 0.0)),
             );
         }
-        let tf = TransformStamped::new("map", "base_link", ns as i64, pose);
-        w.write_tf(
-            "/tf",
-            &TfMessage {
-                transforms: vec![tf],
-            },
-            ns,
-        )
-        .unwrap();
+        write_vehicle_tf(&mut w, ns, pose);
         if k > 0 && k < frames {
             let mut c = scan(&(base(t) * lidar_ext()), 8, 64);
             if tw.far_points {

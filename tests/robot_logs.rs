@@ -5,16 +5,15 @@
 //! without one, a warning that the cues cannot run.
 
 mod drive_common;
-use drive_common::{base, lidar_ext};
+use drive_common::{base, lidar_ext, log_with_mount, write_vehicle_tf};
 
 use std::path::Path;
 use std::process::{Command, Output};
 
 use nalgebra::{Point3, Vector3};
 use tarn::geom::{PointCloud, Pose};
-use tarn::io::mcap_log::{LogWriter, WriteOptions};
 use tarn::io::ros::msgs::datatype;
-use tarn::io::ros::{Header, PointCloud2Msg, PointField, TfMessage, TransformStamped};
+use tarn::io::ros::{Header, PointCloud2Msg, PointField};
 
 const NS: u64 = 1_000_000_000;
 const RINGS: usize = 32;
@@ -126,29 +125,12 @@ fn pointcloud2(c: &PointCloud, layout: Layout, header: Header) -> PointCloud2Msg
 
 /// A 10 Hz drive of 12 scans on each of `topics`, TF at every scan.
 fn write_log(path: &Path, topics: &[&str], layout: Layout) {
-    let mut w = LogWriter::create(path, &WriteOptions::default()).unwrap();
-    let ext = TransformStamped::new("base_link", "lidar", 0, lidar_ext());
-    w.write_tf(
-        "/tf_static",
-        &TfMessage {
-            transforms: vec![ext],
-        },
-        0,
-    )
-    .unwrap();
+    let mut w = log_with_mount(path);
     let frames = 13u64;
     for k in 0..=frames {
         let ns = k * NS / 10;
         let t = ns as f64 * 1e-9;
-        let tf = TransformStamped::new("map", "base_link", ns as i64, base(t));
-        w.write_tf(
-            "/tf",
-            &TfMessage {
-                transforms: vec![tf],
-            },
-            ns,
-        )
-        .unwrap();
+        write_vehicle_tf(&mut w, ns, base(t));
         if k > 0 && k < frames {
             let c = scan(&(base(t) * lidar_ext()));
             let m = pointcloud2(&c, layout, Header::new("lidar", ns as i64));

@@ -4,14 +4,13 @@
 //! row is a test here that checks the message on stderr and the failing exit code.
 
 mod drive_common;
-use drive_common::{base, lidar_ext, scan};
+use drive_common::{base, lidar_ext, log_with_mount, scan, write_vehicle_tf};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use nalgebra::Point3;
-use tarn::io::mcap_log::{LogWriter, WriteOptions};
-use tarn::io::ros::{Header, TfMessage, TransformStamped};
+use tarn::io::ros::Header;
 
 const NS: u64 = 1_000_000_000;
 
@@ -38,16 +37,7 @@ struct Twist {
 
 /// A drive of `frames` scans (10 Hz) with TF at every scan.
 fn write_log(path: &Path, frames: u64, rings: usize, cols: usize, tw: Twist) {
-    let mut w = LogWriter::create(path, &WriteOptions::default()).unwrap();
-    let ext = TransformStamped::new("base_link", "lidar", 0, lidar_ext());
-    w.write_tf(
-        "/tf_static",
-        &TfMessage {
-            transforms: vec![ext],
-        },
-        0,
-    )
-    .unwrap();
+    let mut w = log_with_mount(path);
     for k in 0..=frames {
         let ns = k * NS / 10;
         let t = ns as f64 * 1e-9;
@@ -55,15 +45,7 @@ fn write_log(path: &Path, frames: u64, rings: usize, cols: usize, tw: Twist) {
         if tw.nan_pose_at == Some(k) {
             pose.translation.vector.x = f64::NAN;
         }
-        let tf = TransformStamped::new("map", "base_link", ns as i64, pose);
-        w.write_tf(
-            "/tf",
-            &TfMessage {
-                transforms: vec![tf],
-            },
-            ns,
-        )
-        .unwrap();
+        write_vehicle_tf(&mut w, ns, pose);
         if k > 0 && k < frames {
             let stamp = match tw.backwards_from {
                 Some(b) if k >= b => ns - (k - b + 1) * NS / 5,

@@ -24,6 +24,9 @@ pub struct FrameCueConfig {
     pub stereo: Option<StereoCueConfig>,
     /// Confirm stereo reflections with the frame's camera image when it has one.
     pub mirror_check: bool,
+    /// Collect where the lidar found dry ground and water ([`ScanSurface`]) for the colour
+    /// labels' check; off when no label stage reads them.
+    pub surface_points: bool,
 }
 
 /// What one frame contributed.
@@ -86,7 +89,7 @@ impl FrameCues {
     ) -> Result<Option<ScanSurface>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(model), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
-            let out = model.run(cloud, res, z_ref)?;
+            let out = model.run_with(cloud, res, z_ref, self.cfg.surface_points)?;
             rep.lidar_ingest = Some(grid.ingest(&out.corrected, &self.cfg.lidar_noise)?);
             rep.lidar = Some(out.stats);
             let batch = out.evidence.into_batch();

@@ -457,6 +457,18 @@ impl LidarCueModel {
 
     /// Runs the cues on one organized scan. `resolution` and `z_ref` are the grid's.
     pub fn run(&self, cloud: &PointCloud, resolution: f64, z_ref: f64) -> Result<LidarCues> {
+        self.run_with(cloud, resolution, z_ref, true)
+    }
+
+    /// [`Self::run`], collecting the dry and wet points of [`ScanSurface`] only when
+    /// `surface_points` (the image labels' colour check reads them; nothing else does).
+    pub fn run_with(
+        &self,
+        cloud: &PointCloud,
+        resolution: f64,
+        z_ref: f64,
+        surface_points: bool,
+    ) -> Result<LidarCues> {
         cloud.validate()?;
         let n = cloud.len();
         if let BeamModel::Directions(d) = &self.beams {
@@ -534,7 +546,9 @@ impl LidarCueModel {
                     let [lo, hi] = stats.noret_lookahead_mm.unwrap_or([mm, mm]);
                     stats.noret_lookahead_mm = Some([lo.min(mm), hi.max(mm)]);
                     ev.add_with_level(x, y, level, |e| e.noret = e.noret.saturating_add(1));
-                    surface.wet.push(Point3::new(x, y, level));
+                    if surface_points {
+                        surface.wet.push(Point3::new(x, y, level));
+                    }
                 }
                 Event::Ground {
                     slot,
@@ -545,7 +559,7 @@ impl LidarCueModel {
                     cos_inc,
                     range,
                 } => {
-                    if bright {
+                    if bright && surface_points {
                         surface.dry.push(cloud.point_in_map(slot));
                     }
                     if diag {
@@ -579,7 +593,9 @@ impl LidarCueModel {
                         None => e.add_depth(depth),
                     });
                     corrected.xyz[slot] = [f32::NAN; 3];
-                    surface.wet.push(Point3::new(x, y, level));
+                    if surface_points {
+                        surface.wet.push(Point3::new(x, y, level));
+                    }
                 }
                 Event::Specular {
                     slot,
@@ -590,7 +606,9 @@ impl LidarCueModel {
                 } => {
                     stats.specular += 1;
                     ev.add_with_level(cx, cy, level, |e| e.reflect = e.reflect.saturating_add(1));
-                    surface.wet.push(Point3::new(cx, cy, level));
+                    if surface_points {
+                        surface.wet.push(Point3::new(cx, cy, level));
+                    }
                     let p = to_frame * mirrored;
                     corrected.xyz[slot] = [p.x as f32, p.y as f32, p.z as f32];
                 }

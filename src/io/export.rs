@@ -1000,6 +1000,15 @@ mod tests {
         );
     }
 
+    /// Where a binary PLY's body starts: after its `end_header` line.
+    fn body_start(bytes: &[u8]) -> usize {
+        bytes
+            .windows(11)
+            .position(|w| w == b"end_header\n")
+            .unwrap()
+            + 11
+    }
+
     #[test]
     fn map_ply_coordinates_are_double_where_float_loses_millimetres() {
         let far = HazardMap {
@@ -1011,11 +1020,7 @@ mod tests {
         let p = dir.path().join("map.ply");
         write_map_ply(&p, &far).unwrap();
         let bytes = std::fs::read(&p).unwrap();
-        let h = bytes
-            .windows(11)
-            .position(|w| w == b"end_header\n")
-            .unwrap()
-            + 11;
+        let h = body_start(&bytes);
         let head = String::from_utf8_lossy(&bytes[..h]);
         assert!(head.contains("property double x\nproperty double y\nproperty double z\n"));
         assert_eq!(bytes.len() - h, 41);
@@ -1040,11 +1045,7 @@ mod tests {
         let p = dir.path().join("map.ply");
         write_map_ply(&p, &map).unwrap();
         let bytes = std::fs::read(&p).unwrap();
-        let h = bytes
-            .windows(11)
-            .position(|w| w == b"end_header\n")
-            .unwrap()
-            + 11;
+        let h = body_start(&bytes);
         assert_eq!(bytes.len() - h, 29);
         let f = |o: usize| f32::from_le_bytes(bytes[h + o..h + o + 4].try_into().unwrap());
         assert_eq!(f(0), 0.35);
