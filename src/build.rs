@@ -546,7 +546,7 @@ mod tests {
             b.tiles.cell_bytes()
         );
         let map = HazardMap::from_elevation(&b.tiles);
-        let img = crate::io::export::render_map_png(&map);
+        let img = crate::io::render::render_map_png(&map);
         assert!(img.width() <= 4096 && img.height() <= 4096 + 200);
     }
 

@@ -248,7 +248,7 @@ impl DryCells {
 
 /// The dry 3 × 3 neighbourhood of a cell (itself included), row by row from its lower-left
 /// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
-pub(crate) type Neighbourhood = [(f64, f64); 9];
+pub type Neighbourhood = [(f64, f64); 9];
 
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
 /// `nb`: the upper side of a step higher than `max_step` is an obstacle (class and
@@ -266,7 +266,7 @@ pub(crate) type Neighbourhood = [(f64, f64); 9];
 /// no dry neighbour (the edge of what was seen) there is no tilt along that axis: one side
 /// cannot tell a slope from a bump.
 #[inline]
-pub(crate) fn terrain_hazard(
+pub fn terrain_hazard(
     nb: &Neighbourhood,
     (z, sz): (f64, f64),
     res: f64,
@@ -482,7 +482,7 @@ impl HazardMap {
     /// map's cells should have); of `tiles` only the resolution and reference height are
     /// read. The mapper's window snapshot takes this path with an empty tile map, skipping
     /// the copy of the window into tiles.
-    pub(crate) fn from_cells_after(
+    pub fn from_cells_after(
         tiles: &TileMap,
         observed: Vec<(CellKey, CellStats)>,
         cfg: &HazardConfig,

@@ -7,14 +7,10 @@
 //! Data flows one way: `geom` → `grid` → (cues, water) → `io` exports. A module imports
 //! only from modules to its left; `geom` and `optics` are the ground floor.
 
-pub mod bench;
 pub mod build;
 pub mod classify;
 pub mod cues;
 pub mod error;
-pub mod eval;
-#[doc(hidden)]
-pub mod fuzzing;
 pub mod geom;
 pub mod grid;
 pub mod hazard;
@@ -23,7 +19,6 @@ pub mod io;
 pub mod mapper;
 pub mod optics;
 pub mod project;
-pub mod sim;
 pub mod water;
 
 pub use error::{Error, Result};

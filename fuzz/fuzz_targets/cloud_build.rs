@@ -3,5 +3,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = tarn::fuzzing::cloud_build(data);
+    let _ = tarn_sim::fuzzing::cloud_build(data);
 });

@@ -32,6 +32,8 @@ pub mod mapfile;
 pub mod mcap_log;
 pub mod ply;
 pub mod raster;
+#[cfg(feature = "render")]
+pub mod render;
 pub mod ros;
 pub mod ros_export;
 pub mod tf;

@@ -24,7 +24,6 @@ mod correction;
 mod data;
 mod fresnel;
 mod lidar;
-mod plot;
 
 pub use absorption::{absorption_per_m, ice_absorption_per_m, loss_distance_m, AbsorptionTable};
 pub use correction::{apparent_bottom_point, bottom_depth_gain, correct_bottom_return};
@@ -33,7 +32,6 @@ pub use lidar::{
     Attenuation, LidarModelConfig, LidarModelReport, LidarModelRow, LidarWaterModel, PathGeometry,
     Sensitivity, SolidAngleForm,
 };
-pub use plot::plot_lidar_model;
 
 #[cfg(test)]
 mod tests;

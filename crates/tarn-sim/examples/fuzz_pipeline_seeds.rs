@@ -1,13 +1,13 @@
 //! Writes the seed inputs of the pipeline fuzz targets (`cloud_build`, `mapper_update`,
 //! `exports`) into `fuzz/corpus/<target>/seed-*`, in the byte layouts their entry points in
-//! `tarn::fuzzing` decode.
+//! `tarn_sim::fuzzing` decode.
 //!
 //! `cargo run --example fuzz_pipeline_seeds`
 
 use std::path::Path;
 
 fn put(target: &str, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
         .join("fuzz/corpus")
         .join(target);
     std::fs::create_dir_all(&dir)?;
@@ -44,7 +44,7 @@ fn scan(rows: usize, cols: usize, h: f32) -> Vec<[f32; 3]> {
 
 fn main() -> anyhow::Result<()> {
     // cloud_build: a head byte (reader, resolution, window), then the file.
-    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+    let corpus = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../..")).join("fuzz/corpus");
     for (reader, head) in [("ply", 0u8), ("kitti", 1u8)] {
         let mut names: Vec<_> = std::fs::read_dir(corpus.join(reader))?
             .map(|e| e.map(|e| e.path()))

@@ -239,7 +239,8 @@ fn far_points_in_clouds_build_with_bounded_memory() {
 /// of asking for the claimed size.
 #[test]
 fn corrupted_length_prefixes_in_logs_allocate_nothing_they_claim() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/regressions/mcap");
+    let dir =
+        Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../..")).join("fuzz/regressions/mcap");
     let out = tempfile::tempdir().unwrap();
     for name in [
         "channel-string-claims-gigabytes.mcap",

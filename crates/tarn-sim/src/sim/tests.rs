@@ -69,7 +69,7 @@ fn world(depth: f64) -> World {
 
 #[test]
 fn every_shipped_scene_parses_and_builds() {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/maps");
+    let dir = concat!(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."), "/maps");
     let mut n = 0;
     for e in std::fs::read_dir(dir).unwrap() {
         let p = e.unwrap().path();

@@ -6,9 +6,9 @@ use std::sync::OnceLock;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::absorption::AbsorptionTable;
-use super::lidar::{Attenuation, LidarModelConfig, LidarWaterModel};
-use crate::error::{Error, Result};
+use tarn::error::{Error, Result};
+use tarn::optics::AbsorptionTable;
+use tarn::optics::{Attenuation, LidarModelConfig, LidarWaterModel};
 
 type PlotResult<T = ()> = std::result::Result<T, Box<dyn std::error::Error>>;
 
@@ -277,7 +277,7 @@ fn absorption_panel(
     }
     let mut marks: Vec<(f64, f64, String)> = Vec::new();
     for wl in [525.0, 625.0, 900.0, 1550.0] {
-        if let Ok(a) = super::absorption::absorption_per_m(wl) {
+        if let Ok(a) = tarn::optics::absorption_per_m(wl) {
             marks.push((wl, a, format!("{wl:.0} nm: {a:.3} /m")));
         }
     }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use tarn::sim::{simulate, Scene, SimOptions};
+use tarn_sim::sim::{simulate, Scene, SimOptions};
 
 use crate::build_cmd::{self, BuildArgs};
 
@@ -14,7 +14,7 @@ pub fn default_scene_toml() -> PathBuf {
     if here.exists() {
         return here;
     }
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("maps/default.toml")
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../..")).join("maps/default.toml")
 }
 
 pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
@@ -58,7 +58,7 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
     );
     build_cmd::print_water(&r.water);
     build_cmd::print_latency(&r);
-    let e = tarn::eval::evaluate_dirs(out, &sim_dir)?;
+    let e = tarn_sim::eval::evaluate_dirs(out, &sim_dir)?;
     println!("tarn: accuracy against the truth (by distance from the vehicle's path)");
     print!("{}", e.markdown());
     println!("tarn: obstacles against the truth");

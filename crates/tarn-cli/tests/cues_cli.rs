@@ -3,7 +3,7 @@
 use std::process::Command;
 
 const PLY: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
+    concat!(env!("CARGO_MANIFEST_DIR"), "/../.."),
     "/../shared/data/rellis3d-puddle-frame/frame000104-1581624663_170.ply"
 );
 

@@ -36,7 +36,7 @@ pub use truth::{truth_map, water_stats, ColourView, TruthInfo, TruthPose, TruthW
 pub use world::{Hit, Material, Surface, Terrain, WaterBody, World};
 
 use crate::error::{Error, Result};
-use crate::geom::Pose;
+use crate::geom::{PointCloud, Pose};
 use crate::io::mcap_log::{LogWriter, WriteOptions};
 use crate::io::ros::{Header, Image, TfMessage, Time, TransformStamped};
 
@@ -489,4 +489,28 @@ pub fn cast_fan(w: &World, n: usize) -> usize {
             w.cast(&o, &d, 120.0).is_some()
         })
         .count()
+}
+
+/// A lidar-like ground cloud of `n` points (rings of a spinning sensor 1.8 m up, 2–19 m
+/// out, gentle relief and 2 cm noise), in the order a spinning lidar emits them.
+pub fn synthetic_lidar_cloud(n: usize, seed: u64) -> PointCloud {
+    let mut s = seed | 1;
+    let mut u = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f32 / (1u64 << 53) as f32
+    };
+    let pts = (0..n)
+        .map(|i| {
+            let az = (i as f32 / n as f32) * 64.0 * std::f32::consts::TAU;
+            let r = 2.0 + 17.0 * u();
+            [
+                r * az.cos(),
+                r * az.sin(),
+                0.05 * (r * 0.3).sin() + 0.02 * (u() - 0.5) - 1.8,
+            ]
+        })
+        .collect();
+    PointCloud::unorganized(pts)
 }

@@ -1,6 +1,6 @@
 //! The fuzz smoke run of the test command, on a stable toolchain: every committed corpus
 //! file (`fuzz/corpus/<target>/`) and every crash regression (`fuzz/regressions/<target>/`)
-//! goes through the same entry point as its `cargo fuzz` target (`tarn::fuzzing`), and so
+//! goes through the same entry point as its `cargo fuzz` target (`tarn_sim::fuzzing`), and so
 //! do truncations and byte mutations of each (a fixed-seed generator, so a run is
 //! reproducible). A panic anywhere fails the test and names the input.
 
@@ -9,20 +9,20 @@ use std::path::{Path, PathBuf};
 type Entry = fn(&[u8]) -> bool;
 
 const TARGETS: [(&str, Entry); 10] = [
-    ("ply", tarn::fuzzing::ply),
-    ("kitti", tarn::fuzzing::kitti),
-    ("mcap", tarn::fuzzing::mcap),
-    ("cdr", tarn::fuzzing::cdr),
-    ("scene_toml", tarn::fuzzing::scene_toml),
-    ("color_model_json", tarn::fuzzing::color_model_json),
-    ("cloud_build", tarn::fuzzing::cloud_build),
-    ("mapper_update", tarn::fuzzing::mapper_update),
-    ("exports", tarn::fuzzing::exports),
-    ("ros1_bag", tarn::fuzzing::ros1_bag),
+    ("ply", tarn_sim::fuzzing::ply),
+    ("kitti", tarn_sim::fuzzing::kitti),
+    ("mcap", tarn_sim::fuzzing::mcap),
+    ("cdr", tarn_sim::fuzzing::cdr),
+    ("scene_toml", tarn_sim::fuzzing::scene_toml),
+    ("color_model_json", tarn_sim::fuzzing::color_model_json),
+    ("cloud_build", tarn_sim::fuzzing::cloud_build),
+    ("mapper_update", tarn_sim::fuzzing::mapper_update),
+    ("exports", tarn_sim::fuzzing::exports),
+    ("ros1_bag", tarn_sim::fuzzing::ros1_bag),
 ];
 
 fn inputs(kind: &str, target: &str) -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
         .join("fuzz")
         .join(kind)
         .join(target);

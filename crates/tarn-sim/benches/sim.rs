@@ -6,10 +6,10 @@
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use tarn::sim::{cast_fan, simulate, Scene, SimOptions, World};
+use tarn_sim::sim::{cast_fan, simulate, Scene, SimOptions, World};
 
 fn scene(name: &str) -> Scene {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+    let p = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
         .join("maps")
         .join(format!("{name}.toml"));
     Scene::load(&p).expect("shipped scene")

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use tarn::sim::{simulate, Scene, SimOptions};
+use tarn_sim::sim::{simulate, Scene, SimOptions};
 
 #[derive(Args)]
 pub struct SimulateArgs {
@@ -78,11 +78,11 @@ fn parse_band(s: &str) -> Result<(f64, f64), String> {
 }
 
 pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
-    let (map, truth, info) = tarn::eval::read_dirs(&a.map_dir, &a.truth)?;
-    let r = tarn::eval::evaluate(&map, &truth, &info)?;
+    let (map, truth, info) = tarn_sim::eval::read_dirs(&a.map_dir, &a.truth)?;
+    let r = tarn_sim::eval::evaluate(&map, &truth, &info)?;
     let band = a
         .band
-        .map(|(lo, hi)| tarn::eval::evaluate_band(&map, &truth, &info, lo, hi))
+        .map(|(lo, hi)| tarn_sim::eval::evaluate_band(&map, &truth, &info, lo, hi))
         .transpose()?;
     if a.json {
         let mut v = serde_json::to_value(&r)?;
@@ -91,7 +91,7 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
         }
         // The bands of the evaluation matrix (every scene by every rig), compared across runs.
         v["matrix_bands"] =
-            serde_json::to_value(tarn::eval::evaluate_matrix_bands(&map, &truth, &info)?)?;
+            serde_json::to_value(tarn_sim::eval::evaluate_matrix_bands(&map, &truth, &info)?)?;
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(

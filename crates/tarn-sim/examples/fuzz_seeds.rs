@@ -20,7 +20,7 @@ use tarn::io::ros::{
 const NS: i64 = 1_000_000_000;
 
 fn put(target: &str, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
         .join("fuzz/corpus")
         .join(target);
     std::fs::create_dir_all(&dir)?;
@@ -157,8 +157,9 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
     }
     put("ply", "binary-be.ply", &be)?;
     let tmp = tempfile::tempdir()?;
-    let map = tarn::sim::truth_map(&tarn::sim::World::build(&tarn::sim::Scene::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("maps/vertical_scanner.toml"),
+    let map = tarn_sim::sim::truth_map(&tarn_sim::sim::World::build(&tarn_sim::sim::Scene::load(
+        &Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+            .join("maps/vertical_scanner.toml"),
     )?)?);
     let small = tarn::hazard::HazardMap::new(
         map.resolution,
@@ -250,7 +251,9 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
     }
 
     // Scenes: the repository's maps.
-    for entry in std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("maps"))? {
+    for entry in
+        std::fs::read_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../..")).join("maps"))?
+    {
         let p = entry?.path();
         if p.extension().is_some_and(|e| e == "toml") {
             put(

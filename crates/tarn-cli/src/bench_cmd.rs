@@ -5,9 +5,9 @@ use std::path::PathBuf;
 
 use std::io::Write;
 
+use crate::bench::{cloud_build, run, sweep, sweep_markdown, sweep_plot, BenchOptions};
 use anyhow::Context;
 use clap::Args;
-use tarn::bench::{cloud_build, run, sweep, sweep_markdown, sweep_plot, BenchOptions};
 
 #[derive(Args)]
 pub struct BenchArgs {

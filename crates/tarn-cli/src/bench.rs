@@ -4,7 +4,7 @@
 //! noisy, and a median ignores the runs a neighbour's build slowed down. The stages of one
 //! frame run on a frame from the middle of the log, with a grid already holding the frames
 //! before it (the steady state of a mapper). The full frame is the median
-//! [`crate::mapper::Mapper::update`] over the log (`frame_ms_method` says so), with the
+//! [`tarn::mapper::Mapper::update`] over the log (`frame_ms_method` says so), with the
 //! colour camera's labels when the log has one: a full frame includes colour
 //! classification and projection.
 //!
@@ -17,22 +17,23 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::build::{build_log, LogBuildConfig};
-use crate::classify::color::RuleClassifier;
-use crate::classify::lut::ColorLut;
-use crate::classify::Label;
-use crate::cues::{
+use tarn::build::{build_log, LogBuildConfig};
+use tarn::classify::color::RuleClassifier;
+use tarn::classify::lut::ColorLut;
+use tarn::classify::Label;
+use tarn::cues::{
     estimate_sensor_height, stereo_reflections, BeamModel, LidarCueConfig, LidarCueModel,
     StereoCueConfig,
 };
-use crate::error::{Error, Result};
-use crate::geom::PointCloud;
-use crate::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
-use crate::hazard::HazardMap;
-use crate::io::frames::{Frame, FrameStream, LogConfig};
-use crate::io::ros::convert::Pixels;
-use crate::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
-use crate::project::{FrameLabelConfig, FrameLabels};
+use tarn::error::{Error, Result};
+use tarn::geom::PointCloud;
+use tarn::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
+use tarn::hazard::HazardMap;
+use tarn::io::frames::{Frame, FrameStream, LogConfig};
+use tarn::io::ros::convert::Pixels;
+use tarn::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
+use tarn::project::{FrameLabelConfig, FrameLabels};
+use tarn_sim::sim::synthetic_lidar_cloud;
 
 /// What to measure.
 #[derive(Debug, Clone)]
@@ -57,7 +58,10 @@ impl Default for BenchOptions {
         BenchOptions {
             reps: 7,
             log: None,
-            scene: PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/maps/default.toml")),
+            scene: PathBuf::from(concat!(
+                concat!(env!("CARGO_MANIFEST_DIR"), "/../.."),
+                "/maps/default.toml"
+            )),
             rig: None,
             ingest_points: 4_000_000,
             lut_bits: 6,
@@ -156,30 +160,6 @@ impl<'a> Stages<'a> {
     }
 }
 
-/// A lidar-like ground cloud of `n` points (rings of a spinning sensor 1.8 m up, 2–19 m
-/// out, gentle relief and 2 cm noise), in the order a spinning lidar emits them.
-pub fn synthetic_lidar_cloud(n: usize, seed: u64) -> PointCloud {
-    let mut s = seed | 1;
-    let mut u = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f32 / (1u64 << 53) as f32
-    };
-    let pts = (0..n)
-        .map(|i| {
-            let az = (i as f32 / n as f32) * 64.0 * std::f32::consts::TAU;
-            let r = 2.0 + 17.0 * u();
-            [
-                r * az.cos(),
-                r * az.sin(),
-                0.05 * (r * 0.3).sin() + 0.02 * (u() - 0.5) - 1.8,
-            ]
-        })
-        .collect();
-    PointCloud::unorganized(pts)
-}
-
 /// An RGB buffer of 640 × 480 resampled (nearest) from a frame's camera image.
 fn rgb_640x480(frame: &Frame) -> Option<Vec<u8>> {
     let img = &frame.image.as_ref()?.image;
@@ -220,13 +200,13 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     // The pipeline as the vehicle would run it: the simulated rig's config, or the
     // defaults for a given log.
     let (log, mapper) = match &opts.log {
-        Some(l) => (l.clone(), crate::mapper::MapperConfig::default()),
+        Some(l) => (l.clone(), tarn::mapper::MapperConfig::default()),
         None => {
-            let scene = crate::sim::Scene::load_with_rig(&opts.scene, opts.rig.as_deref())?;
-            crate::sim::simulate(&scene, tmp.path(), crate::sim::SimOptions::default())?;
+            let scene = tarn_sim::sim::Scene::load_with_rig(&opts.scene, opts.rig.as_deref())?;
+            tarn_sim::sim::simulate(&scene, tmp.path(), tarn_sim::sim::SimOptions::default())?;
             (
                 tmp.path().join("log.mcap"),
-                crate::sim::mapper_config(&scene.rig),
+                tarn_sim::sim::mapper_config(&scene.rig),
             )
         }
     };
@@ -246,7 +226,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         _ => None,
     };
     let log_cfg = LogBuildConfig {
-        mapper: crate::mapper::MapperConfig {
+        mapper: tarn::mapper::MapperConfig {
             label_models: colour_labels.clone(),
             ..mapper
         },
@@ -340,7 +320,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     {
         // The water stage (bodies, surfaces, hazards of the window) of a mapper that has
         // fused the frames up to the middle one with the rig's cues and labels.
-        let mut m = crate::mapper::Mapper::new(log_cfg.mapper.clone())?;
+        let mut m = tarn::mapper::Mapper::new(log_cfg.mapper.clone())?;
         m.set_publish(false);
         for f in &frames[..=mid] {
             m.update(f)?;
@@ -349,7 +329,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     }
     st.add("export_map (whole map)", false, || {
         let map = HazardMap::from_elevation(&tiles);
-        crate::io::export::write_map_files(&out_dir, &map)
+        tarn::io::export::write_map_files(&out_dir, &map)
     });
     st.add("ingest_4M_synthetic", false, || {
         big_grid.ingest(&big, &RangeNoise::LIDAR).map(|_| ())
@@ -580,7 +560,7 @@ fn synthetic_rms(g: &RollingGrid) -> Option<f64> {
     let (mut s2, mut cnt) = (0.0, 0usize);
     for ky in o.y..o.y + n {
         for kx in o.x..o.x + n {
-            let k = crate::grid::CellKey::new(kx, ky);
+            let k = tarn::grid::CellKey::new(kx, ky);
             let (cx, cy) = g.centre_of(k);
             let r = cx.hypot(cy);
             if !(3.0..=18.0).contains(&r) {
@@ -604,12 +584,12 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
 
     // Grid resolution on the simulated scene, scored by `tarn eval` against its truth.
     let sim_dir = tmp.path().join("sim");
-    let scene = crate::sim::Scene::load_with_rig(&opts.scene, opts.rig.as_deref())?;
-    crate::sim::simulate(&scene, &sim_dir, crate::sim::SimOptions::default())?;
+    let scene = tarn_sim::sim::Scene::load_with_rig(&opts.scene, opts.rig.as_deref())?;
+    tarn_sim::sim::simulate(&scene, &sim_dir, tarn_sim::sim::SimOptions::default())?;
     let log = sim_dir.join("log.mcap");
     for res in [0.05, 0.1, 0.2, 0.4] {
         let out = tmp.path().join(format!("res{res}"));
-        let mut mapper = crate::sim::mapper_config(&scene.rig);
+        let mut mapper = tarn_sim::sim::mapper_config(&scene.rig);
         mapper.grid = GridConfig {
             resolution: res,
             size_cells: ((40.0 / res).round() as usize).max(2),
@@ -620,7 +600,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
             ..LogBuildConfig::default()
         };
         let (ms, _) = timed(reps.min(3), || build_log(&log, &out, &cfg, &mut |_, _| {}))?;
-        let e = crate::eval::evaluate_dirs(&out, &sim_dir)?;
+        let e = tarn_sim::eval::evaluate_dirs(&out, &sim_dir)?;
         rows.push(row(
             "grid resolution (m)",
             res,
@@ -694,20 +674,20 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
         (2, true),
     ] {
         let out = tmp.path().join(format!("stride{stride}-{wide_rows}"));
-        let mut mapper = crate::sim::mapper_config(&scene.rig);
+        let mut mapper = tarn_sim::sim::mapper_config(&scene.rig);
         mapper.grid.size_cells = 800;
-        mapper.label_models = Some(crate::project::FrameLabelConfig {
+        mapper.label_models = Some(tarn::project::FrameLabelConfig {
             colour: Some(ColorLut::compile(&RuleClassifier::default(), 8)?),
             ray_stride: stride,
             wide_rows,
-            ..crate::project::FrameLabelConfig::default()
+            ..tarn::project::FrameLabelConfig::default()
         });
         let cfg = LogBuildConfig {
             mapper,
             ..LogBuildConfig::default()
         };
         let (_, rep) = timed(1, || build_log(&log, &out, &cfg, &mut |_, _| {}))?;
-        let e = crate::eval::evaluate_dirs(&out, &sim_dir)?;
+        let e = tarn_sim::eval::evaluate_dirs(&out, &sim_dir)?;
         let labels_ms = rep
             .stage_latency_ms
             .iter()
@@ -749,17 +729,17 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     // Water surface interpolation on the stream scene (a surface that is not level): the
     // same fused tile map, its water bodies given a level plane or the constrained Delaunay
     // surface with barycentric interpolation; error against the true water surface.
-    let stream = crate::sim::Scene::load(&opts.scene.with_file_name("stream_slope.toml"))?;
+    let stream = tarn_sim::sim::Scene::load(&opts.scene.with_file_name("stream_slope.toml"))?;
     let stream_dir = tmp.path().join("stream");
-    crate::sim::simulate(&stream, &stream_dir, crate::sim::SimOptions::default())?;
-    let mut mapper = crate::mapper::Mapper::new(crate::sim::mapper_config(&stream.rig))?;
+    tarn_sim::sim::simulate(&stream, &stream_dir, tarn_sim::sim::SimOptions::default())?;
+    let mut mapper = tarn::mapper::Mapper::new(tarn_sim::sim::mapper_config(&stream.rig))?;
     for f in FrameStream::open(stream_dir.join("log.mcap"), &LogConfig::default())? {
         mapper.update(&f?)?;
     }
     let tiles = mapper.finish();
     // The Delaunay surface (barycentric) with its vertices as measured ("raw") and at the
     // median of their 1.5 m of shore (the default).
-    let default_radius = crate::water::WaterConfig::default().vertex_median_radius_m;
+    let default_radius = tarn::water::WaterConfig::default().vertex_median_radius_m;
     for (i, (name, level_residual_m, vertex_median_radius_m)) in [
         ("level plane", 1e9, default_radius),
         ("Delaunay, raw", 0.0, 0.0),
@@ -768,13 +748,13 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     .into_iter()
     .enumerate()
     {
-        let mut hc = crate::sim::mapper_config(&stream.rig).hazard_config();
+        let mut hc = tarn_sim::sim::mapper_config(&stream.rig).hazard_config();
         hc.water.level_residual_m = level_residual_m;
         hc.water.vertex_median_radius_m = vertex_median_radius_m;
         let (ms, map) = timed(reps, || HazardMap::from_tiles(&tiles, &hc))?;
         let out = tmp.path().join(format!("surface-{i}"));
-        crate::io::export::write_map_files(&out, &map)?;
-        let e = crate::eval::evaluate_dirs(&out, &stream_dir)?;
+        tarn::io::export::write_map_files(&out, &map)?;
+        let e = tarn_sim::eval::evaluate_dirs(&out, &stream_dir)?;
         rows.push(row(
             "water surface interpolation",
             name,
@@ -953,11 +933,7 @@ pub fn cloud_build(n: usize, side_m: f64) -> Result<CloudBenchRow> {
     let cloud = PointCloud::unorganized(pts);
     let generate_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let b = crate::build::build_cloud(
-        &cloud,
-        &crate::build::BuildConfig::default(),
-        &mut |_, _| {},
-    )?;
+    let b = tarn::build::build_cloud(&cloud, &tarn::build::BuildConfig::default(), &mut |_, _| {})?;
     let build_s = t1.elapsed().as_secs_f64();
     Ok(CloudBenchRow {
         points: n,

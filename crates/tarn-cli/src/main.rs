@@ -1,5 +1,6 @@
 //! The `tarn` command line: parses, calls the library, prints. One file per command.
 
+mod bench;
 mod bench_cmd;
 mod build_cmd;
 mod classify_cmd;
@@ -9,6 +10,7 @@ mod log_cmd;
 mod main_job;
 mod maps_out;
 mod optics_cmd;
+mod plot;
 mod sim_cmd;
 
 use std::path::PathBuf;

@@ -81,7 +81,7 @@ fn main() {
             println!("  {l}");
         }
     }
-    let t = tarn::bench::synthetic_lidar_cloud(1_000_000, 5);
+    let t = tarn_sim::sim::synthetic_lidar_cloud(1_000_000, 5);
     let mut g = RollingGrid::new(GridConfig::default(), 0.0, 0.0).unwrap();
     let s1 = g.ingest(&t, &RangeNoise::LIDAR).unwrap();
     let s2 = g.ingest(&t, &RangeNoise::LIDAR).unwrap();

@@ -2,11 +2,10 @@
 
 use std::path::PathBuf;
 
+use crate::plot::plot_lidar_model;
 use anyhow::Context;
 use clap::{ArgGroup, Args, ValueEnum};
-use tarn::optics::{
-    plot_lidar_model, Attenuation, LidarModelConfig, LidarWaterModel, Sensitivity, SolidAngleForm,
-};
+use tarn::optics::{Attenuation, LidarModelConfig, LidarWaterModel, Sensitivity, SolidAngleForm};
 
 #[derive(Clone, Copy, ValueEnum)]
 pub enum SolidAngleArg {

@@ -90,7 +90,6 @@ pub fn mcap(data: &[u8]) -> bool {
 
 /// A ROS 1 bag ([`crate::io::bags::Ros1Reader`]): every message read, then the frame
 /// stream over it, whose decoders read the ROS 1 wire.
-#[cfg(feature = "bags")]
 pub fn ros1_bag(data: &[u8]) -> bool {
     use crate::io::bags::Ros1Reader;
     use crate::io::log::MessageSource;
@@ -268,10 +267,10 @@ impl<'a> Bytes<'a> {
 /// `tarn build` into a fresh temporary directory.
 fn exports_of(map: &crate::hazard::HazardMap, files: bool) {
     use crate::io::export;
-    let img = export::render_map_png(map);
+    let img = tarn::io::render::render_map_png(map);
     assert!(
-        img.width() <= export::MAP_PNG_MAX_SIDE.max(640)
-            && img.height() <= export::MAP_PNG_MAX_SIDE + 200,
+        img.width() <= tarn::io::render::MAP_PNG_MAX_SIDE.max(640)
+            && img.height() <= tarn::io::render::MAP_PNG_MAX_SIDE + 200,
         "map.png of {} × {} pixels",
         img.width(),
         img.height()

@@ -12,7 +12,7 @@ use tarn::build::{
 use tarn::grid::{GridConfig, RangeNoise};
 use tarn::mapper::MapperConfig;
 use tarn::project::{LabelSensor, LabelsConfig};
-use tarn::sim::RigSpec;
+use tarn_sim::sim::RigSpec;
 
 #[derive(Args)]
 pub struct BuildArgs {
@@ -289,7 +289,7 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
         None => MapperConfig::every_sensor(),
     };
     if let Some(p) = &a.rig {
-        tarn::sim::apply_rig(&mut cfg, &RigSpec::load(p)?);
+        tarn_sim::sim::apply_rig(&mut cfg, &RigSpec::load(p)?);
     }
     if let Some(r) = a.resolution {
         cfg.grid.resolution = r;

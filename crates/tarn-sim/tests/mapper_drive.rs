@@ -1,0 +1,404 @@
+//! The mapper over a simulated drive: cues, threads, snapshots and offline builds agree.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::OnceLock;
+
+use std::sync::Arc;
+
+use tarn::grid::{RangeNoise, RollingGrid, TileMap};
+use tarn::hazard::HazardMap;
+use tarn::io::frames::{Frame, FrameStream, LogConfig};
+use tarn::mapper::*;
+use tarn_sim::sim::{simulate, Scene, SimOptions};
+
+/// The default scene, cut down: 6 frames 2 m apart, a 256-column lidar, 160 × 120 stereo.
+fn small_scene() -> Scene {
+    let mut s = Scene::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../maps/default.toml"
+    )))
+    .unwrap();
+    s.trajectory.frames = Some(6);
+    s.trajectory.speed = 20.0;
+    let l = s.rig.lidar.as_mut().unwrap();
+    l.columns = 256;
+    l.elevation_deg = [-25.0, 5.0];
+    let st = s.rig.stereo.as_mut().unwrap();
+    st.width = 160;
+    st.height = 120;
+    s.rig.swir = None;
+    s.rig.mwir = None;
+    s
+}
+
+struct Sim {
+    _dir: tempfile::TempDir,
+    log: std::path::PathBuf,
+    frames: Vec<Frame>,
+}
+
+fn sim() -> &'static Sim {
+    static SIM: OnceLock<Sim> = OnceLock::new();
+    SIM.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        simulate(&small_scene(), dir.path(), SimOptions { noise: true }).unwrap();
+        let log = dir.path().join("log.mcap");
+        let frames: Vec<Frame> = FrameStream::open(&log, &LogConfig::default())
+            .unwrap()
+            .map(|f| f.unwrap())
+            .collect();
+        assert_eq!(frames.len(), 6);
+        assert!(frames
+            .iter()
+            .all(|f| f.lidar.is_some() && f.stereo.is_some()));
+        Sim {
+            _dir: dir,
+            log,
+            frames,
+        }
+    })
+}
+
+fn run(cfg: &MapperConfig, frames: &[Frame]) -> (TileMap, Vec<FrameReport>) {
+    let mut m = Mapper::new(cfg.clone()).unwrap();
+    let reps = frames.iter().map(|f| m.update(f).unwrap()).collect();
+    (m.finish(), reps)
+}
+
+#[test]
+fn cues_put_water_evidence_at_the_pond() {
+    let mut cfg = tarn_sim::sim::mapper_config(&small_scene().rig);
+    cfg.lidar.as_mut().unwrap().height_m = None; // estimated from the scan
+    let (tiles, reps) = run(&cfg, &sim().frames);
+    // The lidar is 1.8 m above base_link, which the simulator puts on the terrain.
+    let h = reps[0].lidar_height_m.unwrap();
+    assert!((h - 1.8).abs() < 0.1, "height {h}");
+    // The lidar cue ran on every frame (diagnostic returns, specular returns off the pond).
+    assert!(reps
+        .iter()
+        .all(|r| r.cues.lidar.is_some_and(|l| l.diag_ret > 0)));
+    let map = HazardMap::with_water(&tiles, &cfg.fusion, 0.3);
+    // Cells the evidence makes more likely water than not lie at the pond (centre (22, 6),
+    // radius about 7 × 5 m).
+    let wet: Vec<_> = map.cells.iter().filter(|c| c.water > 0.5).collect();
+    let near = wet
+        .iter()
+        .filter(|c| ((c.x - 22.0) / 8.5).powi(2) + ((c.y - 6.0) / 6.5).powi(2) <= 1.0)
+        .count();
+    eprintln!(
+        "{} cells with p > 0.5, {near} at the pond; {} called water",
+        wet.len(),
+        map.class_counts()[tarn::hazard::Class::Water as usize]
+    );
+    assert!(wet.len() > 20, "{} wet cells", wet.len());
+    assert!(
+        near as f64 >= 0.95 * wet.len() as f64,
+        "{near} of {}",
+        wet.len()
+    );
+}
+
+#[test]
+fn offline_build_is_the_online_map() {
+    let s = sim();
+    let cfg = MapperConfig::default();
+    let mut m = Mapper::new(cfg.clone()).unwrap();
+    for f in &s.frames {
+        m.update(f).unwrap();
+    }
+    let (tiles, online) = m.finish_map().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let r = tarn::build::build_log(
+        &s.log,
+        out.path(),
+        &tarn::build::LogBuildConfig {
+            mapper: cfg,
+            ..Default::default()
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(r.frames_fused, 6);
+    assert_eq!(r.cells_observed, online.cells.len());
+    assert_eq!(r.tiles, tiles.tile_count());
+    let offline = tarn::io::mapfile::read_map_ply(&out.path().join("map.ply")).unwrap();
+    assert_eq!(offline.cells.len(), online.cells.len());
+    for (a, b) in offline.cells.iter().zip(&online.cells) {
+        assert_eq!(a.key, b.key);
+        assert_eq!(a.z as f32, b.z as f32);
+        assert_eq!(a.water, b.water);
+        assert_eq!(a.class, b.class);
+        assert_eq!(a.hazard, b.hazard);
+        assert!(a.depth == b.depth || (a.depth.is_nan() && b.depth.is_nan()));
+    }
+    let counts = r.cue_counts;
+    assert!(counts.lidar_diag_ret > 0 && counts.evidence_cells > 0);
+    // Water probability, class and depth agree cell by cell: outside the water bodies a
+    // cell is dry (depth 0) below one half, of unknown depth (NaN) from it up.
+    for c in offline
+        .cells
+        .iter()
+        .filter(|c| c.class != tarn::hazard::Class::Water)
+    {
+        assert_eq!(c.depth.is_nan(), c.water >= 0.5, "{c:?}");
+        assert!(c.depth.is_nan() || c.depth == 0.0, "{c:?}");
+    }
+    assert_eq!(r.stage_latency_ms.len(), StageTimes::NAMES.len());
+    // The offline build skips the per-frame water stage; the map above, with it on in the
+    // online mapper, is the same.
+    let water_ms = |r: &tarn::build::LogBuildReport| {
+        r.stage_latency_ms
+            .iter()
+            .find(|l| l.stage == "water")
+            .unwrap()
+            .max_ms
+    };
+    assert!(!r.per_frame_maps);
+    assert_eq!(water_ms(&r), 0.0);
+    let r = tarn::build::build_log(
+        &s.log,
+        out.path(),
+        &tarn::build::LogBuildConfig {
+            mapper: MapperConfig::default(),
+            per_frame_maps: true,
+            ..Default::default()
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert!(r.per_frame_maps && water_ms(&r) > 0.0);
+    assert_eq!(r.cells_observed, online.cells.len());
+}
+
+#[test]
+fn without_cues_the_mapper_is_plain_ingest() {
+    // The same sums as fusing every raw cloud into one grid by hand.
+    let s = sim();
+    let mut cfg = MapperConfig::default();
+    cfg.set_cues("none").unwrap();
+    let (tiles, reps) = run(&cfg, &s.frames);
+    assert!(reps
+        .iter()
+        .all(|r| r.cues.lidar.is_none() && r.cues.stereo_runs == 0));
+    let mut grid: Option<RollingGrid> = None;
+    let mut global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref).unwrap();
+    for f in &s.frames {
+        let (cx, cy) = window_centre(&cfg.grid, &f.base_to_map);
+        let g = match grid.as_mut() {
+            Some(g) => {
+                g.recenter(cx, cy, &mut global).unwrap();
+                g
+            }
+            None => grid.insert(RollingGrid::new(cfg.grid.clone(), cx, cy).unwrap()),
+        };
+        g.ingest(f.lidar.as_ref().unwrap(), &RangeNoise::LIDAR)
+            .unwrap();
+        let stereo = f.stereo.as_ref().unwrap();
+        let camera = f.image.as_ref().and_then(|i| i.camera.as_ref());
+        let (noise, source) =
+            StereoConfig::default().range_noise(camera, stereo.cols, f.stereo_baseline_m);
+        assert_eq!(source, StereoNoiseSource::Disparity);
+        g.ingest(stereo, &noise).unwrap();
+    }
+    grid.unwrap().flush(&mut global);
+    assert!(tiles == global);
+    assert!(tiles.observed().all(|(_, c)| c.ev.is_empty()));
+}
+
+#[test]
+fn one_and_two_threads_give_the_same_map() {
+    let frames = &sim().frames;
+    let with = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+            .install(|| {
+                let mut m = Mapper::new(MapperConfig::every_sensor()).unwrap();
+                // The published hazard map of every frame, bit for bit (NaN depths too).
+                let maps: Vec<String> = frames
+                    .iter()
+                    .map(|f| {
+                        m.update(f).unwrap();
+                        format!("{:?}", m.hazard_map())
+                    })
+                    .collect();
+                (m.finish(), maps)
+            })
+    };
+    let (a, b) = (with(1), with(2));
+    assert!(a.0.observed_count() > 1000);
+    assert!(a.0 == b.0);
+    assert!(a.1 == b.1);
+    // The maps hold water bodies, so the water stage's parallel passes were exercised.
+    assert!(a.1.last().unwrap().contains("class: Water"));
+}
+
+#[test]
+fn a_map_published_on_demand_is_the_map_published_every_frame() {
+    let frames = &sim().frames;
+    let cfg = MapperConfig::every_sensor();
+    let mut every = Mapper::new(cfg.clone()).unwrap();
+    let mut asked = Mapper::new(cfg).unwrap();
+    asked.set_publish(false);
+    for (j, f) in frames.iter().enumerate() {
+        every.update(f).unwrap();
+        asked.update(f).unwrap();
+        if j % 2 == 1 {
+            let map = asked.publish_now().unwrap();
+            // What was published is what a reader gets.
+            assert!(Arc::ptr_eq(&map, &asked.hazard_map()));
+        }
+    }
+    let map = asked.publish_now().unwrap();
+    let last = every.hazard_map();
+    assert!(!last.cells.is_empty());
+    assert_eq!(format!("{:?}", map.cells), format!("{:?}", last.cells));
+    assert_eq!(map.bodies.len(), last.bodies.len());
+    assert!(!last.bodies.is_empty(), "the scene's pond is a body");
+}
+
+#[test]
+fn snapshots_are_readable_while_updating() {
+    let frames = &sim().frames;
+    let mut m = Mapper::new(MapperConfig::default()).unwrap();
+    m.update(&frames[0]).unwrap();
+    let first = m.hazard_map();
+    let copy = (*first).clone();
+    assert!(!first.cells.is_empty());
+    let handle = m.snapshots();
+    let done = AtomicBool::new(false);
+    let seen = std::thread::scope(|s| {
+        let reader = s.spawn(|| {
+            let mut seen = Vec::new();
+            loop {
+                let finished = done.load(Ordering::Acquire);
+                let snap = handle.latest();
+                // Every published map is whole: sorted-unique keys, finite positions.
+                assert!(snap
+                    .cells
+                    .iter()
+                    .all(|c| c.x.is_finite() && c.y.is_finite()));
+                if seen.last() != Some(&snap.cells.len()) {
+                    seen.push(snap.cells.len());
+                }
+                if finished {
+                    return seen;
+                }
+                std::thread::yield_now();
+            }
+        });
+        for f in &frames[1..] {
+            m.update(f).unwrap();
+        }
+        done.store(true, Ordering::Release);
+        reader.join().unwrap()
+    });
+    // The reader saw the final map; the first snapshot never changed.
+    assert_eq!(*seen.last().unwrap(), m.hazard_map().cells.len());
+    // (Debug text: NaN elevation_std of evidence-only cells is not == itself.)
+    assert_eq!(format!("{:?}", *first), format!("{copy:?}"));
+    assert!(!Arc::ptr_eq(&first, &m.hazard_map()));
+}
+
+#[test]
+fn a_lidar_only_config_runs_no_stereo_code() {
+    let s = sim();
+    let cfg = MapperConfig {
+        stereo: None,
+        ..MapperConfig::default()
+    };
+    let (tiles, reps) = run(&cfg, &s.frames);
+    for r in &reps {
+        assert!(r.stereo_ingest.is_none() && r.cues.stereo_ingest.is_none());
+        assert_eq!(r.cues.stereo_runs, 0);
+        assert!(r.cues.lidar.is_some());
+    }
+    // The same map as frames that carry no stereo at all.
+    let stripped: Vec<Frame> = s
+        .frames
+        .iter()
+        .map(|f| Frame {
+            stereo: None,
+            image: None,
+            ..f.clone()
+        })
+        .collect();
+    let (t2, _) = run(&MapperConfig::default(), &stripped);
+    assert!(tiles == t2);
+    assert_eq!(tarn::build::cue_names(&cfg), ["lidar", "reflectivity"]);
+}
+
+/// The stereo range noise comes from the disparity noise, the focal length and binning of
+/// the log's camera and the baseline of its right CameraInfo: σ_z = z²·σ_d·k/(f·B).
+/// Without a baseline (from the log or the config) it falls back to the config's and says
+/// so.
+#[test]
+fn stereo_noise_comes_from_the_camera_and_the_baseline() {
+    let s = sim();
+    let f = &s.frames[2];
+    let cam = f.image.as_ref().unwrap().camera.as_ref().unwrap();
+    let cloud = f.stereo.as_ref().unwrap();
+    let b = f.stereo_baseline_m.unwrap();
+    let spec = small_scene().rig.stereo.unwrap();
+    assert!((b - spec.baseline_m).abs() < 1e-12);
+    let k = (cam.width / cloud.cols) as f64;
+    assert_eq!(k, spec.bin as f64);
+    let cfg = StereoConfig {
+        disparity_noise_px: 0.4,
+        ..StereoConfig::default()
+    };
+    let (n, src) = cfg.range_noise(Some(cam), cloud.cols, Some(b));
+    assert_eq!(src, StereoNoiseSource::Disparity);
+    assert!((n.per_m2 - 0.4 * k / (cam.fx * b)).abs() < 1e-15);
+    assert_eq!(n.per_m, 0.0);
+    // The config's baseline serves a log without the right camera; neither: the config's
+    // noise polynomial.
+    let with_b = StereoConfig {
+        baseline_m: Some(b),
+        ..cfg
+    };
+    assert_eq!(with_b.range_noise(Some(cam), cloud.cols, None), (n, src));
+    assert_eq!(
+        cfg.range_noise(Some(cam), cloud.cols, None),
+        (cfg.cue.noise, StereoNoiseSource::Config)
+    );
+    assert_eq!(
+        cfg.range_noise(None, cloud.cols, Some(b)).1,
+        StereoNoiseSource::Config
+    );
+    // The mapper reports what it used.
+    let mut m = Mapper::new(MapperConfig::default()).unwrap();
+    let r = m.update(f).unwrap();
+    assert_eq!(r.stereo_noise.unwrap().1, StereoNoiseSource::Disparity);
+}
+
+#[test]
+fn snapshots_are_the_generic_maps_of_the_window() {
+    // The water stage reads the window's layers directly; every frame, its snapshot is the
+    // map the generic path makes of the window's cells (in tile order, with the previous
+    // snapshot's bodies), bit for bit. Bodies come and go (the sim's pond).
+    let same = |a: &HazardMap, b: &HazardMap| format!("{a:?}") == format!("{b:?}");
+    let mut m = Mapper::new(MapperConfig::default()).unwrap();
+    let cfg = m.config().hazard_config();
+    let mut bodies = 0;
+    let mut held: Option<(Arc<HazardMap>, HazardMap)> = None;
+    for (i, f) in sim().frames.iter().enumerate() {
+        let previous = m.hazard_map();
+        m.update(f).unwrap();
+        let g = m.grid().unwrap();
+        let tiles = TileMap::for_grid(g);
+        let cells = g.observed_by_tile().collect();
+        let want = HazardMap::from_cells_after(&tiles, cells, &cfg, &previous.bodies).unwrap();
+        let got = m.hazard_map();
+        assert!(same(&got, &want), "frame {i}");
+        bodies += got.bodies.len();
+        // A snapshot someone holds is never reused for a later map.
+        if i == 2 {
+            held = Some((Arc::clone(&got), (*got).clone()));
+        }
+    }
+    let (held, copy) = held.unwrap();
+    assert!(same(&held, &copy));
+    eprintln!("{bodies} bodies over the frames");
+}
