@@ -9,7 +9,9 @@ use crate::geom::Pose;
 /// `builtin_interfaces/msg/Time`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
 pub struct Time {
+    /// Whole seconds since the Unix epoch (ROS field `sec`).
     pub sec: i32,
+    /// Nanoseconds past `sec`, `0..1_000_000_000` (ROS field `nanosec`).
     pub nanosec: u32,
 }
 
@@ -19,6 +21,7 @@ impl Time {
         self.sec as i64 * 1_000_000_000 + self.nanosec as i64
     }
 
+    /// The time `ns` nanoseconds after the epoch (negative before it; `nanosec` is always non-negative).
     pub fn from_nanos(ns: i64) -> Self {
         Time {
             sec: ns.div_euclid(1_000_000_000) as i32,
@@ -26,6 +29,7 @@ impl Time {
         }
     }
 
+    /// Seconds since the epoch, as a float.
     pub fn to_sec(self) -> f64 {
         self.sec as f64 + self.nanosec as f64 * 1e-9
     }
@@ -46,7 +50,9 @@ impl Time {
 /// `std_msgs/msg/Header`.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Header {
+    /// Acquisition time (ROS field `stamp`).
     pub stamp: Time,
+    /// Coordinate frame of the data (ROS field `frame_id`).
     pub frame_id: String,
 }
 
@@ -89,8 +95,11 @@ impl Header {
 /// (maps child coordinates to parent coordinates).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TransformStamped {
+    /// ROS field `header`: stamp and parent frame.
     pub header: Header,
+    /// The child frame (ROS field `child_frame_id`).
     pub child_frame_id: String,
+    /// ROS field `transform`: maps child coordinates to parent coordinates, metres.
     pub child_to_parent: Pose,
 }
 
@@ -108,10 +117,13 @@ impl TransformStamped {
 /// `tf2_msgs/msg/TFMessage`.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct TfMessage {
+    /// ROS field `transforms`.
     pub transforms: Vec<TransformStamped>,
 }
 
 impl TfMessage {
+    /// Decodes a CDR payload (encapsulation header included). Fails on a cut or malformed
+    /// payload, or a transform that is not finite or whose quaternion is not unit.
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
         Self::decode_wire(buf, Wire::Cdr)
     }
@@ -158,6 +170,7 @@ impl TfMessage {
         Ok(TfMessage { transforms })
     }
 
+    /// The CDR payload (encapsulation header included) in byte order `endian`.
     pub fn encode(&self, endian: Endian) -> Vec<u8> {
         let mut w = CdrWriter::new(endian);
         w.u32(self.transforms.len() as u32);
@@ -176,13 +189,21 @@ impl TfMessage {
 
 /// `sensor_msgs/msg/PointField` datatypes.
 pub mod datatype {
+    /// `int8`.
     pub const INT8: u8 = 1;
+    /// `uint8`.
     pub const UINT8: u8 = 2;
+    /// `int16`.
     pub const INT16: u8 = 3;
+    /// `uint16`.
     pub const UINT16: u8 = 4;
+    /// `int32`.
     pub const INT32: u8 = 5;
+    /// `uint32`.
     pub const UINT32: u8 = 6;
+    /// `float32`.
     pub const FLOAT32: u8 = 7;
+    /// `float64`.
     pub const FLOAT64: u8 = 8;
 
     /// Size in bytes of one element, `None` for an unknown datatype.
@@ -200,27 +221,41 @@ pub mod datatype {
 /// `sensor_msgs/msg/PointField`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PointField {
+    /// Field name, such as `x` or `intensity` (ROS field `name`).
     pub name: String,
+    /// Byte offset of the field in a point (ROS field `offset`).
     pub offset: u32,
+    /// Element type, one of the [`datatype`] constants (ROS field `datatype`).
     pub datatype: u8,
+    /// Number of elements (ROS field `count`).
     pub count: u32,
 }
 
 /// `sensor_msgs/msg/PointCloud2`, with its raw data.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PointCloud2Msg {
+    /// ROS field `header`: stamp and sensor frame.
     pub header: Header,
+    /// Rows of points, 1 for an unordered cloud (ROS field `height`).
     pub height: u32,
+    /// Points per row (ROS field `width`).
     pub width: u32,
+    /// Layout of one point (ROS field `fields`).
     pub fields: Vec<PointField>,
+    /// Whether the data is big endian (ROS field `is_bigendian`).
     pub is_bigendian: bool,
+    /// Bytes per point (ROS field `point_step`).
     pub point_step: u32,
+    /// Bytes per row (ROS field `row_step`).
     pub row_step: u32,
+    /// Raw point bytes, `row_step * height` of them (ROS field `data`).
     pub data: Vec<u8>,
+    /// Whether the cloud has no invalid points (ROS field `is_dense`).
     pub is_dense: bool,
 }
 
 impl PointCloud2Msg {
+    /// Decodes a CDR payload (encapsulation header included). Fails on a cut or malformed payload.
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
         Self::decode_wire(buf, Wire::Cdr)
     }
@@ -259,6 +294,7 @@ impl PointCloud2Msg {
         })
     }
 
+    /// The CDR payload (encapsulation header included) in byte order `endian`.
     pub fn encode(&self, endian: Endian) -> Vec<u8> {
         let mut w = CdrWriter::with_capacity(endian, self.data.len() + 256);
         self.header.write(&mut w);
@@ -283,16 +319,24 @@ impl PointCloud2Msg {
 /// `sensor_msgs/msg/Image`, with its raw data.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImageMsg {
+    /// ROS field `header`: stamp and camera frame.
     pub header: Header,
+    /// Rows, pixels (ROS field `height`).
     pub height: u32,
+    /// Columns, pixels (ROS field `width`).
     pub width: u32,
+    /// Pixel encoding, such as `rgb8` or `mono8` (ROS field `encoding`).
     pub encoding: String,
+    /// Non-zero when multi-byte pixels are big endian (ROS field `is_bigendian`).
     pub is_bigendian: u8,
+    /// Bytes per row (ROS field `step`).
     pub step: u32,
+    /// Raw pixel bytes, `step * height` of them (ROS field `data`).
     pub data: Vec<u8>,
 }
 
 impl ImageMsg {
+    /// Decodes a CDR payload (encapsulation header included). Fails on a cut or malformed payload.
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
         Self::decode_wire(buf, Wire::Cdr)
     }
@@ -311,6 +355,7 @@ impl ImageMsg {
         })
     }
 
+    /// The CDR payload (encapsulation header included) in byte order `endian`.
     pub fn encode(&self, endian: Endian) -> Vec<u8> {
         let mut w = CdrWriter::with_capacity(endian, self.data.len() + 128);
         self.header.write(&mut w);
@@ -327,30 +372,47 @@ impl ImageMsg {
 /// `sensor_msgs/msg/RegionOfInterest`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RegionOfInterest {
+    /// Left column of the region, pixels (ROS field `x_offset`).
     pub x_offset: u32,
+    /// Top row of the region, pixels (ROS field `y_offset`).
     pub y_offset: u32,
+    /// Rows, pixels; 0 with `width` 0 means the full image (ROS field `height`).
     pub height: u32,
+    /// Columns, pixels (ROS field `width`).
     pub width: u32,
+    /// Whether the region is to be rectified (ROS field `do_rectify`).
     pub do_rectify: bool,
 }
 
 /// `sensor_msgs/msg/CameraInfo`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraInfoMsg {
+    /// ROS field `header`: stamp and camera optical frame.
     pub header: Header,
+    /// Image rows, pixels (ROS field `height`).
     pub height: u32,
+    /// Image columns, pixels (ROS field `width`).
     pub width: u32,
+    /// Distortion model name, such as `plumb_bob` (ROS field `distortion_model`).
     pub distortion_model: String,
+    /// Distortion coefficients of that model (ROS field `d`).
     pub d: Vec<f64>,
+    /// Intrinsic matrix, row major, pixels (ROS field `k`).
     pub k: [f64; 9],
+    /// Rectification rotation, row major (ROS field `r`).
     pub r: [f64; 9],
+    /// 3×4 projection matrix, row major, pixels (ROS field `p`).
     pub p: [f64; 12],
+    /// Horizontal binning, 0 or 1 for none (ROS field `binning_x`).
     pub binning_x: u32,
+    /// Vertical binning, 0 or 1 for none (ROS field `binning_y`).
     pub binning_y: u32,
+    /// Region of interest (ROS field `roi`).
     pub roi: RegionOfInterest,
 }
 
 impl CameraInfoMsg {
+    /// Decodes a CDR payload (encapsulation header included). Fails on a cut or malformed payload.
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
         Self::decode_wire(buf, Wire::Cdr)
     }
@@ -379,6 +441,7 @@ impl CameraInfoMsg {
         })
     }
 
+    /// The CDR payload (encapsulation header included) in byte order `endian`.
     pub fn encode(&self, endian: Endian) -> Vec<u8> {
         let mut w = CdrWriter::new(endian);
         self.header.write(&mut w);
@@ -402,9 +465,13 @@ impl CameraInfoMsg {
 
 /// MCAP schema names (as `ros2 bag` writes them).
 pub mod schema_name {
+    /// `tf2_msgs/msg/TFMessage`.
     pub const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
+    /// `sensor_msgs/msg/PointCloud2`.
     pub const POINT_CLOUD2: &str = "sensor_msgs/msg/PointCloud2";
+    /// `sensor_msgs/msg/Image`.
     pub const IMAGE: &str = "sensor_msgs/msg/Image";
+    /// `sensor_msgs/msg/CameraInfo`.
     pub const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
 }
 
