@@ -17,6 +17,7 @@
 pub struct CdrError {
     /// Byte offset in the payload (including the 4-byte encapsulation header).
     pub offset: usize,
+    /// What was wrong.
     pub message: String,
 }
 
@@ -28,12 +29,15 @@ impl std::fmt::Display for CdrError {
 
 impl std::error::Error for CdrError {}
 
+/// Result of CDR decoding.
 pub type CdrResult<T> = std::result::Result<T, CdrError>;
 
 /// Byte order of a CDR payload.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Endian {
+    /// Little endian (encapsulation `00 01`).
     Little,
+    /// Big endian (encapsulation `00 00`).
     Big,
 }
 
@@ -59,6 +63,7 @@ pub struct CdrReader<'a> {
 
 macro_rules! read_prim {
     ($name:ident, $t:ty, $n:expr) => {
+        #[doc = concat!("One `", stringify!($t), "`, aligned to its size on the CDR wire. Fails at the end of the payload.")]
         pub fn $name(&mut self) -> CdrResult<$t> {
             self.align($n)?;
             let b = self.take($n, stringify!($t))?;
@@ -121,10 +126,12 @@ impl<'a> CdrReader<'a> {
         }
     }
 
+    /// How the payload is serialized.
     pub fn wire(&self) -> Wire {
         self.wire
     }
 
+    /// Byte order of the payload (always little on the ROS 1 wire).
     pub fn endian(&self) -> Endian {
         self.endian
     }
@@ -139,6 +146,7 @@ impl<'a> CdrReader<'a> {
         self.buf.len() - self.pos
     }
 
+    /// An error at the current position, with `message`.
     pub fn err(&self, message: impl Into<String>) -> CdrError {
         CdrError {
             offset: self.pos,
@@ -173,10 +181,12 @@ impl<'a> CdrReader<'a> {
         Ok(s)
     }
 
+    /// One byte. Fails at the end of the payload.
     pub fn u8(&mut self) -> CdrResult<u8> {
         Ok(self.take(1, "u8")?[0])
     }
 
+    /// A `bool` byte: any non-zero value is true. Fails at the end of the payload.
     pub fn bool(&mut self) -> CdrResult<bool> {
         Ok(self.u8()? != 0)
     }
@@ -265,6 +275,7 @@ pub struct CdrWriter {
 
 macro_rules! write_prim {
     ($name:ident, $t:ty, $n:expr) => {
+        #[doc = concat!("One `", stringify!($t), "`, aligned to its size.")]
         pub fn $name(&mut self, v: $t) {
             self.align($n);
             match self.endian {
@@ -276,10 +287,12 @@ macro_rules! write_prim {
 }
 
 impl CdrWriter {
+    /// A writer of byte order `endian`, with the encapsulation header written.
     pub fn new(endian: Endian) -> Self {
         Self::with_capacity(endian, 64)
     }
 
+    /// Like [`CdrWriter::new`], with room for `cap` payload bytes.
     pub fn with_capacity(endian: Endian, cap: usize) -> Self {
         let mut buf = Vec::with_capacity(cap + HEADER);
         buf.extend_from_slice(match endian {
@@ -295,10 +308,12 @@ impl CdrWriter {
         self.buf.resize(self.buf.len() + pad, 0);
     }
 
+    /// One byte.
     pub fn u8(&mut self, v: u8) {
         self.buf.push(v);
     }
 
+    /// A `bool` as one byte, 0 or 1.
     pub fn bool(&mut self, v: bool) {
         self.buf.push(v as u8);
     }
@@ -312,17 +327,20 @@ impl CdrWriter {
     write_prim!(f32, f32, 4);
     write_prim!(f64, f64, 8);
 
+    /// A string: u32 length counting the NUL, the bytes, a NUL.
     pub fn string(&mut self, s: &str) {
         self.u32(s.len() as u32 + 1);
         self.buf.extend_from_slice(s.as_bytes());
         self.buf.push(0);
     }
 
+    /// A `uint8[]` sequence: u32 count, then the bytes.
     pub fn bytes(&mut self, b: &[u8]) {
         self.u32(b.len() as u32);
         self.buf.extend_from_slice(b);
     }
 
+    /// A `float64[]` sequence: u32 count, then the aligned values.
     pub fn f64_seq(&mut self, v: &[f64]) {
         self.u32(v.len() as u32);
         for &x in v {
@@ -330,12 +348,14 @@ impl CdrWriter {
         }
     }
 
+    /// A `float64[N]` fixed array: the aligned values, no count.
     pub fn f64_array(&mut self, v: &[f64]) {
         for &x in v {
             self.f64(x);
         }
     }
 
+    /// The payload, encapsulation header included.
     pub fn finish(self) -> Vec<u8> {
         self.buf
     }
