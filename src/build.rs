@@ -24,6 +24,7 @@ use crate::mapper::{Mapper, MapperConfig, StageTimes};
 /// Parameters of an offline build.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BuildConfig {
+    /// Grid resolution, reference height and layers; `size_cells` is replaced by the window the build chooses.
     pub grid: GridConfig,
     /// Noise of the cloud's points (a map-frame cloud has no sensor origin: constant).
     pub noise: RangeNoise,
@@ -45,7 +46,9 @@ impl Default for BuildConfig {
 /// What a cloud build produced.
 #[derive(Debug, Clone)]
 pub struct CloudBuild {
+    /// The fused map, all of it.
     pub tiles: TileMap,
+    /// What happened to the cloud's points.
     pub ingest: IngestStats,
     /// Windows the cloud was cut into.
     pub blocks: usize,
@@ -379,28 +382,46 @@ pub fn build_cloud(
 /// `report.json` of a build.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct BuildReport {
+    /// Version of tarn that wrote the report.
     pub tarn_version: String,
+    /// The cloud read.
     pub input: PathBuf,
+    /// The output directory.
     pub output: PathBuf,
+    /// Cell side, metres.
     pub resolution_m: f64,
+    /// Side of the window used, cells.
     pub window_cells: usize,
+    /// Windows the cloud was cut into.
     pub blocks: usize,
+    /// Cells of the map with at least one point.
     pub cells_observed: usize,
+    /// Tiles of the global map.
     pub tiles: usize,
+    /// Bytes of rolling-grid storage per cell (all layers).
     pub bytes_per_cell_window: usize,
+    /// Bytes held by the global map's cell storage.
     pub bytes_cells_global: usize,
+    /// What happened to the cloud's points.
     pub points: IngestStats,
+    /// Lowest and highest cell elevation, map z in metres; `None` for an empty map.
     pub elevation_range_m: Option<(f64, f64)>,
     /// Map-frame extent of the observed cells: [xmin, ymin, xmax, ymax] (cell edges).
     pub extent_m: Option<[f64; 4]>,
+    /// Wall time of each step, seconds.
     pub timings_s: Timings,
 }
 
+/// Wall time of the steps of a build, seconds.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Timings {
+    /// Reading the input (a log build: reading and decoding, fusion excluded).
     pub read: f64,
+    /// Fusing points into the grid (a log build: the mapper's updates).
     pub fuse: f64,
+    /// Making the hazard map and writing the output files.
     pub export: f64,
+    /// The whole build.
     pub total: f64,
 }
 
@@ -609,13 +630,21 @@ mod tests {
 /// `report.json` of a build from a ROS 2 log.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LogBuildReport {
+    /// Version of tarn that wrote the report.
     pub tarn_version: String,
+    /// The log read.
     pub input: PathBuf,
+    /// The output directory.
     pub output: PathBuf,
+    /// Cell side, metres.
     pub resolution_m: f64,
+    /// Side of the rolling window, cells.
     pub window_cells: usize,
+    /// Topic whose messages made frames.
     pub frame_topic: String,
+    /// Frames fused into the map.
     pub frames_fused: u64,
+    /// Log duration, seconds.
     pub log_duration_s: f64,
     /// Log duration over build time (offline speed).
     pub x_realtime: f64,
@@ -629,10 +658,13 @@ pub struct LogBuildReport {
     pub lidar_height_m: Option<f64>,
     /// The lidar cues' no-return diagnostic interval (lookahead, m).
     pub diagnostic_interval_m: Option<(f64, f64)>,
+    /// What happened to the lidar points, summed over frames.
     pub lidar_points: IngestStats,
+    /// What happened to the stereo points, summed over frames.
     pub stereo_points: IngestStats,
     /// What the cues found, summed over frames.
     pub cue_counts: CueCounts,
+    /// What the frame stream read, built and skipped.
     pub frames: crate::io::frames::FrameStats,
     /// Messages or frames that could not be used, with where and why.
     pub errors: Vec<String>,
@@ -651,11 +683,15 @@ pub struct LogBuildReport {
     /// What the image labels contributed (`None`: not configured).
     #[serde(default)]
     pub labels: Option<crate::project::FrameLabelsReport>,
+    /// Cells of the map with at least one point.
     pub cells_observed: usize,
+    /// Tiles of the global map.
     pub tiles: usize,
+    /// Lowest and highest cell elevation, map z in metres; `None` for an empty map.
     pub elevation_range_m: Option<(f64, f64)>,
     /// What the map holds: water cells, area, depths, hazards.
     pub water: WaterSummary,
+    /// Wall time of each step, seconds.
     pub timings_s: Timings,
     /// Sum over frames of each stage of [`crate::mapper::Mapper::update`] (s).
     pub stage_totals_s: StageTimes,
@@ -669,23 +705,34 @@ pub const MAX_WARNINGS: usize = 100;
 /// Points dropped as beyond their sensor's maximum range.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct BeyondRange {
+    /// Lidar points dropped.
     pub lidar: u64,
+    /// Stereo points dropped.
     pub stereo: u64,
 }
 
 /// Cue events summed over a build.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct CueCounts {
+    /// Missing lidar beams meeting the ground inside the diagnostic interval.
     pub lidar_noret: u64,
     /// Nearest and farthest lookahead of the no-return beams' ground hits (mm).
     pub lidar_noret_lookahead_mm: Option<[u64; 2]>,
+    /// Lidar ground returns inside the diagnostic interval.
     pub lidar_diag_ret: u64,
+    /// Lidar returns from under the water surface (bottom returns, their depth kept as evidence).
     pub lidar_bottom: u64,
+    /// Lidar returns mirrored by the water surface, put back where the object is.
     pub lidar_specular: u64,
+    /// Lidar ground returns darker than the scan's dark threshold (reflectivity cue).
     pub lidar_dark: u64,
+    /// Stereo reflection runs confirmed.
     pub stereo_runs: u64,
+    /// Stereo points found to be reflections.
     pub stereo_reflected_points: u64,
+    /// Evidence cells merged into the window.
     pub evidence_cells: u64,
+    /// Evidence cells dropped outside the window.
     pub evidence_dropped: u64,
 }
 
@@ -712,11 +759,15 @@ impl CueCounts {
 /// The water in a hazard map.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct WaterSummary {
+    /// Cells classified water.
     pub water_cells: usize,
+    /// Area of the water cells, square metres.
     pub water_area_m2: f64,
     /// Water cells with a measured depth, and their depths.
     pub depth_cells: usize,
+    /// Mean depth of those cells, metres; `None` when no depth was measured.
     pub depth_mean_m: Option<f64>,
+    /// Greatest depth of those cells, metres; `None` when no depth was measured.
     pub depth_max_m: Option<f64>,
     /// Cells per hazard code: free, shallow water, deep or unknown-depth water, obstacle.
     pub hazard_cells: [usize; 4],
@@ -729,6 +780,7 @@ pub struct WaterSummary {
 }
 
 impl WaterSummary {
+    /// Summarises `map`; `fusion` gives the prior above which a cell counts as having evidence.
     pub fn of(map: &HazardMap, fusion: &crate::grid::Fusion) -> Self {
         use crate::hazard::Class;
         let mut s = WaterSummary {
@@ -761,9 +813,13 @@ impl WaterSummary {
 /// Median, 95th percentile and maximum of one stage's per-frame time.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StageLatency {
+    /// Stage name, one of [`StageTimes::NAMES`].
     pub stage: String,
+    /// Median per-frame time, milliseconds.
     pub median_ms: f64,
+    /// 95th percentile (nearest rank), milliseconds.
     pub p95_ms: f64,
+    /// Largest per-frame time, milliseconds.
     pub max_ms: f64,
 }
 
@@ -798,6 +854,7 @@ pub fn stage_latency(times: &[StageTimes]) -> Vec<StageLatency> {
 pub struct LogBuildConfig {
     /// The pipeline: grid, fusion, vehicle, sensors and cues.
     pub mapper: MapperConfig,
+    /// Log reading settings: topic and frame names, matching tolerances, speed limit.
     pub log: crate::io::frames::LogConfig,
     /// Use this topic for frames; by default the lidar topic, or the stereo topic when the
     /// log has no lidar messages.
