@@ -27,22 +27,34 @@ use crate::geom::{PointCloud, Pose};
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LogConfig {
+    /// Topic of `tf2_msgs/TFMessage` transforms.
     pub tf_topic: String,
+    /// Topic of static transforms.
     pub tf_static_topic: String,
+    /// Lidar `PointCloud2` topic.
     pub lidar_topic: String,
+    /// Stereo `PointCloud2` topic (points in the camera frame).
     pub stereo_topic: String,
+    /// Colour camera `Image` topic.
     pub image_topic: String,
+    /// `CameraInfo` topic of the colour camera.
     pub camera_info_topic: String,
     /// The right camera of the stereo pair: its projection gives the baseline
     /// (`P[0][3] = −f·B`).
     pub right_camera_info_topic: String,
+    /// Short-wave infrared `Image` topic.
     pub swir_topic: String,
+    /// `CameraInfo` topic of the short-wave infrared camera.
     pub swir_info_topic: String,
+    /// Mid-wave infrared `Image` topic.
     pub mwir_topic: String,
+    /// `CameraInfo` topic of the mid-wave infrared camera.
     pub mwir_info_topic: String,
     /// Which cloud topic makes a frame: the lidar (default) or the stereo topic.
     pub frame_topic: String,
+    /// Name of the map frame, the frame of the built map.
     pub map_frame: String,
+    /// Name of the vehicle frame.
     pub base_frame: String,
     /// Largest time difference between a frame's scan and a matched cloud or image, s.
     pub tolerance_s: f64,
@@ -89,6 +101,8 @@ impl Default for LogConfig {
 }
 
 impl LogConfig {
+    /// Checks the tolerances and speed limit and that `frame_topic` is the lidar or the stereo
+    /// topic; an `Error::Invalid` names the offending setting.
     pub fn validate(&self) -> Result<()> {
         if !(self.tolerance_s >= 0.0 && self.tolerance_s.is_finite()) {
             return Err(Error::invalid(
@@ -125,8 +139,11 @@ impl LogConfig {
 /// `--frame-topic`): each must be in the log with the right type.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct NamedTopics {
+    /// Lidar `PointCloud2` topic.
     pub lidar: Option<String>,
+    /// Stereo `PointCloud2` topic.
     pub stereo: Option<String>,
+    /// Colour camera `Image` topic.
     pub camera: Option<String>,
     /// Which cloud topic makes frames; a point cloud topic that is not the stereo topic
     /// is taken as the lidar.
@@ -299,6 +316,7 @@ pub fn stereo_baseline(right: &CameraInfoMsg) -> std::result::Result<f64, String
 /// An image with what is needed to project it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SensorImage {
+    /// The pixels and their stamp and frame.
     pub image: Image,
     /// Latest `CameraInfo` seen on the matching info topic.
     pub camera: Option<CameraModel>,
@@ -317,9 +335,13 @@ pub struct Frame {
     /// Clouds with `frame_to_map` at their own stamps and `sensor_origin` at their frame's
     /// origin.
     pub lidar: Option<PointCloud>,
+    /// The stereo cloud nearest the scan within `tolerance_s`, if any.
     pub stereo: Option<PointCloud>,
+    /// The colour image nearest the scan within `tolerance_s`, if any.
     pub image: Option<SensorImage>,
+    /// The short-wave infrared image nearest the scan within `tolerance_s`, if any.
     pub swir: Option<SensorImage>,
+    /// The mid-wave infrared image nearest the scan within `tolerance_s`, if any.
     pub mwir: Option<SensorImage>,
     /// The stereo baseline (m) from the latest right-camera `CameraInfo`, when the log has
     /// one.
@@ -329,7 +351,9 @@ pub struct Frame {
 /// What happened while streaming.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FrameStats {
+    /// Messages read from the log.
     pub messages: u64,
+    /// Frames emitted.
     pub frames_built: u64,
     /// Frames whose scan had no transform to the map at its stamp.
     pub frames_skipped_no_tf: u64,
@@ -348,6 +372,7 @@ pub struct FrameStats {
 }
 
 impl FrameStats {
+    /// Messages of types tarn does not read, all topics together.
     pub fn unknown_type_total(&self) -> u64 {
         self.unknown_type.values().sum()
     }
@@ -434,6 +459,7 @@ impl FrameStream {
         })
     }
 
+    /// What happened so far.
     pub fn stats(&self) -> &FrameStats {
         &self.stats
     }
@@ -449,6 +475,7 @@ impl FrameStream {
         self.fatal.as_deref()
     }
 
+    /// Bytes read of the log, and its size in bytes.
     pub fn progress(&self) -> (u64, u64) {
         (self.reader.bytes_read(), self.reader.total_bytes())
     }
