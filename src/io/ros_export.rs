@@ -39,18 +39,24 @@ use crate::hazard::{Hazard, HazardMap};
 
 /// MCAP schema names of the messages written here.
 pub mod schema_name {
+    /// `grid_map_msgs/msg/GridMap`.
     pub const GRID_MAP: &str = "grid_map_msgs/msg/GridMap";
+    /// `nav_msgs/msg/OccupancyGrid`.
     pub const OCCUPANCY_GRID: &str = "nav_msgs/msg/OccupancyGrid";
 }
 
-/// Topics of `map.mcap`.
+/// Topic of the grid map in `map.mcap`.
 pub const GRID_MAP_TOPIC: &str = "/tarn/grid_map";
+/// Topic of the occupancy grid in `map.mcap`.
 pub const OCCUPANCY_TOPIC: &str = "/tarn/occupancy";
 
-/// Occupancy values of [`occupancy_of`].
+/// Occupancy of a free cell (the values of [`occupancy_of`] follow).
 pub const OCCUPANCY_FREE: i8 = 0;
+/// Shallow water within fording depth.
 pub const OCCUPANCY_SHALLOW_WATER: i8 = 50;
+/// Deep or unknown-depth water, or an obstacle.
 pub const OCCUPANCY_LETHAL: i8 = 100;
+/// An unobserved cell.
 pub const OCCUPANCY_UNKNOWN: i8 = -1;
 
 /// The occupancy of a cell: its hazard, or unobserved (`None`).
@@ -66,7 +72,9 @@ pub fn occupancy_of(hazard: Option<Hazard>) -> i8 {
 /// `geometry_msgs/msg/Pose`: position, then orientation as x, y, z, w.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseMsg {
+    /// Position, metres (ROS field `position`: x, y, z).
     pub position: [f64; 3],
+    /// Orientation quaternion x, y, z, w (ROS field `orientation`).
     pub orientation: [f64; 4],
 }
 
@@ -120,16 +128,22 @@ fn read_header(r: &mut CdrReader) -> CdrResult<Header> {
 /// `std_msgs/msg/MultiArrayDimension`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MultiArrayDimension {
+    /// Name of the dimension (ROS field `label`).
     pub label: String,
+    /// Elements along the dimension (ROS field `size`).
     pub size: u32,
+    /// Elements spanned by one step of the enclosing dimension (ROS field `stride`).
     pub stride: u32,
 }
 
 /// `std_msgs/msg/Float32MultiArray` (its `MultiArrayLayout` inlined).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Float32MultiArray {
+    /// Dimensions, outermost first (ROS field `layout.dim`).
     pub dim: Vec<MultiArrayDimension>,
+    /// Padding elements before the data (ROS field `layout.data_offset`).
     pub data_offset: u32,
+    /// The values (ROS field `data`).
     pub data: Vec<f32>,
 }
 
@@ -173,15 +187,25 @@ impl Float32MultiArray {
 /// `grid_map_msgs/msg/GridMap` (ROS 2; its `GridMapInfo` inlined).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridMapMsg {
+    /// ROS field `header`: stamp and map frame.
     pub header: Header,
+    /// Cell side, metres (ROS field `info.resolution`).
     pub resolution: f64,
+    /// Extent along x, metres (ROS field `info.length_x`).
     pub length_x: f64,
+    /// Extent along y, metres (ROS field `info.length_y`).
     pub length_y: f64,
+    /// Centre of the map in the header's frame (ROS field `info.pose`).
     pub pose: PoseMsg,
+    /// Layer names, one per `data` entry (ROS field `layers`).
     pub layers: Vec<String>,
+    /// Layers whose NaN marks a cell invalid (ROS field `basic_layers`).
     pub basic_layers: Vec<String>,
+    /// Layer values in grid_map's column-major order, NaN unobserved (ROS field `data`).
     pub data: Vec<Float32MultiArray>,
+    /// Circular buffer offset along rows, 0 here (ROS field `outer_start_index`).
     pub outer_start_index: u16,
+    /// Circular buffer offset along columns, 0 here (ROS field `inner_start_index`).
     pub inner_start_index: u16,
 }
 
@@ -198,6 +222,7 @@ fn read_strings(r: &mut CdrReader, what: &str) -> CdrResult<Vec<String>> {
 }
 
 impl GridMapMsg {
+    /// The CDR payload (encapsulation header included) in byte order `endian`.
     pub fn encode(&self, endian: Endian) -> Vec<u8> {
         let cells: usize = self.data.iter().map(|d| d.data.len()).sum();
         let mut w = CdrWriter::with_capacity(endian, 4 * cells + 512);
@@ -217,6 +242,7 @@ impl GridMapMsg {
         w.finish()
     }
 
+    /// Decodes a CDR payload. Fails on a cut or malformed payload.
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
         let mut r = CdrReader::new(buf)?;
         let header = read_header(&mut r)?;
@@ -294,16 +320,25 @@ impl GridMapMsg {
 /// `nav_msgs/msg/OccupancyGrid` (its `MapMetaData` inlined).
 #[derive(Debug, Clone, PartialEq)]
 pub struct OccupancyGridMsg {
+    /// ROS field `header`: stamp and map frame.
     pub header: Header,
+    /// Time the map was made, the header's stamp here (ROS field `info.map_load_time`).
     pub map_load_time: Time,
+    /// Cell side, metres (ROS field `info.resolution`).
     pub resolution: f32,
+    /// Cells along x (ROS field `info.width`).
     pub width: u32,
+    /// Cells along y (ROS field `info.height`).
     pub height: u32,
+    /// Lower-left corner of cell (0, 0) in the header's frame (ROS field `info.origin`).
     pub origin: PoseMsg,
+    /// Occupancy per cell, row major from `origin` with x along `width`: 0 free, 50
+    /// shallow water, 100 lethal, −1 unobserved (ROS field `data`).
     pub data: Vec<i8>,
 }
 
 impl OccupancyGridMsg {
+    /// The CDR payload (encapsulation header included) in byte order `endian`.
     pub fn encode(&self, endian: Endian) -> Vec<u8> {
         let mut w = CdrWriter::with_capacity(endian, self.data.len() + 256);
         write_header(&mut w, &self.header);
@@ -317,6 +352,7 @@ impl OccupancyGridMsg {
         w.finish()
     }
 
+    /// Decodes a CDR payload. Fails on a cut or malformed payload.
     pub fn decode(buf: &[u8]) -> CdrResult<Self> {
         let mut r = CdrReader::new(buf)?;
         Ok(OccupancyGridMsg {
