@@ -66,20 +66,25 @@ pub struct Evidence {
     pub lit: u16,
     /// Frames whose colour labels called this cell water / not water (one vote per frame).
     pub colour_water: u16,
+    /// Frames whose colour labels called this cell not water.
     pub colour_dry: u16,
     /// Frames whose SWIR labels called this cell dark (water) / not dark.
     pub swir_dark: u16,
+    /// Frames whose SWIR labels called this cell not dark.
     pub swir_lit: u16,
     /// Frames whose MWIR labels called this cell water (thermal contrast) / not water.
     pub mwir_water: u16,
+    /// Frames whose MWIR labels called this cell not water.
     pub mwir_dry: u16,
     /// Water-level samples (mm relative to the grid's `z_ref`) that came with `noret`,
     /// `reflect` and bottom-return events: count and exact sum.
     pub level_n: u32,
+    /// Sum of those water-level samples, mm relative to `z_ref`.
     pub level_sum_mm: i64,
     /// Refraction-corrected bottom returns: count and Σ depth (mm) below the level each
     /// was corrected against. Depths are clamped to 0..=65535 mm.
     pub depth_n: u32,
+    /// Sum of those depths, mm.
     pub depth_sum_mm: u32,
     /// How those depths move with the level: Σ gain (thousandths) and Σ gain · level
     /// (thousandths × mm relative to `z_ref`), where a return's gain is d(depth)/d(level)
@@ -88,6 +93,7 @@ pub struct Evidence {
     /// it: the cue corrects against the local ground it walked, the water stage knows the
     /// water's surface.
     pub depth_gain_sum: u32,
+    /// Σ gain · level, thousandths × mm relative to `z_ref`.
     pub depth_gain_level_sum: i64,
 }
 
@@ -98,6 +104,7 @@ pub const EVIDENCE_COUNTS: usize = 11;
 pub const EVIDENCE_BYTES_PER_CELL: usize = EVIDENCE_COUNTS * 2 + 4 + 8 + 4 + 4 + 4 + 8;
 
 impl Evidence {
+    /// Whether the cell has no evidence at all.
     #[inline]
     pub fn is_empty(&self) -> bool {
         *self == Evidence::default()
@@ -305,12 +312,19 @@ pub struct FusionLogs {
 /// Each cue's contribution to a cell's log-odds (natural log).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct CueLogOdds {
+    /// Missing and present diagnostic lidar returns.
     pub noret: f64,
+    /// Reflection rays crossing the level.
     pub reflect: f64,
+    /// Refraction-consistent bottom returns.
     pub bottom: f64,
+    /// Dark and lit reflectivity returns.
     pub reflectivity: f64,
+    /// Colour image votes.
     pub colour: f64,
+    /// SWIR image votes.
     pub swir: f64,
+    /// MWIR image votes.
     pub mwir: f64,
 }
 
@@ -338,22 +352,39 @@ pub struct CueLogOdds {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Fusion {
+    /// Prior probability that a cell is water, before any evidence.
     pub prior: f64,
+    /// Probability that a diagnostic lidar beam on dry ground returns nothing.
     pub p_dropout: f64,
+    /// Probability that a diagnostic lidar beam on water still returns.
     pub p_water_return: f64,
+    /// Probability that a reflection ray is found on reflecting water.
     pub p_reflect_detect: f64,
+    /// Probability that a reflection ray is found on dry ground.
     pub p_reflect_false: f64,
+    /// Probability of a refraction-consistent bottom return on water.
     pub p_bottom_detect: f64,
+    /// Probability of such a return on dry ground.
     pub p_bottom_false: f64,
+    /// Probability that wet ground reads dark in reflectivity.
     pub p_dark_wet: f64,
+    /// Probability that dry ground reads dark (the reflectivity cue's `dark_quantile`).
     pub p_dark_dry: f64,
+    /// Probability that a frame's colour labels call a water cell water.
     pub p_colour_detect: f64,
+    /// Probability that a frame's colour labels call a dry cell water.
     pub p_colour_false: f64,
+    /// Probability that a frame's SWIR labels call a water cell dark.
     pub p_swir_detect: f64,
+    /// Probability that a frame's SWIR labels call a dry cell dark.
     pub p_swir_false: f64,
+    /// Probability that a frame's MWIR labels call a water cell water.
     pub p_mwir_detect: f64,
+    /// Probability that a frame's MWIR labels call a dry cell water.
     pub p_mwir_false: f64,
+    /// Largest magnitude of one non-image cue's log-odds (natural log).
     pub cue_cap: f64,
+    /// Largest magnitude of one image cue's log-odds (natural log).
     pub image_cap: f64,
 }
 
