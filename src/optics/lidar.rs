@@ -63,6 +63,7 @@ pub enum SolidAngleForm {
 pub struct LidarModelConfig {
     /// Height of the sensor above the water surface (m).
     pub height_m: f64,
+    /// How the water column attenuates the beam.
     pub attenuation: Attenuation,
     /// Lambertian albedo of the bottom (and of dry ground), 0..1.
     pub albedo: f64,
@@ -70,7 +71,9 @@ pub struct LidarModelConfig {
     pub aperture_diameter_m: f64,
     /// Refractive index of the water relative to air.
     pub n_water: f64,
+    /// The receiver's sensitivity.
     pub sensitivity: Sensitivity,
+    /// Solid-angle expression for the bottom return.
     pub solid_angle: SolidAngleForm,
 }
 
@@ -213,6 +216,7 @@ impl LidarWaterModel {
         Ok(m)
     }
 
+    /// The configuration the model was built from.
     pub fn config(&self) -> &LidarModelConfig {
         &self.cfg
     }
@@ -499,12 +503,17 @@ impl LidarWaterModel {
 /// One lookahead of the `tarn lidar-model` report.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LidarModelRow {
+    /// Horizontal distance from the sensor to the beam's hit on the water surface, metres.
     pub lookahead_m: f64,
+    /// Incidence angle on the water surface, degrees.
     pub incidence_deg: f64,
+    /// Fresnel transmittance into the water, s polarisation.
     pub transmittance_s: f64,
+    /// Fresnel transmittance into the water, p polarisation.
     pub transmittance_p: f64,
     /// Bottom return ratio for the report's depth.
     pub return_ratio: f64,
+    /// Return ratio from dry level ground at the water level.
     pub dry_ratio: f64,
     /// Greatest depth whose bottom returns here; 0 where nothing returns.
     pub max_depth_m: f64,
@@ -514,20 +523,34 @@ pub struct LidarModelRow {
 /// lookahead) are reported as 0; an empty diagnostic interval as `null`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct LidarModelReport {
+    /// Height of the sensor above the water surface, metres.
     pub height_m: f64,
+    /// Water depth of the report, metres.
     pub depth_m: f64,
     /// Wavelength when the attenuation is pure-water absorption, else `null`.
     pub wavelength_nm: Option<f64>,
+    /// Lambertian albedo of the bottom and of dry ground, 0..1.
     pub albedo: f64,
+    /// Diameter of the receiver aperture, metres.
     pub aperture_diameter_m: f64,
+    /// Refractive index of the water relative to air.
     pub n_water: f64,
+    /// Solid-angle expression used.
     pub solid_angle: SolidAngleForm,
+    /// Total attenuation coefficient of the water column, 1/m.
     pub attenuation_per_m: f64,
+    /// Smallest detectable ratio of received to emitted power.
     pub min_power_ratio: f64,
+    /// Lookahead beyond which dry level ground gives no return, metres (0: none even straight down).
     pub dry_limit_m: f64,
+    /// Lookahead beyond which the thinnest film of water returns nothing, metres.
     pub zero_depth_cutoff_m: f64,
+    /// Incidence angle beyond which nothing returns from water of any depth, degrees.
     pub incidence_cutoff_deg: f64,
+    /// Largest lookahead at which the bottom under `depth_m` of water still returns, metres.
     pub max_lookahead_for_depth_m: f64,
+    /// Lookaheads where no return is diagnostic of water `depth_m` deep, metres; `None` when empty.
     pub diagnostic_interval_m: Option<[f64; 2]>,
+    /// One row per lookahead asked for.
     pub rows: Vec<LidarModelRow>,
 }
