@@ -26,6 +26,7 @@ use crate::geom::PointCloud;
 /// What a channel carries.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ChannelInfo {
+    /// Topic name.
     pub topic: String,
     /// Schema name, e.g. `sensor_msgs/msg/PointCloud2` (empty when the channel has none).
     pub schema: String,
@@ -38,12 +39,15 @@ pub struct ChannelInfo {
 /// One message as stored in the log.
 #[derive(Debug, Clone)]
 pub struct RawMessage {
+    /// The channel the message was published on.
     pub channel: Arc<ChannelInfo>,
+    /// Sequence number given by the publisher (0 when it gave none).
     pub sequence: u32,
     /// Nanoseconds.
     pub log_time: u64,
     /// Nanoseconds.
     pub publish_time: u64,
+    /// The serialized message (CDR for ROS 2 logs).
     pub data: Vec<u8>,
 }
 
@@ -129,6 +133,8 @@ pub struct DamagedRange {
     /// message read before the damage and the first one after it (`"neighbours"`; `None`
     /// where there is no such message).
     pub log_time_ns: [Option<u64>; 2],
+    /// Where `log_time_ns` comes from: `"chunk index"`, `"neighbours"`, or `"unknown"` (both
+    /// `None`).
     pub log_time_from: String,
     /// How reading went on: `"chunk index"`, `"record length"` (the damaged record's own
     /// framing held), `"forward scan"` (the next plausible record found by scanning),
@@ -264,6 +270,8 @@ fn chunk_header(body: &[u8]) -> std::result::Result<(), String> {
 }
 
 impl LogReader {
+    /// Opens the MCAP log at `path` for streaming (nothing is read yet). Fails when the file
+    /// cannot be opened or its size read.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
         let file = File::open(&path).map_err(|e| Error::io(&path, e))?;
@@ -306,6 +314,8 @@ impl LogReader {
         }
     }
 
+    /// The log's path (or the name given to [`LogReader::from_bytes`] or
+    /// [`LogReader::from_reader`]).
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -909,20 +919,27 @@ impl Iterator for LogReader {
 /// Per-topic summary of a log.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct TopicInfo {
+    /// Topic name.
     pub topic: String,
+    /// Schema (message type) name, `type` in JSON.
     #[serde(rename = "type")]
     pub schema: String,
+    /// Messages on the topic.
     pub count: u64,
 }
 
 /// What a log holds, from one streaming pass over its messages.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct LogSummary {
+    /// One entry per topic.
     pub topics: Vec<TopicInfo>,
+    /// Messages read.
     pub messages: u64,
     /// Earliest and latest message log time, nanoseconds (None for an empty log).
     pub start_ns: Option<u64>,
+    /// Latest message log time, nanoseconds (`None` for an empty log).
     pub end_ns: Option<u64>,
+    /// `end_ns − start_ns`, seconds (0 for an empty log).
     pub duration_s: f64,
     /// The damaged parts of the file, skipped (the counts are those of the messages read).
     pub damaged: Vec<DamagedRange>,
@@ -1057,15 +1074,19 @@ fn summary_section(path: &Path) -> Option<LogSummary> {
 /// Chunk compression for written logs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LogCompression {
+    /// Uncompressed chunks.
     None,
+    /// Zstandard.
     #[default]
     Zstd,
+    /// LZ4 frames.
     Lz4,
 }
 
 /// How a log is written.
 #[derive(Debug, Clone)]
 pub struct WriteOptions {
+    /// Chunk compression.
     pub compression: LogCompression,
     /// Chunked (with message indexes and a summary) as `ros2 bag` writes; unchunked otherwise.
     pub chunked: bool,
@@ -1099,6 +1120,8 @@ pub struct LogWriter {
 }
 
 impl LogWriter {
+    /// Creates the log, written to a temporary file in the directory of `path` until
+    /// [`LogWriter::finish`]. Fails when that file cannot be created or the MCAP header written.
     pub fn create(path: impl AsRef<Path>, opts: &WriteOptions) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
         let dir = match path.parent() {
@@ -1203,11 +1226,13 @@ impl LogWriter {
         self.write_raw(topic, schema, &text, log_time_ns, data)
     }
 
+    /// Writes a `TFMessage` on `topic` at log time `log_time_ns` (nanoseconds).
     pub fn write_tf(&mut self, topic: &str, msg: &TfMessage, log_time_ns: u64) -> Result<()> {
         let d = msg.encode(self.endian);
         self.write_known(topic, schema_name::TF_MESSAGE, log_time_ns, &d)
     }
 
+    /// Writes a `PointCloud2` on `topic` at log time `log_time_ns` (nanoseconds).
     pub fn write_pointcloud2(
         &mut self,
         topic: &str,
@@ -1230,11 +1255,13 @@ impl LogWriter {
         self.write_pointcloud2(topic, &m, log_time_ns)
     }
 
+    /// Writes an `Image` on `topic` at log time `log_time_ns` (nanoseconds).
     pub fn write_image_msg(&mut self, topic: &str, msg: &ImageMsg, log_time_ns: u64) -> Result<()> {
         let d = msg.encode(self.endian);
         self.write_known(topic, schema_name::IMAGE, log_time_ns, &d)
     }
 
+    /// Writes an [`Image`] as a tightly packed `Image` message stamped with `header`.
     pub fn write_image(
         &mut self,
         topic: &str,
@@ -1246,6 +1273,7 @@ impl LogWriter {
         self.write_image_msg(topic, &m, log_time_ns)
     }
 
+    /// Writes a `CameraInfo` on `topic` at log time `log_time_ns` (nanoseconds).
     pub fn write_camera_info_msg(
         &mut self,
         topic: &str,
@@ -1256,6 +1284,7 @@ impl LogWriter {
         self.write_known(topic, schema_name::CAMERA_INFO, log_time_ns, &d)
     }
 
+    /// Writes a [`CameraModel`] as a `CameraInfo` stamped with `header`.
     pub fn write_camera(
         &mut self,
         topic: &str,
@@ -1287,6 +1316,7 @@ impl LogWriter {
 /// What [`recode`] did.
 #[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
 pub struct RecodeStats {
+    /// Messages written.
     pub written: u64,
     /// Messages of types tarn does not read, by topic; not copied.
     pub skipped_unknown: BTreeMap<String, u64>,
