@@ -33,8 +33,11 @@ use crate::error::{Error, Result};
 pub enum Label {
     /// Anything that is not water, sky, snow or ice (terrain, vegetation, objects).
     Other = 0,
+    /// A water surface.
     Water = 1,
+    /// Open sky.
     Sky = 2,
+    /// Snow or ice (dark in SWIR, bright in the visible).
     SnowIce = 3,
     /// No decision (outside a sensor's valid geometry, e.g. grazing incidence in SWIR).
     Unknown = 255,
@@ -71,8 +74,11 @@ impl Label {
 /// A row-major image of labels.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LabelImage {
+    /// Columns, pixels.
     pub width: usize,
+    /// Rows, pixels.
     pub height: usize,
+    /// Labels, row major, `width × height` of them.
     pub data: Vec<Label>,
 }
 
@@ -102,6 +108,7 @@ impl LabelImage {
         Ok(())
     }
 
+    /// The label at column `x`, row `y`. Panics outside the image.
     #[inline]
     pub fn get(&self, x: usize, y: usize) -> Label {
         self.data[y * self.width + x]
@@ -156,8 +163,11 @@ impl LabelImage {
 /// A single-channel image (SWIR, MWIR) as `f32` values in sensor units; NaN = no data.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MonoImage {
+    /// Columns, pixels.
     pub width: usize,
+    /// Rows, pixels.
     pub height: usize,
+    /// Values, row major, `width × height` of them; NaN where there is no data.
     pub data: Vec<f32>,
 }
 
@@ -177,6 +187,7 @@ impl MonoImage {
         })
     }
 
+    /// An 8-bit image, values 0..=255 unchanged.
     pub fn from_gray8(img: &image::GrayImage) -> Self {
         MonoImage {
             width: img.width() as usize,
@@ -185,6 +196,7 @@ impl MonoImage {
         }
     }
 
+    /// A 16-bit image, values 0..=65535 unchanged.
     pub fn from_gray16(img: &image::ImageBuffer<image::Luma<u16>, Vec<u16>>) -> Self {
         MonoImage {
             width: img.width() as usize,
@@ -211,13 +223,18 @@ pub fn save_gray_png(path: &std::path::Path, img: &image::GrayImage) -> Result<(
 /// Pixel-level agreement of a predicted water mask with a reference one.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Confusion {
+    /// Pixels predicted water that are water.
     pub tp: u64,
+    /// Pixels predicted water that are not.
     pub fp: u64,
+    /// Water pixels predicted not water (false negatives).
     pub fn_: u64,
+    /// Pixels predicted not water that are not.
     pub tn: u64,
 }
 
 impl Confusion {
+    /// Counts one pixel: its prediction and its reference.
     pub fn add(&mut self, predicted: bool, truth: bool) {
         match (predicted, truth) {
             (true, true) => self.tp += 1,
@@ -226,12 +243,15 @@ impl Confusion {
             (false, false) => self.tn += 1,
         }
     }
+    /// `tp / (tp + fp)`, 0 when nothing was predicted water.
     pub fn precision(&self) -> f64 {
         self.tp as f64 / (self.tp + self.fp).max(1) as f64
     }
+    /// `tp / (tp + fn)`, 0 when the reference has no water.
     pub fn recall(&self) -> f64 {
         self.tp as f64 / (self.tp + self.fn_).max(1) as f64
     }
+    /// Intersection over union of the water masks, `tp / (tp + fp + fn)`; 0 when both are empty.
     pub fn iou(&self) -> f64 {
         self.tp as f64 / (self.tp + self.fp + self.fn_).max(1) as f64
     }
