@@ -55,8 +55,9 @@ pub struct CellStats {
     pub swz: i128,
     /// Σ w·z² (z in mm).
     pub swzz: i128,
-    /// Lowest and highest fused elevation, mm (`i32::MAX` / `i32::MIN` when empty).
+    /// Lowest fused elevation, mm (`i32::MAX` when empty).
     pub zmin: i32,
+    /// Highest fused elevation, mm (`i32::MIN` when empty).
     pub zmax: i32,
     /// Water evidence from the cues (see [`Evidence`]).
     pub ev: Evidence,

@@ -43,11 +43,14 @@ pub fn in_map_domain(x: f64, y: f64) -> bool {
 /// map frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 pub struct CellKey {
+    /// Column: `floor(x / resolution)`, x in the map frame.
     pub x: i64,
+    /// Row: `floor(y / resolution)`, y in the map frame.
     pub y: i64,
 }
 
 impl CellKey {
+    /// The key of column `x`, row `y`.
     pub const fn new(x: i64, y: i64) -> Self {
         CellKey { x, y }
     }
@@ -324,10 +327,12 @@ impl RollingGrid {
         Ok(g)
     }
 
+    /// The grid's configuration.
     pub fn config(&self) -> &GridConfig {
         &self.cfg
     }
 
+    /// Cell edge length, metres.
     pub fn resolution(&self) -> f64 {
         self.cfg.resolution
     }
