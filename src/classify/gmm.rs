@@ -104,6 +104,7 @@ impl Default for TrainConfig {
 }
 
 impl TrainConfig {
+    /// Checks every parameter's range; an `Error::Invalid` names the first one out of range.
     pub fn validate(&self) -> Result<()> {
         let bad = |w: &str, m: String| Err(Error::invalid(format!("train config {w}"), m));
         if self.max_components == 0 || self.max_components > 64 {
@@ -135,7 +136,9 @@ impl TrainConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Component {
+    /// Mixture weight within the class, positive.
     pub weight: f64,
+    /// Mean colour, RGB in 8-bit units.
     pub mean: [f64; 3],
     /// Full covariance, row-major, symmetric, 8-bit units².
     pub cov: [[f64; 3]; 3],
@@ -145,9 +148,13 @@ pub struct Component {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ClassModel {
+    /// The label this class gives a pixel (not [`Label::Unknown`]).
     pub label: Label,
+    /// Name of the class, used in messages.
     pub name: String,
+    /// Prior weight of the class, positive.
     pub prior: f64,
+    /// The class's Gaussian components (at least one).
     pub components: Vec<Component>,
 }
 
@@ -155,7 +162,9 @@ pub struct ClassModel {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ColorModelData {
+    /// Format tag, `tarn-color-gmm-1`.
     pub format: String,
+    /// One entry per class, labels distinct.
     pub classes: Vec<ClassModel>,
 }
 
@@ -241,10 +250,15 @@ pub struct ColorModel {
 /// Per-class BIC table of a training run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BicRow {
+    /// The class fitted.
     pub label: Label,
+    /// Components fitted.
     pub components: usize,
+    /// Total log-likelihood of the class's pixels under the fit (natural log).
     pub log_likelihood: f64,
+    /// Bayesian information criterion, `−2 ln L + p ln n` over the pixel count; lowest wins.
     pub bic: f64,
+    /// EM iterations run.
     pub iterations: usize,
 }
 
@@ -310,6 +324,7 @@ impl ColorModel {
         Ok(ColorModel { data, dens })
     }
 
+    /// The stored form of the model.
     pub fn data(&self) -> &ColorModelData {
         &self.data
     }
@@ -326,6 +341,8 @@ impl ColorModel {
         Self::from_data(d).map_err(|e| Error::format(name, "model", e.to_string()))
     }
 
+    /// Reads and parses a JSON model file. Fails when the file cannot be read or is not a
+    /// valid model.
     pub fn load(path: &Path) -> Result<Self> {
         let t = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
         Self::from_json(&t, &path.display().to_string())
@@ -716,6 +733,7 @@ pub fn training_samples(
 
 /// Labels a whole image by direct evaluation of the mixtures (slow; see [`super::lut`]).
 impl ColorModel {
+    /// Labels every pixel by direct evaluation of the mixtures.
     pub fn classify(&self, img: &RgbImage) -> LabelImage {
         classify_image(self, img)
     }
