@@ -250,6 +250,7 @@ impl WaterConfig {
         (self.shore_radius_m / resolution).ceil().max(1.0) as i64
     }
 
+    /// Checks every threshold's range; the error names the bad field.
     pub fn validate(&self) -> Result<()> {
         let prob = |p: f64| p > 0.0 && p < 1.0;
         check(
@@ -352,6 +353,8 @@ impl Default for Vehicle {
 }
 
 impl Vehicle {
+    /// Checks that the depth and step are finite and non-negative (the step positive) and the
+    /// slope strictly between 0 and 90 degrees; the error names the bad field.
     pub fn validate(&self) -> Result<()> {
         let nonneg = |v: f64| v.is_finite() && v >= 0.0;
         check(
@@ -379,8 +382,11 @@ impl Vehicle {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct HazardConfig {
+    /// The evidence fusion rule.
     pub fusion: Fusion,
+    /// Water body segmentation and surface fitting.
     pub water: WaterConfig,
+    /// What the vehicle can drive through.
     pub vehicle: Vehicle,
 }
 
@@ -426,30 +432,41 @@ pub enum SurfaceSource {
 pub struct DepthStats {
     /// Cells with at least one bottom return, and without.
     pub known_cells: usize,
+    /// Cells with no bottom return.
     pub unknown_cells: usize,
+    /// Area of the cells with a bottom return, square metres.
     pub known_area_m2: f64,
+    /// Area of the cells without, square metres.
     pub unknown_area_m2: f64,
     /// Mean and greatest of the known cell depths (m).
     pub mean_m: Option<f64>,
+    /// Greatest known cell depth, metres.
     pub max_m: Option<f64>,
 }
 
 /// One water body.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WaterBody {
+    /// Identifier, kept from frame to frame for the body that inherits most of a previous
+    /// body's cells (see the module documentation, "Ids").
     pub id: u32,
     /// Its cells, sorted.
     pub cells: Vec<CellKey>,
+    /// Area of its cells, square metres.
     pub area_m2: f64,
     /// Volume of the closed water mesh; `None` when any cell's depth is unknown.
     pub volume_m3: Option<f64>,
+    /// What is known of its depth.
     pub depth: DepthStats,
     /// Dry shore cells found, and those kept after the occluder test.
     pub shore_samples: usize,
+    /// Shore cells kept after the occluder test.
     pub shore_samples_kept: usize,
     /// Samples the surface was fitted to, and where they came from.
     pub surface_samples: usize,
+    /// Where the surface samples came from.
     pub surface_source: SurfaceSource,
+    /// The fitted water surface (map z, metres).
     pub surface: SurfaceModel,
     /// RMS of the samples about the level plane (m).
     pub level_residual_m: f64,
