@@ -22,14 +22,21 @@ type CellMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
 #[repr(u8)]
 pub enum Class {
     Unknown = 0,
+    /// Observed, but not classified ground, water or obstacle.
     Ground = 1,
+    /// Drivable or sloped ground.
     Water = 2,
+    /// Part of a water body.
     Vegetation = 3,
+    /// Vegetation (a contract code the map builder does not assign).
     Obstacle = 4,
+    /// A step beyond the vehicle's limit.
     SnowIce = 5,
+/// Snow or ice (a contract code the map builder does not assign).
 }
 
 impl Class {
+    /// Every class, in code order.
     pub const ALL: [Class; 6] = [
         Class::Unknown,
         Class::Ground,
@@ -51,6 +58,7 @@ impl Class {
         }
     }
 
+    /// The class's name in reports and legends.
     pub fn name(self) -> &'static str {
         match self {
             Class::Unknown => "unknown",
@@ -64,6 +72,7 @@ impl Class {
 }
 
 /// Hazard codes of the export contract.
+/// Nothing the vehicle cannot drive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[repr(u8)]
 pub enum Hazard {
@@ -79,21 +88,27 @@ pub enum Hazard {
 /// One observed cell of the map.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MapCell {
+    /// Global address of the cell.
     pub key: CellKey,
-    /// Cell centre (map frame).
+    /// Cell centre x (map frame), metres.
     pub x: f64,
+    /// Cell centre y (map frame), metres.
     pub y: f64,
     /// Terrain elevation, or the water surface elevation for water cells.
     pub z: f64,
+    /// Standard deviation of the fused elevation, metres; NaN without an elevation.
     pub elevation_std: f64,
     /// Probability of water, 0..1.
     pub water: f32,
     /// Water depth in metres: 0 for dry cells, NaN where unknown.
     pub depth: f32,
+    /// What the cell is.
     pub class: Class,
+    /// What the cell means to the vehicle.
     pub hazard: Hazard,
-    /// Fused points and below-surface points of the cell.
+    /// Points fused into the elevation.
     pub hits: u32,
+    /// Points far below the cell's surface (not averaged in).
     pub below: u32,
 }
 
@@ -153,7 +168,9 @@ impl Seen {
 /// A map ready for export: observed cells in a deterministic order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HazardMap {
+    /// Cell edge length, metres.
     pub resolution: f64,
+    /// Observed cells, in a deterministic order.
     pub cells: Vec<MapCell>,
     /// Water bodies (empty for a geometry-only map).
     #[serde(default)]
