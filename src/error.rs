@@ -8,7 +8,9 @@ pub enum Error {
     /// The operating system refused a read or write.
     #[error("{path}: {source}")]
     Io {
+        /// The file or directory.
         path: PathBuf,
+        /// What the operating system said.
         #[source]
         source: std::io::Error,
     },
@@ -16,13 +18,21 @@ pub enum Error {
     /// `location` says where: a byte offset, a header line, an element index, a topic.
     #[error("{path}: {location}: {message}")]
     Format {
+        /// The file (or log) read.
         path: PathBuf,
+        /// Where in it.
         location: String,
+        /// What was wrong.
         message: String,
     },
     /// A parameter or configuration value that cannot be used (zero resolution, NaN pose...).
     #[error("invalid {what}: {message}")]
-    Invalid { what: String, message: String },
+    Invalid {
+        /// The parameter or value.
+        what: String,
+        /// Why it cannot be used.
+        message: String,
+    },
     /// A stop was requested (SIGINT, see [`crate::interrupt`]) while doing the named work;
     /// nothing was written.
     #[error("interrupted while {0}: the previous outputs are kept")]
@@ -30,6 +40,7 @@ pub enum Error {
 }
 
 impl Error {
+    /// An [`Error::Io`] at `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),
@@ -37,6 +48,7 @@ impl Error {
         }
     }
 
+    /// An [`Error::Format`] in `path` at `location`.
     pub fn format(
         path: impl Into<PathBuf>,
         location: impl Into<String>,
@@ -49,6 +61,7 @@ impl Error {
         }
     }
 
+    /// An [`Error::Invalid`] of `what`.
     pub fn invalid(what: impl Into<String>, message: impl Into<String>) -> Self {
         Error::Invalid {
             what: what.into(),
@@ -57,4 +70,5 @@ impl Error {
     }
 }
 
+/// The library's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -41,9 +41,13 @@ pub fn saturation(rgb: [u8; 3]) -> f32 {
 /// Mean and standard deviation of brightness and saturation for one class.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ClassStats {
+    /// Mean brightness ([`brightness`]), 0..255.
     pub brightness_mean: f32,
+    /// Standard deviation of brightness.
     pub brightness_std: f32,
+    /// Mean saturation ([`saturation`]), 0..1.
     pub saturation_mean: f32,
+    /// Standard deviation of saturation.
     pub saturation_std: f32,
 }
 
@@ -60,8 +64,11 @@ impl ClassStats {
 /// with axis-aligned Gaussians in (brightness, saturation).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct RuleClassifier {
+    /// Sky pixels.
     pub sky: ClassStats,
+    /// Water pixels.
     pub water: ClassStats,
+    /// Everything else.
     pub rest: ClassStats,
 }
 

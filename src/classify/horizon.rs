@@ -119,7 +119,9 @@ impl Horizon {
 /// Per-pixel geometry against the level plane z = `ground_z` (map frame).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GroundGeometry {
+    /// Image columns, pixels.
     pub width: usize,
+    /// Image rows, pixels.
     pub height: usize,
     /// Angle between the ray and the plane's normal, radians; NaN where the ray misses.
     pub incidence: Vec<f32>,

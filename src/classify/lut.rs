@@ -59,6 +59,7 @@ impl ColorLut {
         Ok(ColorLut { bits, table })
     }
 
+    /// Bits per channel of the table's bins, 1..=8.
     pub fn bits(&self) -> u8 {
         self.bits
     }

@@ -13,6 +13,7 @@ use crate::error::{Error, Result};
 /// Lens distortion.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Distortion {
+    /// No distortion (a pinhole camera).
     None,
     /// `plumb_bob`: [k1, k2, p1, p2, k3].
     PlumbBob([f64; 5]),
@@ -23,12 +24,19 @@ pub enum Distortion {
 /// A calibrated camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraModel {
+    /// Image columns, pixels.
     pub width: usize,
+    /// Image rows, pixels.
     pub height: usize,
+    /// Focal length along x, pixels.
     pub fx: f64,
+    /// Focal length along y, pixels.
     pub fy: f64,
+    /// Principal point x, pixels.
     pub cx: f64,
+    /// Principal point y, pixels.
     pub cy: f64,
+    /// Lens distortion model and coefficients.
     pub distortion: Distortion,
     /// The optical frame the model lives in.
     pub frame_id: String,

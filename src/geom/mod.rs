@@ -52,7 +52,9 @@ pub fn pose_is_finite(p: &Pose) -> bool {
 /// coordinates, so the beam it belongs to is still known.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PointCloud {
+    /// Rows (lidar rings, image rows); 1 for an unorganized cloud.
     pub rows: usize,
+    /// Points per row.
     pub cols: usize,
     /// Coordinates in the cloud's frame; `[NaN; 3]` for a missing return.
     pub xyz: Vec<[f32; 3]>,
@@ -104,14 +106,17 @@ impl PointCloud {
         Ok(c)
     }
 
+    /// Number of points, missing returns included.
     pub fn len(&self) -> usize {
         self.xyz.len()
     }
 
+    /// Whether the cloud has no points.
     pub fn is_empty(&self) -> bool {
         self.xyz.is_empty()
     }
 
+    /// Whether the cloud has more than one row.
     pub fn is_organized(&self) -> bool {
         self.rows > 1
     }

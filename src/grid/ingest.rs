@@ -36,8 +36,11 @@ use crate::geom::PointCloud;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RangeNoise {
+    /// Noise at zero range, metres.
     pub sigma0: f64,
+    /// Growth per metre of range, metres per metre.
     pub per_m: f64,
+    /// Growth per square metre of range, metres per square metre.
     pub per_m2: f64,
 }
 
@@ -64,11 +67,13 @@ impl RangeNoise {
         }
     }
 
+    /// Elevation standard deviation at range `r` metres, metres.
     #[inline]
     pub fn sigma(&self, r: f64) -> f64 {
         self.sigma0 + r * (self.per_m + r * self.per_m2)
     }
 
+    /// Checks that `sigma0` is positive and every term finite and non-negative.
     pub fn validate(&self) -> Result<()> {
         let ok = self.sigma0.is_finite()
             && self.sigma0 > 0.0
@@ -112,6 +117,7 @@ pub struct IngestStats {
 }
 
 impl IngestStats {
+    /// Adds another batch's counts.
     pub fn merge(&mut self, o: &IngestStats) {
         self.points += o.points;
         self.fused += o.fused;

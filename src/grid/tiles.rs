@@ -124,6 +124,8 @@ fn split(k: CellKey) -> ((i64, i64), usize) {
 }
 
 impl TileMap {
+    /// An empty map of cells `resolution` metres wide, elevations relative to `z_ref` (map z,
+    /// metres). Fails when the resolution or reference height is out of range.
     pub fn new(resolution: f64, z_ref: f64) -> Result<Self> {
         GridConfig {
             resolution,
@@ -147,10 +149,12 @@ impl TileMap {
         }
     }
 
+    /// Cell edge length, metres.
     pub fn resolution(&self) -> f64 {
         self.resolution
     }
 
+    /// Reference height of the stored elevations, map z, metres.
     pub fn z_ref(&self) -> f64 {
         self.z_ref
     }
@@ -164,6 +168,7 @@ impl TileMap {
         self.tiles.entry(tk).or_insert_with(Tile::new).merge(i, c);
     }
 
+    /// The statistics of the cell at `k`; `None` when it was never observed.
     pub fn get(&self, k: CellKey) -> Option<CellStats> {
         let (tk, i) = split(k);
         self.tiles
@@ -217,10 +222,12 @@ impl TileMap {
         })
     }
 
+    /// Number of observed cells.
     pub fn observed_count(&self) -> usize {
         self.tiles.values().map(Tile::observed).sum()
     }
 
+    /// Number of tiles holding cells.
     pub fn tile_count(&self) -> usize {
         self.tiles.len()
     }

@@ -74,8 +74,9 @@ pub struct MapRaster<'a> {
     map: &'a HazardMap,
     /// Key of raster cell (0, 0).
     pub lo: CellKey,
-    /// Cells along x and along y.
+    /// Cells along x.
     pub nx: usize,
+    /// Cells along y.
     pub ny: usize,
     /// Index into `map.cells` of raster cell `ix + nx * iy`, `u32::MAX` where unobserved.
     index: Vec<u32>,

@@ -86,6 +86,7 @@ pub fn interpolate(a: &Pose, b: &Pose, s: f64) -> Pose {
 }
 
 impl TfBuffer {
+    /// An empty buffer.
     pub fn new() -> Self {
         Self::default()
     }
@@ -141,6 +142,7 @@ impl TfBuffer {
             + self.statics.len()
     }
 
+    /// Whether no transform is held, static or dynamic.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

@@ -18,12 +18,15 @@ use crate::grid::CellKey;
 /// A body's mesh in the map frame (f64).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct BodyMesh {
+    /// Vertex positions, map frame, metres.
     pub vertices: Vec<[f64; 3]>,
     /// Depth below the surface at each vertex (0 on the top sheet).
     pub vertex_depth: Vec<f64>,
-    /// Top triangles (normals up), then bottom triangles (normals down).
+    /// Top triangles (normals up).
     pub top: Vec<[u32; 3]>,
+    /// Bottom triangles (normals down).
     pub bottom: Vec<[u32; 3]>,
+    /// Whether every cell's depth is known, so the mesh is closed.
     pub closed: bool,
 }
 

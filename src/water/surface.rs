@@ -11,8 +11,11 @@ use super::WaterConfig;
 /// One shore (or water-level) sample: a position in the map frame and an elevation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ShoreSample {
+    /// Map x, metres.
     pub x: f64,
+    /// Map y, metres.
     pub y: f64,
+    /// Elevation, map z, metres.
     pub z: f64,
 }
 
@@ -31,6 +34,7 @@ pub enum SurfaceModel {
 }
 
 impl SurfaceModel {
+    /// The model's name in reports: `level` or `delaunay`.
     pub fn name(&self) -> &'static str {
         match self {
             SurfaceModel::Level { .. } => "level",
@@ -190,6 +194,7 @@ pub fn quantile(mut v: Vec<f64>, q: f64) -> Option<f64> {
     Some(v[i])
 }
 
+/// The median of the finite values (nearest rank); `None` when there are none.
 pub fn median(v: Vec<f64>) -> Option<f64> {
     quantile(v, 0.5)
 }
@@ -347,6 +352,7 @@ pub fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
 /// The outcome of choosing a surface model for one body.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Fit {
+    /// The surface chosen.
     pub model: SurfaceModel,
     /// RMS of the kept samples about the median level.
     pub level_residual_m: f64,

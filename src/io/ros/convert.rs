@@ -363,16 +363,22 @@ pub fn cloud_to_pointcloud2(cloud: &PointCloud, header: Header) -> PointCloud2Ms
 pub enum Pixels {
     /// Colour (from `rgb8` or `bgr8`; always stored R, G, B).
     Rgb8(Vec<[u8; 3]>),
+    /// Grey levels (from `mono8` or `8UC1`).
     Mono8(Vec<u8>),
+    /// 16-bit grey levels (from `mono16` or `16UC1`).
     Mono16(Vec<u16>),
 }
 
 /// A decoded camera image.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Image {
+    /// Columns, pixels.
     pub width: usize,
+    /// Rows, pixels.
     pub height: usize,
+    /// Pixel values, row major.
     pub pixels: Pixels,
+    /// The optical frame of the camera (the message's `header.frame_id`).
     pub frame_id: String,
     /// Acquisition time, seconds.
     pub stamp: f64,
