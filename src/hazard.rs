@@ -21,18 +21,18 @@ type CellMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[repr(u8)]
 pub enum Class {
-    Unknown = 0,
     /// Observed, but not classified ground, water or obstacle.
-    Ground = 1,
+    Unknown = 0,
     /// Drivable or sloped ground.
-    Water = 2,
+    Ground = 1,
     /// Part of a water body.
-    Vegetation = 3,
+    Water = 2,
     /// Vegetation (a contract code the map builder does not assign).
-    Obstacle = 4,
+    Vegetation = 3,
     /// A step beyond the vehicle's limit.
+    Obstacle = 4,
+    /// Snow or ice (a contract code the map builder does not assign).
     SnowIce = 5,
-/// Snow or ice (a contract code the map builder does not assign).
 }
 
 impl Class {
@@ -72,10 +72,10 @@ impl Class {
 }
 
 /// Hazard codes of the export contract.
-/// Nothing the vehicle cannot drive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[repr(u8)]
 pub enum Hazard {
+    /// Nothing the vehicle cannot drive.
     Free = 0,
     /// Water within the vehicle's fording depth.
     ShallowWater = 1,
