@@ -19,6 +19,7 @@ use crate::io::ros::convert::{Image, Pixels};
 pub struct FrameCueConfig {
     /// The lidar's cue model (`None`: no lidar cues).
     pub lidar: Option<LidarCueModel>,
+    /// Range noise of the lidar points fused into the grid.
     pub lidar_noise: RangeNoise,
     /// Stereo reflection settings (`None`: no stereo cue).
     pub stereo: Option<StereoCueConfig>,
@@ -32,22 +33,30 @@ pub struct FrameCueConfig {
 /// What one frame contributed.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct FrameCuesReport {
+    /// What the lidar cues saw (`None`: no lidar in the frame or no lidar cues).
     pub lidar: Option<LidarCueStats>,
+    /// What happened to the lidar cloud's points when fused.
     pub lidar_ingest: Option<IngestStats>,
+    /// Stereo reflection runs confirmed.
     pub stereo_runs: usize,
+    /// Stereo points found to be reflections.
     pub stereo_reflected_points: usize,
+    /// The stereo cue's water level from reflection symmetry, map z, metres.
     pub stereo_symmetry_level: Option<f64>,
     /// The stereo cue's waterline level (the level its runs took, when present).
     pub stereo_waterline_level: Option<f64>,
+    /// What happened to the stereo cloud's points when fused.
     pub stereo_ingest: Option<IngestStats>,
-    /// Evidence cells merged, and those dropped outside the window.
+    /// Evidence cells merged.
     pub evidence_cells: usize,
+    /// Evidence cells dropped outside the window.
     pub evidence_dropped: usize,
 }
 
 /// The per-frame cue runner.
 #[derive(Debug, Clone, Default)]
 pub struct FrameCues {
+    /// Which cues run, and how.
     pub cfg: FrameCueConfig,
 }
 
@@ -65,6 +74,7 @@ pub fn gray_of(image: &Image) -> Result<GrayImage> {
 }
 
 impl FrameCues {
+    /// A runner of the cues `cfg` names.
     pub fn new(cfg: FrameCueConfig) -> Self {
         FrameCues { cfg }
     }

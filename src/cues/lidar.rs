@@ -197,6 +197,8 @@ impl Default for LidarCueConfig {
 }
 
 impl LidarCueConfig {
+    /// Checks that every depth, gate, tolerance and slope is finite and non-negative; the
+    /// error names the first that is not.
     pub fn validate(&self) -> Result<()> {
         for (name, v) in [
             ("min_depth_m", self.min_depth_m),
@@ -220,7 +222,9 @@ impl LidarCueConfig {
 /// Counts of what the lidar cues saw in one scan.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 pub struct LidarCueStats {
+    /// Point slots of the scan, missing returns included.
     pub slots: u64,
+    /// Slots without a return.
     pub missing: u64,
     /// Missing slots whose direction could not be known (no model, no neighbours).
     pub no_direction: u64,
@@ -236,22 +240,28 @@ pub struct LidarCueStats {
     /// Missing beams inside the interval but farther than dry ground along their scan line
     /// returned from ([`LidarCueConfig::scan_dry_limit`]): no evidence.
     pub noret_beyond_dry: u64,
+    /// Returns from under the water surface, refraction-corrected into bottom evidence.
     pub bottom: u64,
+    /// Returns mirrored by the water surface, put back where the object is.
     pub specular: u64,
     /// Below-level returns neither bottom nor deep enough to be specular.
     pub unexplained: u64,
+    /// Ground returns darker than the scan's threshold (reflectivity cue).
     pub dark: u64,
+    /// Ground returns tested for reflectivity and not dark.
     pub lit: u64,
 }
 
 /// The output of [`LidarCueModel::run`].
 #[derive(Debug, Clone)]
 pub struct LidarCues {
+    /// Water evidence of the scan, by cell.
     pub evidence: EvidenceMap,
     /// The input cloud with specular returns mirrored about the water level (put where the
     /// object is) and bottom returns removed (NaN: their depth is in the evidence), ready to
     /// be fused into the elevation map instead of the raw cloud.
     pub corrected: PointCloud,
+    /// What the cues saw.
     pub stats: LidarCueStats,
     /// The scan's dark threshold (the `dark_quantile` of its ground returns' residuals from
     /// the channel's fitted law, natural log) when the reflectivity cue ran.
@@ -421,10 +431,12 @@ impl LidarCueModel {
         })
     }
 
+    /// The water optics model the cue uses.
     pub fn optics(&self) -> &LidarWaterModel {
         &self.optics
     }
 
+    /// The cue's settings.
     pub fn config(&self) -> &LidarCueConfig {
         &self.cfg
     }

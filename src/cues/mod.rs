@@ -85,6 +85,7 @@ pub struct EvidenceMap {
 }
 
 impl EvidenceMap {
+    /// An empty map of cells `resolution` metres wide, levels relative to `z_ref` (map z, metres).
     pub fn new(resolution: f64, z_ref: f64) -> Self {
         EvidenceMap {
             resolution,
@@ -118,14 +119,17 @@ impl EvidenceMap {
         }
     }
 
+    /// Number of cells with evidence.
     pub fn len(&self) -> usize {
         self.cells.len()
     }
 
+    /// Whether no cell has evidence.
     pub fn is_empty(&self) -> bool {
         self.cells.is_empty()
     }
 
+    /// The evidence of the cell `k`, if it has any.
     pub fn get(&self, k: CellKey) -> Option<&Evidence> {
         self.cells.get(&k)
     }

@@ -31,15 +31,18 @@ pub enum Channel {
     Intensity,
 }
 
+/// Settings of the reflectivity cue (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ReflectivityConfig {
+    /// Which per-point channel to read.
     pub channel: Channel,
     /// A return is dark below this quantile of the scan's ground returns (0..1); keep it
     /// equal to the fusion's `p_dark_dry`.
     pub dark_quantile: f64,
     /// Range band of the returns used (m): close returns saturate, far ones are noisy.
     pub min_range_m: f64,
+    /// Upper end of that band, metres.
     pub max_range_m: f64,
     /// Returns at a grazing incidence (cos θ below this) are not used.
     pub min_cos_incidence: f64,
@@ -61,6 +64,8 @@ impl Default for ReflectivityConfig {
 }
 
 impl ReflectivityConfig {
+    /// Checks the quantile, range band and incidence limit; an `Error::Invalid` says which
+    /// value is out of range.
     pub fn validate(&self) -> Result<()> {
         let ok = self.dark_quantile > 0.0
             && self.dark_quantile < 1.0
@@ -135,7 +140,9 @@ pub fn normalised_reflectivity(
 /// measured against the scan's own law, not an assumed one.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ChannelLaw {
+    /// `ln v` at a range of 1 m (natural log of the channel's units).
     pub offset: f64,
+    /// Slope of `ln v` against `ln r`.
     pub exponent: f64,
     /// Returns the fit used.
     pub samples: usize,

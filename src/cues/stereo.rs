@@ -59,12 +59,16 @@ use crate::grid::{key_of, CellKey, RangeNoise};
 /// A single-channel image (row-major, `width × height`), e.g. the left camera's intensity.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GrayImage {
+    /// Columns, pixels.
     pub width: usize,
+    /// Rows, pixels.
     pub height: usize,
+    /// Intensities, row major.
     pub pixels: Vec<f32>,
 }
 
 impl GrayImage {
+    /// An image of `width × height` pixels. Fails when `pixels` does not fill it or a side is 0.
     pub fn new(width: usize, height: usize, pixels: Vec<f32>) -> Result<Self> {
         if width.checked_mul(height) != Some(pixels.len()) || width == 0 || height == 0 {
             return Err(Error::invalid(
@@ -100,10 +104,13 @@ impl GrayImage {
 /// `(k·col + (k−1)/2, k·row + (k−1)/2)` with `k = image width / cloud width`.
 #[derive(Debug, Clone, Copy)]
 pub struct MirrorCheck<'a> {
+    /// The left camera of the pair.
     pub camera: &'a CameraModel,
+    /// Its image, at the camera's resolution.
     pub image: &'a GrayImage,
 }
 
+/// Settings of the stereo reflection cue.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct StereoCueConfig {
@@ -113,6 +120,7 @@ pub struct StereoCueConfig {
     /// local ground, `σ_v = σ(r)·|sin δ|` the vertical part of the range error along a ray
     /// of depression `δ`.
     pub gate_sigma: f64,
+    /// Smallest depth below the local ground that starts a run, metres.
     pub gate_min_m: f64,
     /// Points more than this above the local ground are objects, not ground (m).
     pub above_gate_m: f64,
@@ -161,6 +169,7 @@ impl Default for StereoCueConfig {
 }
 
 impl StereoCueConfig {
+    /// Checks the noise model and every setting's range (`Error::Invalid`).
     pub fn validate(&self) -> Result<()> {
         self.noise.validate()?;
         let pos = |v: f64| v.is_finite() && v >= 0.0;
@@ -188,6 +197,7 @@ impl StereoCueConfig {
 /// The output of [`stereo_reflections`].
 #[derive(Debug, Clone)]
 pub struct StereoCues {
+    /// Water evidence of the confirmed runs, by cell.
     pub evidence: EvidenceMap,
     /// The input cloud with every reflected point replaced by its mirror image (the real
     /// object), in the cloud's frame: fuse this instead of the raw cloud.
@@ -203,7 +213,9 @@ pub struct StereoCues {
     pub far_shores: usize,
     /// Runs confirmed, runs rejected by geometry, runs rejected by the image check.
     pub runs: usize,
+    /// Runs rejected by geometry.
     pub rejected_geometry: usize,
+    /// Runs rejected by the image check.
     pub rejected_image: usize,
     /// Points found to be reflections (in runs and below the known level).
     pub reflected_points: usize,
