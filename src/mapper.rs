@@ -72,7 +72,9 @@ pub struct LidarConfig {
     pub height_m: Option<f64>,
     /// Lambertian albedo of bottom and ground at the wavelength.
     pub albedo: f64,
+    /// Diameter of the receiver aperture, metres.
     pub aperture_diameter_m: f64,
+    /// Refractive index of the water relative to air.
     pub n_water: f64,
     /// Directions of missing beams are inferred from the scan across at most this fraction
     /// of a row.
@@ -82,7 +84,9 @@ pub struct LidarConfig {
     /// Farthest plausible return, m: points beyond it are dropped (made missing returns)
     /// and counted in the frame's warnings.
     pub max_range_m: f64,
+    /// Settings of the lidar water cues.
     pub cue: LidarCueConfig,
+    /// Settings of the reflectivity cue (used when `reflectivity` is on).
     pub reflectivity_cue: ReflectivityConfig,
 }
 
@@ -201,7 +205,9 @@ impl StereoConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MapperConfig {
+    /// Cell size, window size and gating of the rolling grid.
     pub grid: GridConfig,
+    /// The evidence fusion rule.
     pub fusion: Fusion,
     /// Fording depth, step and slope limits (hazards).
     pub vehicle: Vehicle,
@@ -548,6 +554,7 @@ impl MapperConfig {
 /// Wall time of each stage of one update, seconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct StageTimes {
+    /// Moving the window with the vehicle and handing cells that leave it to the global map.
     pub recentre: f64,
     /// Lidar cues and the ingest of the (corrected) scan.
     pub lidar: f64,
@@ -557,13 +564,16 @@ pub struct StageTimes {
     pub labels: f64,
     /// The window's hazard map, published as the snapshot.
     pub water: f64,
+    /// The whole update.
     pub total: f64,
 }
 
 impl StageTimes {
+    /// Stage names, in the order of [`StageTimes::values`].
     pub const NAMES: [&'static str; 6] =
         ["recentre", "lidar", "stereo", "labels", "water", "total"];
 
+    /// The stage times, in the order of [`StageTimes::NAMES`].
     pub fn values(&self) -> [f64; 6] {
         [
             self.recentre,
@@ -575,6 +585,7 @@ impl StageTimes {
         ]
     }
 
+    /// Adds another update's times, stage by stage.
     pub fn add(&mut self, o: &StageTimes) {
         self.recentre += o.recentre;
         self.lidar += o.lidar;
@@ -588,11 +599,13 @@ impl StageTimes {
 /// What one frame contributed.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct FrameReport {
+    /// Stamp of the frame, seconds.
     pub stamp: f64,
     /// Frames fused so far, this one included.
     pub frame_index: u64,
     /// Raw ingest of a scan or cloud whose cue did not run.
     pub lidar_ingest: Option<IngestStats>,
+    /// Raw ingest of a stereo cloud whose cue did not run.
     pub stereo_ingest: Option<IngestStats>,
     /// What the cues did (their ingest of corrected clouds included).
     pub cues: FrameCuesReport,
@@ -600,11 +613,13 @@ pub struct FrameReport {
     pub lidar_height_m: Option<f64>,
     /// The stereo cloud's range noise and where it came from (a frame with a stereo cloud).
     pub stereo_noise: Option<(RangeNoise, StereoNoiseSource)>,
-    /// Cells of the published snapshot, and those called water.
+    /// Cells of the published snapshot.
     pub snapshot_cells: usize,
+    /// Snapshot cells called water.
     pub snapshot_water_cells: usize,
     /// What the image labels contributed (`None`: not configured).
     pub labels: Option<crate::project::FrameLabelsReport>,
+    /// Wall time of each stage of the update.
     pub times_s: StageTimes,
     /// Lidar and stereo points beyond their sensor's `max_range_m`, dropped.
     pub beyond_max_range: [u64; 2],
@@ -621,6 +636,7 @@ impl FrameReport {
             .or(self.lidar_ingest.as_ref())
     }
 
+    /// Points of the frame's stereo cloud offered to the grid (raw or corrected).
     pub fn stereo_points(&self) -> Option<&IngestStats> {
         self.cues
             .stereo_ingest
@@ -849,6 +865,7 @@ impl Mapper {
         )
     }
 
+    /// The mapper's configuration.
     pub fn config(&self) -> &MapperConfig {
         &self.cfg
     }

@@ -37,6 +37,7 @@ use crate::io::ros::convert::Pixels;
 /// MWIR labelling: the classifier's parameters and the local solar hour of the log.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MwirLabelConfig {
+    /// Parameters of the MWIR thermal contrast classifier.
     pub classifier: MwirConfig,
     /// Local solar hour (0..24) the images were taken at.
     pub hour: f64,
@@ -47,7 +48,9 @@ pub struct MwirLabelConfig {
 pub struct FrameLabelConfig {
     /// Colour classifier as a lookup table (the Table 1 rule or a trained mixture model).
     pub colour: Option<ColorLut>,
+    /// SWIR darkness classifier (`None`: no SWIR labels).
     pub swir: Option<SwirConfig>,
+    /// MWIR labelling (`None`: no MWIR labels).
     pub mwir: Option<MwirLabelConfig>,
     /// Use every `ray_stride`-th pixel in x and y (1 = all).
     pub ray_stride: usize,
@@ -119,6 +122,8 @@ impl Default for FrameLabelConfig {
 }
 
 impl FrameLabelConfig {
+    /// Checks the stride, ranges and surface limit, and that the MWIR classifier has a regime
+    /// for `hour`; the error says what is out of range.
     pub fn validate(&self) -> Result<()> {
         if self.ray_stride == 0
             || !(self.max_range.is_finite() && self.max_range > 0.0)
@@ -269,17 +274,23 @@ impl LabelsConfig {
 /// What one sensor contributed in one frame (or, summed, over a log).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SensorLabelStats {
+    /// Frames the sensor was used in.
     pub frames: u64,
     /// Configured but not usable in a frame (no image, camera info or pose).
     pub frames_skipped: u64,
+    /// Pixels labelled water.
     pub pixels_water: u64,
+    /// Pixels labelled other or snow/ice.
     pub pixels_not_water: u64,
-    /// Pixels placed through a stereo point, by a ray march, or not at all.
+    /// Pixels placed through a stereo point.
     pub via_point: u64,
+    /// Pixels placed by a ray march through the map.
     pub via_ray: u64,
+    /// Pixels not placed (the ray met nothing).
     pub no_hit: u64,
-    /// Per-frame cell votes.
+    /// Per-frame cell votes for water.
     pub cells_water: u64,
+    /// Per-frame cell votes for dry.
     pub cells_dry: u64,
     /// Colour water pixels brighter than a reflection of the sky could be
     /// ([`reflection_check`]).
@@ -293,6 +304,7 @@ pub struct SensorLabelStats {
 }
 
 impl SensorLabelStats {
+    /// Adds another frame's counts.
     pub fn merge(&mut self, o: &SensorLabelStats) {
         self.frames += o.frames;
         self.frames_skipped += o.frames_skipped;
@@ -312,14 +324,18 @@ impl SensorLabelStats {
 /// What one frame contributed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct FrameLabelsReport {
+    /// What the colour camera contributed (`None`: not configured).
     pub colour: Option<SensorLabelStats>,
+    /// What the SWIR camera contributed (`None`: not configured).
     pub swir: Option<SensorLabelStats>,
+    /// What the MWIR camera contributed (`None`: not configured).
     pub mwir: Option<SensorLabelStats>,
     /// Cell votes that fell outside the window (dropped).
     pub dropped: u64,
 }
 
 impl FrameLabelsReport {
+    /// Adds another frame's counts, sensor by sensor.
     pub fn merge(&mut self, o: &FrameLabelsReport) {
         for (a, b) in [
             (&mut self.colour, &o.colour),
@@ -364,6 +380,7 @@ impl RayCache {
 /// frames, so a frame pays neither undistortion nor allocation.
 #[derive(Debug, Clone)]
 pub struct FrameLabels {
+    /// Which sensors label, and how.
     pub cfg: FrameLabelConfig,
     caches: [Option<RayCache>; 3],
     /// Per raster cell: water pixels, other pixels, Σ z of the water pixels' hits.
@@ -830,6 +847,7 @@ fn quad_cells(surface: &GridSurface, q: [Vector4<f64>; 4], mut f: impl FnMut(usi
 }
 
 impl FrameLabels {
+    /// A runner of the labels `cfg` names. Fails when `cfg` does not validate.
     pub fn new(cfg: FrameLabelConfig) -> Result<Self> {
         cfg.validate()?;
         Ok(FrameLabels {

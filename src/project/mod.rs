@@ -49,6 +49,8 @@ pub struct LabelVotes {
 }
 
 impl LabelVotes {
+    /// An empty vote map of cells `resolution` metres wide. Fails unless the resolution is
+    /// finite and positive.
     pub fn new(resolution: f64) -> Result<Self> {
         if !(resolution.is_finite() && resolution > 0.0) {
             return Err(Error::invalid(
@@ -62,6 +64,7 @@ impl LabelVotes {
         })
     }
 
+    /// Cell edge length, metres.
     pub fn resolution(&self) -> f64 {
         self.resolution
     }
@@ -99,6 +102,7 @@ impl LabelVotes {
         Ok(())
     }
 
+    /// The votes of cell `key`, if it has any.
     pub fn get(&self, key: CellKey) -> Option<&Counts> {
         self.cells.get(&key)
     }
@@ -108,6 +112,7 @@ impl LabelVotes {
         self.cells.len()
     }
 
+    /// Whether no cell has votes.
     pub fn is_empty(&self) -> bool {
         self.cells.is_empty()
     }
@@ -223,6 +228,7 @@ impl ElevationSurface {
             .map(|t| t as f64)
     }
 
+    /// Cell edge length, metres.
     pub fn resolution(&self) -> f64 {
         self.resolution
     }
@@ -278,7 +284,9 @@ impl Default for ProjectConfig {
 /// Where each pixel's vote went.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ProjectStats {
+    /// Pixels placed through a valid point of the stereo cloud.
     pub via_point: u64,
+    /// Pixels placed by a ray march through the elevation surface.
     pub via_ray: u64,
     /// Rays that met nothing within range (sky, holes, beyond the grid).
     pub no_hit: u64,
@@ -307,6 +315,8 @@ pub struct Projector {
 }
 
 impl Projector {
+    /// A projector for `camera`. Fails unless `max_range` is finite and positive and `stride`
+    /// at least 1.
     pub fn new(camera: CameraModel, cfg: ProjectConfig) -> Result<Self> {
         if !(cfg.max_range.is_finite() && cfg.max_range > 0.0) || cfg.stride == 0 {
             return Err(Error::invalid("projection config", format!("{cfg:?}")));
@@ -315,6 +325,7 @@ impl Projector {
         Ok(Projector { camera, rays, cfg })
     }
 
+    /// The camera projected.
     pub fn camera(&self) -> &CameraModel {
         &self.camera
     }

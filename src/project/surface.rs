@@ -67,6 +67,7 @@ impl Block {
 }
 
 impl GridSurface {
+    /// The elevation snapshot of `grid`'s window, every observed cell included.
     pub fn from_grid(grid: &RollingGrid) -> Self {
         Self::from_grid_gated(grid, f64::INFINITY)
     }
@@ -174,14 +175,17 @@ impl GridSurface {
         Ok(Self::with_blocks(n, resolution, origin, z))
     }
 
+    /// Cells per side of the window.
     pub fn size(&self) -> usize {
         self.n
     }
 
+    /// Key of the window's lower-left cell.
     pub fn origin(&self) -> CellKey {
         self.origin
     }
 
+    /// Cell edge length, metres.
     pub fn resolution(&self) -> f64 {
         self.resolution
     }
