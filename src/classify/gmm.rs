@@ -26,6 +26,7 @@ use crate::error::{Error, Result};
 
 /// Anything that labels one RGB colour.
 pub trait PixelClassifier: Sync {
+    /// The label of an RGB colour (8 bits per channel).
     fn classify_pixel(&self, rgb: [u8; 3]) -> Label;
 
     /// True when the label depends on the colour only through R + G + B and min(R, G, B)

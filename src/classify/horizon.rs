@@ -45,7 +45,9 @@ pub enum Horizon {
     Row(usize),
     /// From the camera's intrinsics, distortion and pose (optical frame → map frame).
     Camera {
+        /// The calibrated camera.
         camera: CameraModel,
+        /// Pose of the camera's optical frame in the map frame.
         cam_to_map: Pose,
     },
 }

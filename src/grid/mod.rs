@@ -146,6 +146,7 @@ impl GridConfig {
 
 /// Receives cells that leave the rolling window.
 pub trait CellSink {
+    /// Takes the statistics of the cell at `key` as it leaves the window.
     fn accept(&mut self, key: CellKey, cell: &CellStats);
 }
 

@@ -57,6 +57,7 @@ impl MessageSource for LogReader {
 /// The storage of a log.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LogFormat {
+    /// An MCAP file.
     Mcap,
     /// rosbag2 sqlite3 storage.
     Db3,

@@ -17,13 +17,23 @@ pub enum TfError {
     /// No transform connects the frame to anything.
     UnknownFrame(String),
     /// The two frames are in different trees.
-    NotConnected { target: String, source: String },
+    NotConnected {
+        /// The frame coordinates were to be mapped to.
+        target: String,
+        /// The frame coordinates were to be mapped from.
+        source: String,
+    },
     /// The time is before the first or after the last transform of an edge.
     OutOfRange {
+        /// Parent frame of the edge.
         parent: String,
+        /// Child frame of the edge.
         child: String,
+        /// The time asked for, nanoseconds.
         t_ns: i64,
+        /// Stamp of the edge's first transform, nanoseconds.
         first_ns: i64,
+        /// Stamp of the edge's last transform, nanoseconds.
         last_ns: i64,
     },
     /// The frame graph has a cycle or is deeper than any real robot.

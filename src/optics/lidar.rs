@@ -32,7 +32,10 @@ use crate::error::{Error, Result};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Attenuation {
     /// Pure-water absorption at this wavelength (nm), from the embedded Segelstein table.
-    PureWater { wavelength_nm: f64 },
+    PureWater {
+        /// Wavelength of the beam, nanometres.
+        wavelength_nm: f64,
+    },
     /// A total attenuation coefficient `c = a + b` (1/m) given directly (turbid water).
     PerMetre(f64),
 }

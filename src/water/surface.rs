@@ -24,11 +24,16 @@ pub struct ShoreSample {
 #[serde(tag = "model", rename_all = "snake_case")]
 pub enum SurfaceModel {
     /// A horizontal plane at `z`.
-    Level { z: f64 },
+    Level {
+        /// Elevation of the plane, map z, metres.
+        z: f64,
+    },
     /// Barycentric interpolation on the constrained Delaunay triangulation of `samples`;
     /// `constraints` are index pairs into `samples` (neighbouring shore cells).
     Delaunay {
+        /// The triangulation's vertices.
         samples: Vec<ShoreSample>,
+        /// Edges that the triangulation keeps, as index pairs into `samples`.
         constraints: Vec<[usize; 2]>,
     },
 }
@@ -74,8 +79,11 @@ impl spade::HasPosition for V {
 
 /// A surface ready to evaluate.
 pub enum Surface {
+    /// A horizontal plane at this elevation, map z, metres.
     Level(f64),
+    /// Barycentric interpolation on a constrained Delaunay triangulation.
     Tin {
+        /// The triangulation of the surface samples.
         cdt: ConstrainedDelaunayTriangulation<V>,
         /// The hull's edges, for points outside it.
         hull: Vec<[V; 2]>,
