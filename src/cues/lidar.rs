@@ -55,8 +55,11 @@ pub enum BeamModel {
     /// A spinning lidar: elevation per row (rad) and azimuth of column `c`
     /// `azimuth0_rad ∓ 2π c / cols` (minus when `clockwise`).
     Spinning {
+        /// Elevation of each row's beam, radians.
         elevations_rad: Vec<f64>,
+        /// Azimuth of column 0, radians.
         azimuth0_rad: f64,
+        /// Whether the azimuth decreases with the column.
         clockwise: bool,
     },
     /// One direction per slot (row-major), in the cloud's frame; need not be unit length.

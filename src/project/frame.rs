@@ -154,7 +154,9 @@ pub enum LabelSensor {
     /// The colour camera (`color` is read too).
     #[serde(alias = "color")]
     Colour,
+    /// The short-wave infrared camera.
     Swir,
+    /// The mid-wave infrared camera.
     Mwir,
 }
 
