@@ -51,7 +51,10 @@ pub enum BeamModel {
     /// neighbours: its beams are evenly spaced in elevation, so the elevation of every row
     /// is the least-squares line through the valid rows (when they fit it within 0.1°),
     /// which also reaches the missing beams past the last return, over water.
-    Infer { max_gap_fraction: f64 },
+    Infer {
+        /// Widest gap interpolated across, as a fraction of a row's slots (≥ 0).
+        max_gap_fraction: f64,
+    },
     /// A spinning lidar: elevation per row (rad) and azimuth of column `c`
     /// `azimuth0_rad ∓ 2π c / cols` (minus when `clockwise`).
     Spinning {
