@@ -7,6 +7,8 @@
 //! Data flows one way: `geom` → `grid` → (cues, water) → `io` exports. A module imports
 //! only from modules to its left; `geom` and `optics` are the ground floor.
 
+#![warn(missing_docs)]
+
 pub mod build;
 pub mod classify;
 pub mod cues;
