@@ -74,7 +74,7 @@ pub struct FrameLabelConfig {
     /// the image with this encoding; `None`: no check.
     pub reflection_check: Option<Encoding>,
     /// Check colour water against where the lidar found the surface dry or wet
-    /// ([`ColourCheck`]).
+    /// (`ColourCheck`).
     pub colour_check: bool,
 }
 
@@ -201,7 +201,7 @@ pub struct LabelsConfig {
     /// How the colour camera encodes radiance (sRGB unless the camera says otherwise).
     pub encoding: Encoding,
     /// Stop counting a colour as water in a log where the lidar finds it on dry ground
-    /// ([`ColourCheck`]).
+    /// (`ColourCheck`).
     pub colour_check: bool,
 }
 
@@ -301,7 +301,7 @@ pub struct SensorLabelStats {
     /// ([`crate::cues::DryReach`]): a hole that range alone explains places no vote.
     pub beyond_reach: u64,
     /// Colour water pixels whose colour the log's lidar finds on dry ground
-    /// ([`ColourCheck`]): no vote.
+    /// (`ColourCheck`): no vote.
     pub colour_check_vetoed: u64,
 }
 
