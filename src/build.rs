@@ -394,7 +394,7 @@ pub struct BuildReport {
     pub window_cells: usize,
     /// Windows the cloud was cut into.
     pub blocks: usize,
-    /// Cells of the map with at least one point.
+    /// Observed cells of the map.
     pub cells_observed: usize,
     /// Tiles of the global map.
     pub tiles: usize,
@@ -683,7 +683,7 @@ pub struct LogBuildReport {
     /// What the image labels contributed (`None`: not configured).
     #[serde(default)]
     pub labels: Option<crate::project::FrameLabelsReport>,
-    /// Cells of the map with at least one point.
+    /// Observed cells of the map.
     pub cells_observed: usize,
     /// Tiles of the global map.
     pub tiles: usize,

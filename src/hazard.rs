@@ -23,7 +23,7 @@ type CellMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
 pub enum Class {
     /// Observed, but not classified ground, water or obstacle.
     Unknown = 0,
-    /// Drivable or sloped ground.
+    /// Ground (its hazard says whether the vehicle can drive its slope).
     Ground = 1,
     /// Part of a water body.
     Water = 2,

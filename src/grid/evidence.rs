@@ -368,7 +368,8 @@ pub struct Fusion {
     pub p_bottom_false: f64,
     /// Probability that wet ground reads dark in reflectivity.
     pub p_dark_wet: f64,
-    /// Probability that dry ground reads dark (the reflectivity cue's `dark_quantile`).
+    /// Probability that dry ground reads dark (keep equal to the reflectivity cue's
+    /// `dark_quantile`).
     pub p_dark_dry: f64,
     /// Probability that a frame's colour labels call a water cell water.
     pub p_colour_detect: f64,

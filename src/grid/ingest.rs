@@ -38,9 +38,9 @@ use crate::geom::PointCloud;
 pub struct RangeNoise {
     /// Noise at zero range, metres.
     pub sigma0: f64,
-    /// Growth per metre of range, metres per metre.
+    /// Coefficient of `r` (metres of σ per metre of range).
     pub per_m: f64,
-    /// Growth per square metre of range, metres per square metre.
+    /// Coefficient of `r²`, per metre.
     pub per_m2: f64,
 }
 
