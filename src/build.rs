@@ -31,6 +31,9 @@ pub struct BuildConfig {
     /// Largest window side for a cloud build, cells (2048² cells ≈ 235 MB of layers);
     /// larger clouds are cut into blocks of this size.
     pub max_window_cells: usize,
+    /// `map.mcap` and `map.tif`, when asked for.
+    #[serde(skip)]
+    pub extra: ExtraMaps,
 }
 
 impl Default for BuildConfig {
@@ -39,7 +42,54 @@ impl Default for BuildConfig {
             grid: GridConfig::default(),
             noise: RangeNoise::constant(0.02),
             max_window_cells: 2048,
+            extra: ExtraMaps::default(),
         }
+    }
+}
+
+/// The outputs beside the contract's files, each written only when asked for, from the
+/// finished `map.ply` (so that every output holds the same values) into the same staged
+/// set: a build replaces all of its outputs at once or none.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ExtraMaps {
+    /// `map.mcap`: the map as a `grid_map_msgs/GridMap` and a `nav_msgs/OccupancyGrid`
+    /// ([`crate::io::ros_export`]), with these headers.
+    pub ros_map: Option<crate::io::ros_export::RosMapOptions>,
+    /// `map.tif`: the layers as a GeoTIFF ([`crate::io::geotiff`]).
+    pub geotiff: Option<crate::io::geotiff::GeoTiffOptions>,
+}
+
+impl ExtraMaps {
+    /// What the `[build]` section asks for: the map's frame is `frame_id`, else `map_frame`;
+    /// `stamp_ns` is the map's log time.
+    pub fn of(b: &crate::mapper::BuildOptions, map_frame: &str, stamp_ns: u64) -> Self {
+        ExtraMaps {
+            ros_map: b.ros_map.then(|| crate::io::ros_export::RosMapOptions {
+                frame_id: b.frame_id.clone().unwrap_or_else(|| map_frame.to_string()),
+                stamp_ns,
+            }),
+            geotiff: b
+                .geotiff
+                .then_some(crate::io::geotiff::GeoTiffOptions { epsg: b.epsg }),
+        }
+    }
+
+    /// Writes the asked-for files into `dir` from `dir/map.ply`; their names.
+    fn write(&self, dir: &Path) -> Result<Vec<String>> {
+        let mut written = Vec::new();
+        if self.ros_map.is_none() && self.geotiff.is_none() {
+            return Ok(written);
+        }
+        let map = crate::io::mapfile::read_map_ply(&dir.join("map.ply"))?;
+        if let Some(o) = &self.ros_map {
+            crate::io::ros_export::write_ros_map(&dir.join("map.mcap"), &map, o)?;
+            written.push("map.mcap".to_string());
+        }
+        if let Some(o) = &self.geotiff {
+            crate::io::geotiff::write_geotiff(&dir.join("map.tif"), &map, o)?;
+            written.push("map.tif".to_string());
+        }
+        Ok(written)
     }
 }
 
@@ -408,6 +458,9 @@ pub struct BuildReport {
     pub elevation_range_m: Option<(f64, f64)>,
     /// Map-frame extent of the observed cells: [xmin, ymin, xmax, ymax] (cell edges).
     pub extent_m: Option<[f64; 4]>,
+    /// The outputs written beside the contract's files (`map.mcap`, `map.tif`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub extra_outputs: Vec<String>,
     /// Wall time of each step, seconds.
     pub timings_s: Timings,
 }
@@ -457,6 +510,7 @@ pub fn build_file(
     let map = HazardMap::from_elevation(&built.tiles);
     let stage = export::Staging::new(out)?;
     export::write_map_files(stage.path(), &map)?;
+    let extra_outputs = cfg.extra.write(stage.path())?;
     let t_export = t2.elapsed().as_secs_f64();
     let res = built.tiles.resolution();
     let report = BuildReport {
@@ -480,6 +534,7 @@ pub fn build_file(
                 (hi.y + 1) as f64 * res,
             ]
         }),
+        extra_outputs,
         timings_s: Timings {
             read: t_read,
             fuse: t_fuse,
@@ -567,7 +622,7 @@ mod tests {
             b.tiles.cell_bytes()
         );
         let map = HazardMap::from_elevation(&b.tiles);
-        let img = crate::io::render::render_map_png(&map);
+        let img = crate::io::render::render_map_png(&map, &[]);
         assert!(img.width() <= 4096 && img.height() <= 4096 + 200);
     }
 
@@ -691,6 +746,9 @@ pub struct LogBuildReport {
     pub elevation_range_m: Option<(f64, f64)>,
     /// What the map holds: water cells, area, depths, hazards.
     pub water: WaterSummary,
+    /// The outputs written beside the contract's files (`map.mcap`, `map.tif`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub extra_outputs: Vec<String>,
     /// Wall time of each step, seconds.
     pub timings_s: Timings,
     /// Sum over frames of each stage of [`crate::mapper::Mapper::update`] (s).
@@ -918,6 +976,8 @@ pub fn build_log(
     let mut stage_totals = StageTimes::default();
     let mut per_frame = Vec::new();
     let mut label_totals: Option<crate::project::FrameLabelsReport> = None;
+    let mut vehicle_path: Vec<[f64; 2]> = Vec::new();
+    let path_step = cfg.mapper.grid.resolution;
     // Frames are read and decoded on a second thread while this one fuses the previous
     // frame: the order, and so the map, is the log's. A bounded queue keeps at most two
     // decoded frames waiting.
@@ -958,6 +1018,14 @@ pub fn build_log(
             let t = Instant::now();
             match mapper.update(&frame) {
                 Ok(r) => {
+                    // The vehicle's path for map.png: a point per cell travelled.
+                    let at = frame.base_to_map.translation.vector;
+                    if vehicle_path
+                        .last()
+                        .is_none_or(|p: &[f64; 2]| (p[0] - at.x).hypot(p[1] - at.y) >= path_step)
+                    {
+                        vehicle_path.push([at.x, at.y]);
+                    }
                     beyond.lidar += r.beyond_max_range[0];
                     beyond.stereo += r.beyond_max_range[1];
                     for w in &r.warnings {
@@ -1032,7 +1100,18 @@ pub fn build_log(
     let t2 = Instant::now();
     let (tiles, map) = mapper.finish_map()?;
     let stage = export::Staging::new(out)?;
-    export::write_map_files_marked(stage.path(), &map, &damage_marks(input, &damaged))?;
+    export::write_map_files_marked(
+        stage.path(),
+        &map,
+        &damage_marks(input, &damaged),
+        &vehicle_path,
+    )?;
+    let extra_outputs = ExtraMaps::of(
+        &cfg.mapper.build,
+        &log_cfg.map_frame,
+        summary.end_ns.unwrap_or(0),
+    )
+    .write(stage.path())?;
     let t_export = t2.elapsed().as_secs_f64();
     let total = t0.elapsed().as_secs_f64();
     let report = LogBuildReport {
@@ -1062,6 +1141,7 @@ pub fn build_log(
         tiles: tiles.tile_count(),
         elevation_range_m: export::elevation_range(&map.cells),
         water: WaterSummary::of(&map, &fusion),
+        extra_outputs,
         timings_s: Timings {
             read: t_read_fuse - t_fuse,
             fuse: t_fuse,

@@ -252,6 +252,10 @@ pub struct BuildOptions {
     /// EPSG code of the projected CRS the map frame is in, written into `map.tif`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub epsg: Option<u16>,
+    /// The frame the map's coordinates are in, named in `map.mcap`'s headers; `None`: the
+    /// log config's `map_frame`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame_id: Option<String>,
 }
 
 impl Default for BuildOptions {
@@ -263,6 +267,7 @@ impl Default for BuildOptions {
             ros_map: false,
             geotiff: false,
             epsg: None,
+            frame_id: None,
         }
     }
 }

@@ -309,7 +309,7 @@ def test_python_reads_what_tarn_wrote(tmp_path, flags):
     src = tmp_path / "py.mcap"
     write_python_log(src)
     dst = tmp_path / "tarn.mcap"
-    out = run_tarn("recode", src, dst, *flags)
+    out = run_tarn("recode", src, "--out", dst, *flags)
     assert "skipped 2 messages of unknown type on /diagnostics" in out
 
     original = [(m.channel.topic, m.log_time_ns, to_plain(m.ros_msg))
@@ -319,7 +319,7 @@ def test_python_reads_what_tarn_wrote(tmp_path, flags):
     for a, b in zip(original, rewritten):
         assert a == b
 
-    report = json.loads(run_tarn("recode", src, tmp_path / "again.mcap", *flags, "--json"))
+    report = json.loads(run_tarn("recode", src, "--out", tmp_path / "again.mcap", *flags, "--json"))
     assert report == {"written": len(original), "skipped_unknown": {"/diagnostics": 2}, "damaged": []}
 
     with open(dst, "rb") as f:

@@ -189,7 +189,7 @@ def test_build_gives_the_same_map(logs):
 
 def test_recode_turns_a_ros1_bag_into_the_same_mcap_messages(logs):
     d, paths = logs
-    r = tarn("recode", paths["bag-lz4"], d / "recoded.mcap")
+    r = tarn("recode", paths["bag-lz4"], "--out", d / "recoded.mcap")
     assert r.returncode == 0, r.stderr
     with open(paths["mcap"], "rb") as a, open(d / "recoded.mcap", "rb") as b:
         n_a = sum(1 for _ in make_reader(a).iter_messages())

@@ -1,6 +1,6 @@
 //! Driving the cues from one [`Frame`] of a log: run each configured cue on the sensor it
-//! needs, fuse the *corrected* cloud (reflections mirrored back above the water, bottom
-//! returns taken out) into the grid instead of the raw one, and merge the evidence.
+//! needs, fuse the *corrected* cloud (stereo reflections mirrored back above the water,
+//! the lidar's specular and bottom returns taken out) into the grid instead of the raw one, and merge the evidence.
 //!
 //! Only configured sensors are modelled: a cue whose sensor is not configured, or absent
 //! from the frame, runs no code.

@@ -25,8 +25,12 @@
 //!   it finds: the level here is the last ground the scan line walked, which on a bank
 //!   that falls to the water is the bank, not the water); otherwise it cannot
 //!   come from the bottom and is a specular return from beyond the water: the cell where
-//!   its ray crosses the level gets reflection evidence and the point, mirrored about the
-//!   level, is put back where the object is.
+//!   its ray crosses the level gets reflection evidence, and the point is left out of the
+//!   terrain. Mirrored about the walked level it would land where the object is only if
+//!   the water lay at that level; below a bank it lands too high by twice the bank's
+//!   height over the water (0.7 m on a bank 0.35 m above a pond), a raised row of cells
+//!   as consistent as real ground, and an object to the step test. The object is seen
+//!   directly by other beams.
 
 use std::collections::VecDeque;
 
@@ -263,9 +267,9 @@ pub struct LidarCueStats {
 pub struct LidarCues {
     /// Water evidence of the scan, by cell.
     pub evidence: EvidenceMap,
-    /// The input cloud with specular returns mirrored about the water level (put where the
-    /// object is) and bottom returns removed (NaN: their depth is in the evidence), ready to
-    /// be fused into the elevation map instead of the raw cloud.
+    /// The input cloud with specular and bottom returns removed (NaN: their reflection and
+    /// depth are in the evidence), ready to be fused into the elevation map instead of the
+    /// raw cloud.
     pub corrected: PointCloud,
     /// What the cues saw.
     pub stats: LidarCueStats,
@@ -532,7 +536,6 @@ impl LidarCueModel {
 
         let mut ev = EvidenceMap::new(resolution, z_ref);
         let mut corrected = cloud.clone();
-        let to_frame = cloud.frame_to_map.inverse();
         let mut stats = LidarCueStats {
             slots: n as u64,
             missing: (n - cloud.valid_count()) as u64,
@@ -620,15 +623,13 @@ impl LidarCueModel {
                     cx,
                     cy,
                     level,
-                    mirrored,
                 } => {
                     stats.specular += 1;
                     ev.add_with_level(cx, cy, level, |e| e.reflect = e.reflect.saturating_add(1));
                     if surface_points {
                         surface.wet.push(Point3::new(cx, cy, level));
                     }
-                    let p = to_frame * mirrored;
-                    corrected.xyz[slot] = [p.x as f32, p.y as f32, p.z as f32];
+                    corrected.xyz[slot] = [f32::NAN; 3];
                 }
             }
         }
@@ -746,7 +747,6 @@ impl LidarCueModel {
                             cx: c.x,
                             cy: c.y,
                             level,
-                            mirrored: Point3::new(p.x, p.y, 2.0 * level - p.z),
                         });
                     }
                 } else if dz <= cfg.above_gate_m + slack {
@@ -882,7 +882,6 @@ enum Event {
         cx: f64,
         cy: f64,
         level: f64,
-        mirrored: Point3<f64>,
     },
 }
 

@@ -20,8 +20,9 @@
 //!   interval are counted too (so no-return is a fraction, not a raw count). **Below-level
 //!   returns**: corrected for refraction and the speed of light in water, a return whose
 //!   depth the optics say is visible at that lookahead is a **bottom return** (a depth
-//!   sample); one deeper than that is a **specular** return from beyond the water, handled
-//!   like a stereo reflection. **Reflectivity drop**: ground returns normalised for range
+//!   sample); one deeper than that is a **specular** return from beyond the water: reflection
+//!   evidence where its ray crosses the level, and no terrain (the walked level is not the
+//!   water's, so its mirror image would land too high). **Reflectivity drop**: ground returns normalised for range
 //!   and incidence and compared with the scan's own median.
 //!
 //! The cues produce sparse per-cell [`Evidence`] (see [`crate::grid::Evidence`] for the

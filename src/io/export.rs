@@ -524,11 +524,17 @@ pub fn write_water_ply(path: &Path, map: &HazardMap) -> Result<()> {
 /// Writes `map.ply`, `terrain.ply`, `water.ply` and (with feature `render`) `map.png` into
 /// `dir` (created if needed).
 pub fn write_map_files(dir: &Path, map: &HazardMap) -> Result<()> {
-    write_map_files_marked(dir, map, &[])
+    write_map_files_marked(dir, map, &[], &[])
 }
 
-/// [`write_map_files`], with `marks` as extra comment lines in `map.ply`'s header.
-pub fn write_map_files_marked(dir: &Path, map: &HazardMap, marks: &[String]) -> Result<()> {
+/// [`write_map_files`], with `marks` as extra comment lines in `map.ply`'s header and the
+/// vehicle's `path` (map-frame x, y, metres) drawn in `map.png`.
+pub fn write_map_files_marked(
+    dir: &Path,
+    map: &HazardMap,
+    marks: &[String],
+    path: &[[f64; 2]],
+) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     // The files are independent: written side by side (each atomically), the first error
     // in this order reported.
@@ -542,7 +548,7 @@ pub fn write_map_files_marked(dir: &Path, map: &HazardMap, marks: &[String]) -> 
         || {
             rayon::join(
                 || write_terrain_ply(&dir.join("terrain.ply"), map),
-                || write_png(dir, map),
+                || write_png(dir, map, path),
             )
         },
     );
@@ -550,12 +556,12 @@ pub fn write_map_files_marked(dir: &Path, map: &HazardMap, marks: &[String]) -> 
 }
 
 #[cfg(feature = "render")]
-fn write_png(dir: &Path, map: &HazardMap) -> Result<()> {
-    super::render::write_map_png(&dir.join("map.png"), map)
+fn write_png(dir: &Path, map: &HazardMap, path: &[[f64; 2]]) -> Result<()> {
+    super::render::write_map_png(&dir.join("map.png"), map, path)
 }
 
 #[cfg(not(feature = "render"))]
-fn write_png(_dir: &Path, _map: &HazardMap) -> Result<()> {
+fn write_png(_dir: &Path, _map: &HazardMap, _path: &[[f64; 2]]) -> Result<()> {
     Ok(())
 }
 

@@ -36,6 +36,34 @@ fn draw_text(img: &mut RgbImage, x: u32, y: u32, text: &str, scale: u32, colour:
     }
 }
 
+/// A line `thick` pixels wide from `a` to `b` (pixel coordinates), clipped to the map part
+/// of the picture (`w` × `h`).
+fn draw_line(
+    img: &mut RgbImage,
+    a: (f64, f64),
+    b: (f64, f64),
+    thick: u32,
+    w: u32,
+    h: u32,
+    colour: [u8; 3],
+) {
+    let steps = ((b.0 - a.0).abs().max((b.1 - a.1).abs()).ceil() as usize).clamp(1, 1 << 16);
+    let half = (thick / 2) as f64;
+    for i in 0..=steps {
+        let f = i as f64 / steps as f64;
+        let (x, y) = (a.0 + f * (b.0 - a.0) - half, a.1 + f * (b.1 - a.1) - half);
+        if x < 0.0 || y < 0.0 || x >= w as f64 || y >= h as f64 {
+            continue;
+        }
+        let (x, y) = (x as u32, y as u32);
+        for py in y..(y + thick).min(h) {
+            for px in x..(x + thick).min(w) {
+                img.put_pixel(px, py, Rgb(colour));
+            }
+        }
+    }
+}
+
 fn fill_rect(img: &mut RgbImage, x: u32, y: u32, w: u32, h: u32, colour: [u8; 3]) {
     for py in y..(y + h).min(img.height()) {
         for px in x..(x + w).min(img.width()) {
@@ -54,16 +82,73 @@ fn nice_length(max_m: f64) -> f64 {
         .unwrap_or(p)
 }
 
+/// The elevation ramp of drivable cells, low to high: greens through ochre to pale sand, no
+/// blue (water) and no red (obstacles), and lighter with height so it reads in grey too.
+const RAMP: [[u8; 3]; 5] = [
+    [34, 68, 52],
+    [70, 112, 60],
+    [150, 150, 70],
+    [200, 170, 110],
+    [240, 228, 200],
+];
+
+/// The ramp's colour at `t` in [0, 1] (clamped; NaN is the low end).
+fn ramp(t: f64) -> [u8; 3] {
+    let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
+    let x = t * (RAMP.len() - 1) as f64;
+    let i = (x.floor() as usize).min(RAMP.len() - 2);
+    let f = x - i as f64;
+    std::array::from_fn(|k| {
+        (RAMP[i][k] as f64 + f * (RAMP[i + 1][k] as f64 - RAMP[i][k] as f64)).round() as u8
+    })
+}
+
+/// The elevations the ramp spans: the 2nd and 98th percentiles of the drivable cells (a few
+/// stray cells metres off would otherwise flatten every colour), the full range when
+/// there are no drivable cells, (0, 1) with no cells.
+fn ramp_range(cells: &[MapCell]) -> (f64, f64) {
+    let mut z: Vec<f64> = cells
+        .iter()
+        .filter(|c| c.class != Class::Water && c.hazard != Hazard::Obstacle && c.z.is_finite())
+        .map(|c| c.z)
+        .collect();
+    if z.is_empty() {
+        return elevation_range(cells).unwrap_or((0.0, 1.0));
+    }
+    z.sort_by(f64::total_cmp);
+    let at = |q: f64| z[((z.len() - 1) as f64 * q).round() as usize];
+    (at(0.02), at(0.98))
+}
+
+/// `a` moved a fraction `f` of the way to `b`.
+fn blend(a: [u8; 3], b: [u8; 3], f: f64) -> [u8; 3] {
+    std::array::from_fn(|k| (a[k] as f64 + f * (b[k] as f64 - a[k] as f64)).round() as u8)
+}
+
 /// Colour of a cell in `map.png`: water by hazard (light blue shallow, dark blue deep,
-/// violet where the depth is unknown), geometric obstacles red, other classes in their
-/// colours; drivable ground keeps its class colour.
-fn map_colour(c: &MapCell) -> [u8; 3] {
+/// violet where the depth is unknown), geometric obstacles red; a drivable cell by its
+/// elevation (`t`: its place between the map's lowest and highest cell) on the ramp,
+/// tinted by its class (vegetation greener, snow and ice whiter, no class grey).
+fn map_colour(c: &MapCell, t: f64) -> [u8; 3] {
     match (c.class, c.hazard) {
         (Class::Water, Hazard::ShallowWater) => SHALLOW,
         (Class::Water, _) if c.depth.is_nan() => UNKNOWN_DEPTH,
         (Class::Water, _) => DEEP,
         (_, Hazard::Obstacle) => OBSTACLE,
-        (class, _) => class.colour(),
+        (class, _) => drivable_colour(class, t),
+    }
+}
+
+fn drivable_colour(class: Class, t: f64) -> [u8; 3] {
+    let base = ramp(t);
+    match class {
+        Class::Vegetation => blend(base, VEGETATION, 0.45),
+        Class::SnowIce => blend(base, SNOW, 0.6),
+        Class::Unknown => {
+            let g = ((base[0] as u32 + base[1] as u32 + base[2] as u32) / 3) as u8;
+            [g, g, g]
+        }
+        _ => base,
     }
 }
 
@@ -71,18 +156,24 @@ const SHALLOW: [u8; 3] = [110, 200, 250];
 const DEEP: [u8; 3] = [20, 50, 160];
 const UNKNOWN_DEPTH: [u8; 3] = [130, 70, 200];
 const OBSTACLE: [u8; 3] = [220, 40, 30];
+const VEGETATION: [u8; 3] = [20, 170, 40];
+const SNOW: [u8; 3] = [235, 245, 255];
+const PATH: [u8; 3] = [255, 70, 220];
+/// Unobserved cells: the picture's background.
+const BG: [u8; 3] = [24, 24, 28];
 
-/// Renders the map top-down: +x to the right, +y up. Drivable cells in their class colours
-/// shaded by a hillshade of the elevation (light from the upper left); water coloured by
-/// hazard (shallow within the fording depth, deep, depth unknown); geometric obstacles
-/// red; each water body labelled with its id and depth at its centre; a legend of what is
-/// shown and a scale bar below the map.
+/// Renders the map top-down: +x to the right, +y up. Drivable cells coloured by elevation
+/// (a ramp with its colourbar, tinted by class) and shaded by a hillshade (light from the
+/// upper left); cells never observed stay the dark background; water coloured by hazard
+/// (shallow within the fording depth, deep, depth unknown); geometric obstacles red; the
+/// vehicle's `path` (map-frame x, y in metres, in order; may be empty) as a magenta line
+/// from a square at its start; each water body labelled with its id and depth at its
+/// centre; a legend of what is shown, the colourbar and a scale bar below the map.
 ///
 /// The picture's size does not follow the map's extent beyond [`MAP_PNG_MAX_SIDE`] pixels:
 /// a wider map is drawn with several cells per pixel (water and obstacles drawn over the
 /// rest, so a hazard never disappears), and the scale bar says so.
-pub fn render_map_png(map: &HazardMap) -> RgbImage {
-    const BG: [u8; 3] = [24, 24, 28];
+pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
     let Some((lo, hi)) = map.key_bounds() else {
         let mut img = RgbImage::from_pixel(320, 60, Rgb(BG));
         draw_text(&mut img, 10, 25, "no observed cells", 1, [220, 220, 220]);
@@ -109,13 +200,13 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         )
     };
     let (mw, mh) = (wc * s, hc * s);
-    let legend_h = 96;
+    let legend_h = 116;
     let width = mw.max(640);
     let mut img = RgbImage::from_pixel(width, mh + legend_h, Rgb(BG));
 
     let elev: HashMap<CellKey, f64> = map.cells.iter().map(|c| (c.key, c.z)).collect();
     let res = map.resolution;
-    let (zlo, zhi) = elevation_range(&map.cells).unwrap_or((0.0, 1.0));
+    let (zlo, zhi) = ramp_range(&map.cells);
     let zspan = (zhi - zlo).max(1e-6);
     // Light from the upper left (north-west), 45° up.
     let l = nalgebra::Vector3::new(-1.0, 1.0, 2f64.sqrt()).normalize();
@@ -146,7 +237,7 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
                 0.0
             }
         };
-        let base = map_colour(c);
+        let base = map_colour(c, (c.z - zlo) / zspan);
         let col = if c.class == Class::Water || c.hazard == Hazard::Obstacle {
             // Flat colours: hazards must read at a glance.
             base
@@ -154,14 +245,42 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
             let gx = slope([(-2, z(-2, 0)), (-1, z(-1, 0)), (1, z(1, 0)), (2, z(2, 0))]);
             let gy = slope([(-2, z(0, -2)), (-1, z(0, -1)), (1, z(0, 1)), (2, z(0, 2))]);
             let n = nalgebra::Vector3::new(-gx, -gy, 1.0).normalize();
-            // Flat ground has shade 1; slopes facing the light are brighter, others darker;
-            // higher ground is a little lighter.
-            let shade =
-                (0.45 + 0.55 * n.dot(&l).max(0.0) / l.z) * (0.8 + 0.35 * (c.z - zlo) / zspan);
+            // Flat ground has shade 1; slopes facing the light are brighter, others darker.
+            let shade = 0.45 + 0.55 * n.dot(&l).max(0.0) / l.z;
             base.map(|v| (v as f64 * shade.clamp(0.0, 1.2)).min(255.0) as u8)
         };
         let (px, py) = pixel_of(c.key);
         fill_rect(&mut img, px, py, s, s, col);
+    }
+
+    // The vehicle's path over the cells, under the labels.
+    let to_pixel = |p: &[f64; 2]| {
+        (
+            ((p[0] / res).floor() - lo.x as f64 + 0.5) / d as f64 * s as f64,
+            (hi.y as f64 - (p[1] / res).floor() + 0.5) / d as f64 * s as f64,
+        )
+    };
+    let pts: Vec<(f64, f64)> = path
+        .iter()
+        .filter(|p| p[0].is_finite() && p[1].is_finite())
+        .map(to_pixel)
+        .collect();
+    let thick = (s / 2).max(1) + 1;
+    for w in pts.windows(2) {
+        draw_line(&mut img, w[0], w[1], thick, mw, mh, PATH);
+    }
+    if let Some(&(x, y)) = pts.first() {
+        let r = 2 * thick;
+        if x >= 0.0 && y >= 0.0 {
+            fill_rect(
+                &mut img,
+                (x as u32).saturating_sub(r),
+                (y as u32).saturating_sub(r),
+                2 * r,
+                2 * r,
+                PATH,
+            );
+        }
     }
 
     // Body labels: "#id" and the depth, centred above the body (below it when there is no
@@ -217,15 +336,19 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
         .iter()
         .any(|c| c.class == Class::Water && c.hazard == Hazard::DeepWater && !c.depth.is_nan());
     let mut items: Vec<([u8; 3], String)> = Vec::new();
-    for class in [
-        Class::Ground,
-        Class::Vegetation,
-        Class::SnowIce,
-        Class::Unknown,
+    let mid = 0.5;
+    for (class, name) in [
+        (Class::Vegetation, "vegetation"),
+        (Class::SnowIce, "snow/ice"),
+        (Class::Unknown, "no class"),
     ] {
         if counts[class as usize] > 0 {
-            items.push((class.colour(), format!("{} (drivable)", class.name())));
+            items.push((drivable_colour(class, mid), format!("{name} (drivable)")));
         }
+    }
+    items.push((BG, "unobserved".into()));
+    if pts.len() > 1 {
+        items.push((PATH, "vehicle path".into()));
     }
     if has(Hazard::ShallowWater) {
         items.push((SHALLOW, "shallow water (fordable)".into()));
@@ -246,15 +369,41 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
             lx = 8;
             ly += 18;
         }
-        fill_rect(&mut img, lx, ly, 12, 12, *colour);
+        // A light frame, so the background's swatch shows.
+        fill_rect(&mut img, lx, ly, 12, 12, [200, 200, 200]);
+        fill_rect(&mut img, lx + 1, ly + 1, 10, 10, *colour);
         draw_text(&mut img, lx + 16, ly + 2, name, 1, [230, 230, 230]);
         lx += w;
     }
+    // The elevation colourbar of drivable cells, lowest to highest.
+    ly += 20;
+    let bar_w = 200.min(width.saturating_sub(200)).max(64);
+    let low = format!("<{zlo:.2} m");
+    draw_text(&mut img, 8, ly + 2, &low, 1, [230, 230, 230]);
+    let bx = 16 + 8 * low.len() as u32;
+    for i in 0..bar_w {
+        fill_rect(
+            &mut img,
+            bx + i,
+            ly,
+            1,
+            12,
+            ramp(i as f64 / (bar_w - 1) as f64),
+        );
+    }
+    draw_text(
+        &mut img,
+        bx + bar_w + 8,
+        ly + 2,
+        &format!(">{zhi:.2} m  elevation of drivable cells"),
+        1,
+        [230, 230, 230],
+    );
     // Metres per pixel.
     let mpp = res * d as f64 / s as f64;
     let bar_m = nice_length(0.35 * mw as f64 * mpp);
     let bar_px = ((bar_m / mpp) as u32).max(1);
-    let by = ly + 30;
+    let by = ly + 34;
     fill_rect(&mut img, 8, by, bar_px, 4, [240, 240, 240]);
     fill_rect(&mut img, 8, by - 4, 2, 12, [240, 240, 240]);
     fill_rect(
@@ -289,10 +438,10 @@ pub fn render_map_png(map: &HazardMap) -> RgbImage {
 /// Longest side of the map part of `map.png`, pixels.
 pub const MAP_PNG_MAX_SIDE: u32 = 4096;
 
-/// `map.png`, atomically.
-pub fn write_map_png(path: &Path, map: &HazardMap) -> Result<()> {
+/// `map.png` ([`render_map_png`] with the vehicle's path), atomically.
+pub fn write_map_png(path: &Path, map: &HazardMap, vehicle_path: &[[f64; 2]]) -> Result<()> {
     crate::interrupt::check(&format!("writing {}", path.display()))?;
-    let img = render_map_png(map);
+    let img = render_map_png(map, vehicle_path);
     // Rendering stops early on a stop request: an unfinished picture is not written.
     crate::interrupt::check(&format!("writing {}", path.display()))?;
     write_atomic(path, |w| {
@@ -307,11 +456,65 @@ mod tests {
 
     #[test]
     fn png_of_an_empty_map_is_still_a_picture() {
-        let img = render_map_png(&HazardMap {
-            resolution: 0.1,
-            cells: vec![],
-            bodies: vec![],
-        });
+        let img = render_map_png(
+            &HazardMap {
+                resolution: 0.1,
+                cells: vec![],
+                bodies: vec![],
+            },
+            &[],
+        );
         assert!(img.width() > 0);
+    }
+
+    fn cell(x: i64, y: i64, z: f64, class: Class) -> MapCell {
+        MapCell {
+            key: CellKey::new(x, y),
+            x: (x as f64 + 0.5) * 0.1,
+            y: (y as f64 + 0.5) * 0.1,
+            z,
+            elevation_std: 0.01,
+            water: 0.0,
+            depth: 0.0,
+            class,
+            hazard: Hazard::Free,
+            hits: 1,
+            below: 0,
+        }
+    }
+
+    /// Elevation sets a drivable cell's colour, an unobserved cell keeps the background, and
+    /// the path is drawn where the vehicle went.
+    #[test]
+    fn elevation_path_and_unobserved_cells_are_drawn() {
+        // A 40 × 40 ramp rising along x, with a hole at (20..25, 20..25).
+        let cells = (0..40)
+            .flat_map(|x| (0..40).map(move |y| (x, y)))
+            .filter(|&(x, y)| !((20..25).contains(&x) && (20..25).contains(&y)))
+            .map(|(x, y)| cell(x, y, x as f64 * 0.05, Class::Ground))
+            .collect();
+        let map = HazardMap {
+            resolution: 0.1,
+            cells,
+            bodies: vec![],
+        };
+        let path = [[0.05, 0.05], [0.05, 3.95]];
+        let img = render_map_png(&map, &path);
+        // 900 / 40 cells: 8 pixels per cell (capped), row 0 at the top (y = 39).
+        let px = |x: u32, y: u32| img.get_pixel(x * 8 + 4, (39 - y) * 8 + 4).0;
+        let brightness = |c: [u8; 3]| c.iter().map(|&v| v as u32).sum::<u32>();
+        assert!(
+            brightness(px(35, 10)) > brightness(px(5, 10)) + 100,
+            "higher is lighter"
+        );
+        assert_eq!(px(22, 22), BG, "unobserved");
+        assert_eq!(px(0, 20), PATH, "path");
+        assert_ne!(px(10, 20), PATH);
+        // The colourbar is in the legend.
+        let legend = (img.height() - 116)..img.height();
+        let ramp_end = ramp(1.0);
+        assert!(legend
+            .into_iter()
+            .any(|y| (0..img.width()).any(|x| img.get_pixel(x, y).0 == ramp_end)));
     }
 }

@@ -182,7 +182,7 @@ impl std::str::FromStr for LabelSensor {
 pub struct LabelsConfig {
     /// Sensors whose labels vote (a sensor the log lacks is skipped, and counted).
     pub sensors: Vec<LabelSensor>,
-    /// A colour model (JSON from `tarn train-color`), compiled into a 6-bit lookup table;
+    /// A colour model (JSON from `tarn train-colour`), compiled into a 6-bit lookup table;
     /// without it the paper's Table 1 rule (8-bit table).
     pub colour_model: Option<std::path::PathBuf>,
     /// Local solar hour of the log (0..24), which the MWIR labels need.

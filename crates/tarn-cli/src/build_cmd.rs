@@ -6,10 +6,11 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use tarn::build::{
-    build_file, build_log, check_output_dir, BuildConfig, BuildReport, LogBuildConfig,
+    build_file, build_log, check_output_dir, BuildConfig, BuildReport, ExtraMaps, LogBuildConfig,
     LogBuildReport, WaterSummary,
 };
 use tarn::grid::{GridConfig, RangeNoise};
+use tarn::io::frames::LogConfig;
 use tarn::mapper::MapperConfig;
 use tarn::project::{LabelSensor, LabelsConfig};
 use tarn_sim::sim::RigSpec;
@@ -72,7 +73,7 @@ pub struct BuildArgs {
     /// colour, swir, mwir [default: the config's; colour and swir without a config].
     #[arg(long, value_delimiter = ',')]
     pub labels: Vec<String>,
-    /// (log) Colour model (JSON from `tarn train-color`), compiled into a 6-bit lookup
+    /// (log) Colour model (JSON from `tarn train-colour`), compiled into a 6-bit lookup
     /// table; without it the paper's Table 1 rule.
     #[arg(long)]
     pub colour_model: Option<PathBuf>,
@@ -243,26 +244,15 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         }
         let cfg = mapper_config(a)?;
         let r = run_cloud(a, &cfg)?;
-        let extra = crate::maps_out::write(&a.maps_out, &cfg, &a.out, 0)?;
         if a.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
         } else {
             print_summary(&r);
-            print_extra(&extra);
+            print_extra(&r.extra_outputs);
         }
         return Ok(());
     }
     let r = run_log(a)?;
-    let cfg = mapper_config(a)?;
-    let extra = if cfg.build.ros_map || cfg.build.geotiff {
-        // The map's log time: the last message of the log.
-        let end = tarn::io::log::summarize_quick(&a.input)
-            .ok()
-            .and_then(|s| s.end_ns);
-        crate::maps_out::write(&a.maps_out, &cfg, &a.out, end.unwrap_or(0))?
-    } else {
-        Vec::new()
-    };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
         for w in r.warnings.iter().filter(|w| w.contains("cannot run")) {
@@ -270,12 +260,12 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
         }
     } else {
         print_log_summary(&r);
-        print_extra(&extra);
+        print_extra(&r.extra_outputs);
     }
     damaged_input(&a.input, "the map holds", &r.damaged)
 }
 
-fn print_extra(files: &[&str]) {
+fn print_extra(files: &[String]) {
     if !files.is_empty() {
         println!("  also wrote {}", files.join(" "));
     }
@@ -310,12 +300,7 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
         cfg.build.per_frame_maps = true;
     }
     if let Some(p) = &a.log_config {
-        let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
-        cfg.log = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a log config", p.display()))?;
-        cfg.log
-            .validate()
-            .with_context(|| format!("{}: bad log config", p.display()))?;
+        cfg.log = load_log_config(p)?;
     }
     if let Some(t) = &a.frame_topic {
         cfg.log.frame_topic = t.clone();
@@ -323,6 +308,17 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
     apply_label_args(a, &mut cfg)?;
     crate::maps_out::apply(&a.maps_out, &mut cfg);
     cfg.validate()?;
+    Ok(cfg)
+}
+
+/// A log configuration file (`--log-config`: JSON, the fields of `LogConfig`, all optional),
+/// checked.
+pub fn load_log_config(p: &Path) -> anyhow::Result<LogConfig> {
+    let text = std::fs::read_to_string(p).with_context(|| p.display().to_string())?;
+    let cfg: LogConfig = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a log config", p.display()))?;
+    cfg.validate()
+        .with_context(|| format!("{}: bad log config", p.display()))?;
     Ok(cfg)
 }
 
@@ -354,6 +350,8 @@ pub fn run_cloud(a: &BuildArgs, mapper: &MapperConfig) -> anyhow::Result<BuildRe
         },
         noise: RangeNoise::constant(mapper.build.noise_sigma_m),
         max_window_cells: mapper.build.max_window_cells,
+        // A cloud is in the map frame; it has no log time.
+        extra: ExtraMaps::of(&mapper.build, &mapper.log.map_frame, 0),
     };
     let bar = progress_bar("{spinner} fusing {bar:40} {human_pos}/{human_len} points ({eta})");
     let report = build_file(&a.input, &a.out, &cfg, &mut |done, total| {

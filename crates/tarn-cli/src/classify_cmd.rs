@@ -1,4 +1,4 @@
-//! `tarn train-color` and `tarn classify`: the colour water classifier on images.
+//! `tarn train-colour` and `tarn classify`: the colour water classifier on images.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::Args;
 use serde::Deserialize;
+use serde_json::json;
 use tarn::classify::color::RuleClassifier;
 use tarn::classify::gmm::{training_samples, ColorModel, TrainConfig};
 use tarn::classify::horizon::{optical_pose, Horizon};
@@ -64,6 +65,10 @@ pub struct TrainArgs {
     /// Output model (JSON).
     #[arg(long)]
     out: PathBuf,
+    /// Print what was trained (pixels per class, components, the BIC table) as one JSON
+    /// object instead of text.
+    #[arg(long)]
+    json: bool,
 }
 
 pub fn train(a: TrainArgs) -> anyhow::Result<()> {
@@ -115,13 +120,38 @@ pub fn train(a: TrainArgs) -> anyhow::Result<()> {
     };
     let (model, report) = ColorModel::train(&refs, &cfg)?;
     model.save(&a.out)?;
-    for c in &model.data().classes {
-        let (_, n, d) = report
+    let samples_of = |label: Label| {
+        report
             .samples
             .iter()
-            .find(|(l, _, _)| *l == c.label)
-            .copied()
-            .unwrap_or((c.label, 0, 0));
+            .find(|(l, _, _)| *l == label)
+            .map_or((0, 0), |&(_, n, d)| (n, d))
+    };
+    if a.json {
+        let classes: Vec<_> = model
+            .data()
+            .classes
+            .iter()
+            .map(|c| {
+                let (pixels, colours) = samples_of(c.label);
+                json!({"class": c.name, "pixels": pixels, "colours": colours,
+                       "prior": c.prior, "components": c.components.len()})
+            })
+            .collect();
+        let bic: Vec<_> = report
+            .bic
+            .iter()
+            .map(|r| {
+                json!({"class": format!("{:?}", r.label).to_lowercase(), "components": r.components,
+                       "log_likelihood": r.log_likelihood, "bic": r.bic, "iterations": r.iterations})
+            })
+            .collect();
+        let out = json!({"model": a.out, "classes": classes, "bic": bic});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    for c in &model.data().classes {
+        let (n, d) = samples_of(c.label);
         println!(
             "{:<8} {:>9} pixels {:>7} colours  prior {:.3}  {} components",
             c.name,
@@ -179,7 +209,7 @@ fn load_camera(p: &PathBuf) -> anyhow::Result<CameraModel> {
 pub struct ClassifyArgs {
     /// RGB image (PNG or JPEG).
     image: PathBuf,
-    /// Colour model from `tarn train-color`; without it, the rule baseline of the paper's
+    /// Colour model from `tarn train-colour`; without it, the rule baseline of the paper's
     /// Table 1.
     #[arg(long)]
     model: Option<PathBuf>,
@@ -206,6 +236,10 @@ pub struct ClassifyArgs {
     /// i.e. water).
     #[arg(long)]
     keep_sky_below_horizon: bool,
+    /// Print the class fractions (and the horizon's changes) as one JSON object instead of
+    /// text.
+    #[arg(long)]
+    json: bool,
 }
 
 pub fn classify(a: ClassifyArgs) -> anyhow::Result<()> {
@@ -227,27 +261,43 @@ pub fn classify(a: ClassifyArgs) -> anyhow::Result<()> {
         }
         _ => None,
     };
-    if let Some(h) = horizon {
-        let st = h
-            .apply(&mut labels, !a.keep_sky_below_horizon)
-            .with_context(|| a.image.display().to_string())?;
-        println!(
-            "horizon: {} pixels above; {} water → sky, {} sky → water",
-            st.above, st.water_to_sky, st.sky_to_water
-        );
-    }
+    let horizon = match horizon {
+        Some(h) => Some(
+            h.apply(&mut labels, !a.keep_sky_below_horizon)
+                .with_context(|| a.image.display().to_string())?,
+        ),
+        None => None,
+    };
     save_gray_png(&a.out, &labels.water_mask()?)?;
     if let Some(p) = &a.labels_out {
         save_gray_png(p, &labels.to_gray()?)?;
     }
     let n = labels.data.len().max(1);
-    let count = |l: Label| labels.data.iter().filter(|&&x| x == l).count();
+    let fraction = |l: Label| labels.data.iter().filter(|&&x| x == l).count() as f64 / n as f64;
+    if a.json {
+        let out = json!({
+            "image": a.image, "mask": a.out, "labels": a.labels_out,
+            "pixels": labels.data.len(),
+            "water": fraction(Label::Water), "sky": fraction(Label::Sky),
+            "snow_ice": fraction(Label::SnowIce), "other": fraction(Label::Other),
+            "horizon": horizon.map(|st| json!({"above": st.above, "water_to_sky": st.water_to_sky,
+                                                "sky_to_water": st.sky_to_water})),
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    if let Some(st) = horizon {
+        println!(
+            "horizon: {} pixels above; {} water → sky, {} sky → water",
+            st.above, st.water_to_sky, st.sky_to_water
+        );
+    }
     println!(
         "{}: water {:.1} %, sky {:.1} %, other {:.1} %",
         a.image.display(),
-        100.0 * count(Label::Water) as f64 / n as f64,
-        100.0 * count(Label::Sky) as f64 / n as f64,
-        100.0 * count(Label::Other) as f64 / n as f64
+        100.0 * fraction(Label::Water),
+        100.0 * fraction(Label::Sky),
+        100.0 * fraction(Label::Other)
     );
     println!("wrote {}", a.out.display());
     Ok(())

@@ -16,7 +16,6 @@ mod sim_cmd;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use tarn::io::frames::LogConfig;
 use tarn::io::mcap_log::{self, LogCompression, WriteOptions};
@@ -85,7 +84,7 @@ enum Command {
         camera_topic: Option<String>,
         /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
         #[arg(long)]
-        config: Option<PathBuf>,
+        log_config: Option<PathBuf>,
         /// (cloud) The file is a column-major lidar scan with this many rings (point = column ×
         /// rings + ring, as Ouster and RELLIS-3D write it): show it organized.
         #[arg(long)]
@@ -99,7 +98,8 @@ enum Command {
     Eval(sim_cmd::EvalArgs),
     /// Train the colour water classifier (one Gaussian mixture per class in RGB, components
     /// by BIC) from an image and a label image of class ids; writes a JSON model.
-    TrainColor(classify_cmd::TrainArgs),
+    #[command(name = "train-colour")]
+    TrainColour(classify_cmd::TrainArgs),
     /// Classify an image's pixels as water or not (8-bit mask, 255 = water).
     Classify(classify_cmd::ClassifyArgs),
     /// Decodes the TF, PointCloud2, Image and CameraInfo messages of a log (any input log:
@@ -107,7 +107,9 @@ enum Command {
     /// types are skipped and counted).
     Recode {
         input: PathBuf,
-        output: PathBuf,
+        /// The MCAP log to write.
+        #[arg(long)]
+        out: PathBuf,
         #[arg(long, value_enum, default_value = "zstd")]
         compression: Compression,
         /// Write without chunks (no index, no summary of chunks).
@@ -132,7 +134,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Simulate(a)) => sim_cmd::run_simulate(&a),
         Some(Command::Eval(a)) => sim_cmd::run_eval(&a),
         Some(Command::LidarModel(a)) => optics_cmd::lidar_model(a),
-        Some(Command::TrainColor(a)) => classify_cmd::train(a),
+        Some(Command::TrainColour(a)) => classify_cmd::train(a),
         Some(Command::Classify(a)) => classify_cmd::classify(a),
         Some(Command::Cues(a)) => cues_cmd::run(&a),
         Some(Command::Bench(a)) => bench_cmd::run_bench(&a),
@@ -144,19 +146,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             lidar_topic,
             stereo_topic,
             camera_topic,
-            config,
+            log_config,
             rings,
         }) => {
             if !tarn::io::log::is_log(&input) {
                 return cloud_cmd::info(&input, rings);
             }
-            let cfg = match config {
-                Some(p) => {
-                    let text =
-                        std::fs::read_to_string(&p).with_context(|| p.display().to_string())?;
-                    serde_json::from_str(&text)
-                        .with_context(|| format!("{}: not a log config", p.display()))?
-                }
+            let cfg = match log_config {
+                Some(p) => build_cmd::load_log_config(&p)?,
                 None => LogConfig::default(),
             };
             let named = tarn::io::frames::NamedTopics {
@@ -172,7 +169,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Some(Command::Recode {
             input,
-            output,
+            out,
             compression,
             unchunked,
             big_endian,
@@ -192,11 +189,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 },
                 ..Default::default()
             };
-            let s = mcap_log::recode(&input, &output, &opts)?;
+            let s = mcap_log::recode(&input, &out, &opts)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&s)?);
             } else {
-                println!("wrote {} messages to {}", s.written, output.display());
+                println!("wrote {} messages to {}", s.written, out.display());
                 for (t, n) in &s.skipped_unknown {
                     println!("skipped {n} messages of unknown type on {t}");
                 }

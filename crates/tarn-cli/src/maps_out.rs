@@ -1,14 +1,9 @@
-//! The ROS and GIS outputs of `tarn build`: `map.mcap` (`--ros-map`) and `map.tif`
-//! (`--geotiff`), or the config's `[build]` `ros_map`, `geotiff` and `epsg`, written from
-//! the finished `map.ply` after the contract's files.
+//! The options of `tarn build` for its ROS and GIS outputs: `map.mcap` (`--ros-map`) and
+//! `map.tif` (`--geotiff`), over the config's `[build]` `ros_map`, `geotiff`, `epsg` and
+//! `frame_id`. The library writes them with the contract's files
+//! (`tarn::build::ExtraMaps`).
 
-use std::path::Path;
-
-use anyhow::Context;
 use clap::Args;
-use tarn::io::geotiff::{write_geotiff, GeoTiffOptions};
-use tarn::io::mapfile::read_map_ply;
-use tarn::io::ros_export::{write_ros_map, RosMapOptions};
 use tarn::mapper::MapperConfig;
 
 #[derive(Args, Debug, Clone, Default)]
@@ -38,39 +33,7 @@ pub fn apply(a: &MapsOutArgs, cfg: &mut MapperConfig) {
     if a.epsg.is_some() {
         cfg.build.epsg = a.epsg;
     }
-}
-
-/// Writes the outputs the config asks for (`[build]` `ros_map`, `geotiff`, `epsg`, with
-/// the options applied) into `out`, from `out/map.ply`. The map's frame is `--frame-id`,
-/// else the log config's `map_frame`; `stamp_ns` is the map's log time. Returns the names
-/// of the files written.
-pub fn write(
-    a: &MapsOutArgs,
-    cfg: &MapperConfig,
-    out: &Path,
-    stamp_ns: u64,
-) -> anyhow::Result<Vec<&'static str>> {
-    let b = &cfg.build;
-    let mut written = Vec::new();
-    if !(b.ros_map || b.geotiff) {
-        return Ok(written);
+    if a.frame_id.is_some() {
+        cfg.build.frame_id = a.frame_id.clone();
     }
-    let ply = out.join("map.ply");
-    let map = read_map_ply(&ply).with_context(|| format!("reading back {}", ply.display()))?;
-    if b.ros_map {
-        let opts = RosMapOptions {
-            frame_id: a
-                .frame_id
-                .clone()
-                .unwrap_or_else(|| cfg.log.map_frame.clone()),
-            stamp_ns,
-        };
-        write_ros_map(&out.join("map.mcap"), &map, &opts)?;
-        written.push("map.mcap");
-    }
-    if b.geotiff {
-        write_geotiff(&out.join("map.tif"), &map, &GeoTiffOptions { epsg: b.epsg })?;
-        written.push("map.tif");
-    }
-    Ok(written)
 }

@@ -1,4 +1,4 @@
-//! `tarn train-color` and `tarn classify` on a synthetic scene with a known answer.
+//! `tarn train-colour` and `tarn classify` on a synthetic scene with a known answer.
 
 use std::process::Command;
 
@@ -54,7 +54,7 @@ fn train_then_classify_with_horizon() {
     let (img, ids) = scene(dir.path());
     let model = dir.path().join("m.json").display().to_string();
     let (ok, out, err) = tarn(&[
-        "train-color",
+        "train-colour",
         "--image",
         &img,
         "--labels",
@@ -125,7 +125,7 @@ fn bad_inputs_are_named() {
     let (img, ids) = scene(dir.path());
     let model = dir.path().join("m.json").display().to_string();
     let (ok, _, err) = tarn(&[
-        "train-color",
+        "train-colour",
         "--image",
         &img,
         "--labels",
@@ -137,7 +137,7 @@ fn bad_inputs_are_named() {
     ]);
     assert!(!ok && err.contains("no pixel of the water ids 99"), "{err}");
     let (ok, _, err) = tarn(&[
-        "train-color",
+        "train-colour",
         "--image",
         &img,
         "--labels",

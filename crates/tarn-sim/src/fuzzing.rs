@@ -267,7 +267,7 @@ impl<'a> Bytes<'a> {
 /// `tarn build` into a fresh temporary directory.
 fn exports_of(map: &crate::hazard::HazardMap, files: bool) {
     use crate::io::export;
-    let img = tarn::io::render::render_map_png(map);
+    let img = tarn::io::render::render_map_png(map, &[]);
     assert!(
         img.width() <= tarn::io::render::MAP_PNG_MAX_SIDE.max(640)
             && img.height() <= tarn::io::render::MAP_PNG_MAX_SIDE + 200,
