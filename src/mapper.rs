@@ -899,6 +899,19 @@ impl Mapper {
         self.cues.cfg.lidar.as_ref().and_then(|m| m.interval())
     }
 
+    /// Bytes of every allocation that grows with the window's cells, by owner (from their
+    /// capacities): the grid's layers and ingest accumulators, the water stage's buffers and
+    /// the label stage's raster and tally. Divided by the window's cells: bytes per cell.
+    pub fn window_heap_bytes(&self) -> Vec<(&'static str, usize)> {
+        let (layers, ingest) = self.grid.as_ref().map_or((0, 0), |g| g.heap_bytes());
+        vec![
+            ("grid_layers", layers),
+            ("ingest_scratch", ingest),
+            ("water_scratch", self.scratch.heap_bytes()),
+            ("labels", self.labels.as_ref().map_or(0, |l| l.heap_bytes())),
+        ]
+    }
+
     /// The rolling window (after the first frame).
     pub fn grid(&self) -> Option<&RollingGrid> {
         self.grid.as_ref()

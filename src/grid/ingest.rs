@@ -275,6 +275,26 @@ pub(crate) struct Scratch {
     acc: Vec<Acc>,
 }
 
+impl Scratch {
+    /// Bytes allocated (capacities).
+    pub(crate) fn heap_bytes(&self) -> usize {
+        let buckets: usize = self
+            .binned
+            .iter()
+            .map(|b| {
+                b.buckets.capacity() * std::mem::size_of::<Vec<Sample>>()
+                    + b.buckets
+                        .iter()
+                        .map(|v| v.capacity() * std::mem::size_of::<Sample>())
+                        .sum::<usize>()
+            })
+            .sum();
+        self.binned.capacity() * std::mem::size_of::<Binned>()
+            + buckets
+            + self.acc.capacity() * std::mem::size_of::<Acc>()
+    }
+}
+
 /// The elevation layers of one bucket's cells (indices local to the bucket).
 struct ElevMut<'a> {
     occupied: &'a mut [bool],

@@ -204,6 +204,26 @@ impl Layers {
     /// the rest evidence.
     pub const BYTES_PER_CELL: usize = 1 + 4 + 4 + 8 + 16 + 16 + 4 + 4 + EVIDENCE_BYTES_PER_CELL;
 
+    /// Bytes allocated by the layers (their capacities).
+    fn heap_bytes(&self) -> usize {
+        fn b<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        b(&self.occupied)
+            + b(&self.hits)
+            + b(&self.below)
+            + b(&self.sw)
+            + b(&self.swz)
+            + b(&self.swzz)
+            + b(&self.zmin)
+            + b(&self.zmax)
+            + b(&self.ev_counts)
+            + b(&self.ev_level_n)
+            + b(&self.ev_level_sum)
+            + b(&self.ev_depth)
+            + b(&self.ev_depth_gain_level)
+    }
+
     #[inline]
     pub fn get_ev(&self, i: usize) -> Evidence {
         let d = self.ev_depth[i];
@@ -351,6 +371,13 @@ impl RollingGrid {
     /// Bytes of cell storage per cell (all layers).
     pub fn bytes_per_cell() -> usize {
         Layers::BYTES_PER_CELL
+    }
+
+    /// Bytes the grid holds on the heap: `(layers, ingest scratch)`, from the capacities
+    /// of every allocation (the layers are per cell; the scratch is one accumulator per
+    /// cell plus the binned points of the largest batch so far).
+    pub fn heap_bytes(&self) -> (usize, usize) {
+        (self.layers.heap_bytes(), self.scratch.heap_bytes())
     }
 
     /// The key of the cell containing the map point `(x, y)`.

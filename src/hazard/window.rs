@@ -30,6 +30,14 @@ pub(crate) struct WindowScratch {
 }
 
 impl WindowScratch {
+    /// Bytes allocated (capacities): observed cells, dry raster, seeds, map cells.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        fn b<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        b(&self.seen) + b(&self.dry) + b(&self.seeds) + b(&self.cells)
+    }
+
     /// Keeps the storage of a map nobody reads any more for the next map.
     pub(crate) fn recycle(&mut self, map: HazardMap) {
         if map.cells.capacity() > self.cells.capacity() {

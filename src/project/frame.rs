@@ -862,6 +862,14 @@ impl FrameLabels {
         })
     }
 
+    /// Bytes allocated per window cell between frames (capacities): the vote tally, the
+    /// cells it touched and the elevation raster.
+    pub fn heap_bytes(&self) -> usize {
+        self.tally.capacity() * std::mem::size_of::<(u32, u32, f64)>()
+            + self.touched.capacity() * std::mem::size_of::<u32>()
+            + self.raster.capacity() * std::mem::size_of::<f32>()
+    }
+
     /// Classifies the frame's configured images, projects the labels and adds one vote per
     /// cell and sensor to `grid`'s evidence.
     pub fn apply(

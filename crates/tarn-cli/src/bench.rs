@@ -27,7 +27,7 @@ use tarn::cues::{
 };
 use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;
-use tarn::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
+use tarn::grid::{CellKey, GridConfig, RangeNoise, RollingGrid, TileMap};
 use tarn::hazard::HazardMap;
 use tarn::io::frames::{Frame, FrameStream, LogConfig};
 use tarn::io::ros::convert::Pixels;
@@ -92,8 +92,35 @@ pub struct BenchReport {
     pub log_duration_s: f64,
     /// Peak resident memory of this process (VmHWM), bytes; `None` where /proc is absent.
     pub peak_memory_bytes: Option<u64>,
-    /// Bytes of cell storage per cell of the rolling window.
+    /// Bytes of cell storage per cell of the rolling window (the grid's layers alone).
     pub bytes_per_cell: usize,
+    /// Bytes per window cell of every allocation that grows with the window (the grid's
+    /// layers and ingest accumulators, the water stage's and the label stage's buffers),
+    /// counted from their capacities after the measured frames:
+    /// [`tarn::mapper::Mapper::window_heap_bytes`] over the window's cells.
+    pub bytes_per_cell_all: f64,
+    /// The same by owner, bytes per window cell.
+    pub bytes_per_cell_by_owner: BTreeMap<String, f64>,
+    /// Minor page faults (getrusage `ru_minflt`) per `Mapper::update` (hazard map
+    /// published), over the second half of the log's frames, held in memory, after the
+    /// first half: the steady state. `None` off unix.
+    pub page_faults_per_frame: Option<f64>,
+    /// Minor page faults per frame of the whole online build (`build_log` with the map
+    /// published every frame, reading the log included), over all its frames.
+    pub page_faults_per_frame_build: Option<f64>,
+    /// Ingest of the measured frame's lidar scan as it comes (organized), points/s, on
+    /// one thread, and the plain binning loop over the same points on one thread
+    /// ([`plain_binning`]): the memory-bound reference. `ingest_vs_plain_scan` is their
+    /// ratio.
+    pub ingest_scan_points_per_s_1t: Option<f64>,
+    pub plain_scan_points_per_s_1t: Option<f64>,
+    pub ingest_vs_plain_scan: Option<f64>,
+    /// The same for the dense synthetic batch of `ingest_points` points.
+    pub ingest_dense_points_per_s_1t: f64,
+    pub plain_dense_points_per_s_1t: f64,
+    pub ingest_vs_plain_dense: f64,
+    /// Shape of the measured frame's lidar scan (rows, columns).
+    pub frame_lidar_shape: Option<(usize, usize)>,
     /// Median ms of every stage, per frame unless the name says otherwise.
     pub stages_ms: BTreeMap<String, f64>,
     /// Points in the measured frame's clouds.
@@ -121,6 +148,84 @@ pub fn peak_memory_bytes() -> Option<u64> {
     let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
+}
+
+/// Minor page faults of this process so far (getrusage `ru_minflt`); `None` off unix.
+pub fn minor_faults() -> Option<u64> {
+    #[cfg(unix)]
+    {
+        // SAFETY: getrusage writes one `rusage` into the zeroed struct it is given.
+        unsafe {
+            let mut u: libc::rusage = std::mem::zeroed();
+            if libc::getrusage(libc::RUSAGE_SELF, &mut u) == 0 {
+                return Some(u.ru_minflt as u64);
+            }
+        }
+        None
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
+}
+
+/// A dense window of per-cell sums for [`plain_binning`].
+#[derive(Debug, Clone)]
+pub struct PlainBins {
+    n: usize,
+    origin: CellKey,
+    res: f64,
+    count: Vec<u32>,
+    sum_z: Vec<f32>,
+}
+
+impl PlainBins {
+    /// A window of `n` × `n` cells of `res` metres with lower-left key `origin`.
+    pub fn new(n: usize, res: f64, origin: CellKey) -> Self {
+        PlainBins {
+            n,
+            origin,
+            res,
+            count: vec![0; n * n],
+            sum_z: vec![0.0; n * n],
+        }
+    }
+
+    /// Points added so far.
+    #[cfg(test)]
+    pub fn total(&self) -> u64 {
+        self.count.iter().map(|&c| c as u64).sum()
+    }
+}
+
+/// The reference ingest is measured against: every point of `cloud` moved into the map
+/// frame by the cloud's pose and added (a count and Σ z) to its cell of a dense window in
+/// one pass; no noise model, no gate, no buckets. What is left of the cost is reading the
+/// points and one random access per point: the memory-bound floor of binning. Returns the
+/// points that fell in the window.
+pub fn plain_binning(cloud: &PointCloud, bins: &mut PlainBins) -> usize {
+    let m = cloud.frame_to_map.to_homogeneous();
+    let r = |i: usize, j: usize| m[(i, j)] as f32;
+    let (inv, n) = (1.0 / bins.res, bins.n as i64);
+    let (ox, oy) = (bins.origin.x, bins.origin.y);
+    let mut added = 0;
+    for p in &cloud.xyz {
+        let x = r(0, 0) * p[0] + r(0, 1) * p[1] + r(0, 2) * p[2] + m[(0, 3)] as f32;
+        let y = r(1, 0) * p[0] + r(1, 1) * p[1] + r(1, 2) * p[2] + m[(1, 3)] as f32;
+        let z = r(2, 0) * p[0] + r(2, 1) * p[1] + r(2, 2) * p[2] + m[(2, 3)] as f32;
+        if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+            continue;
+        }
+        let kx = (x as f64 * inv).floor() as i64 - ox;
+        let ky = (y as f64 * inv).floor() as i64 - oy;
+        if (0..n).contains(&kx) && (0..n).contains(&ky) {
+            let i = (ky * n + kx) as usize;
+            bins.count[i] += 1;
+            bins.sum_z[i] += z;
+            added += 1;
+        }
+    }
+    added
 }
 
 /// A stage: a name, whether it is part of one frame's work, and the work.
@@ -280,6 +385,14 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let mut big_grid = RollingGrid::new(opts.grid.clone(), 0.0, 0.0)?;
     big_grid.ingest(&big, &RangeNoise::LIDAR)?; // warm: scratch and surface
 
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| Error::invalid("bench thread pool", e.to_string()))?;
+    let (n, origin) = (grid.size(), grid.origin());
+    let mut big_grid1 = big_grid.clone();
+    let (big_n, big_origin) = (big_grid.size(), big_grid.origin());
+
     // Each stage is one line here.
     // Two closures cannot both hold the grid mutably: each ingest works on its own copy.
     let (mut gl, mut gs) = (grid.clone(), grid.clone());
@@ -334,7 +447,54 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     st.add("ingest_4M_synthetic", false, || {
         big_grid.ingest(&big, &RangeNoise::LIDAR).map(|_| ())
     });
+    // Ingest against the plain binning loop on the same points, both on one thread: the
+    // measured frame's scan as it comes, and the dense synthetic batch.
+    let one = &one;
+    if let Some(c) = lidar {
+        let mut g1 = grid.clone();
+        st.add("ingest_lidar_1t", false, move || {
+            one.install(|| g1.ingest(c, &RangeNoise::LIDAR).map(|_| ()))
+        });
+        let mut bins = PlainBins::new(n, res, origin);
+        st.add("plain_lidar_1t", false, move || {
+            plain_binning(c, &mut bins);
+            Ok(())
+        });
+    }
+    {
+        let big = &big;
+        st.add("ingest_4M_synthetic_1t", false, move || {
+            one.install(|| big_grid1.ingest(big, &RangeNoise::LIDAR).map(|_| ()))
+        });
+        let mut bins = PlainBins::new(big_n, res, big_origin);
+        st.add("plain_4M_synthetic_1t", false, move || {
+            plain_binning(big, &mut bins);
+            Ok(())
+        });
+    }
     let (stages_ms, frame_stages) = st.time(reps)?;
+
+    // Page faults and per-cell memory of the steady state: a mapper as the vehicle runs it
+    // (the hazard map published every frame) over the frames in memory; the faults are
+    // counted over the second half.
+    let (faults, window_bytes, window_cells) = {
+        let mut m = tarn::mapper::Mapper::new(log_cfg.mapper.clone())?;
+        for f in &frames[..=mid] {
+            m.update(f)?;
+        }
+        let f0 = minor_faults();
+        for f in &frames[mid + 1..] {
+            m.update(f)?;
+        }
+        let f1 = minor_faults();
+        let measured = frames.len() - mid - 1;
+        let faults = match (f0, f1) {
+            (Some(a), Some(b)) if measured > 0 => Some((b - a) as f64 / measured as f64),
+            _ => None,
+        };
+        let cells = m.grid().map_or(0, |g| g.size() * g.size());
+        (faults, m.window_heap_bytes(), cells)
+    };
 
     // The whole log, offline (the water stage once, at the end), and as the vehicle runs
     // it (the hazard map published after every frame) for the full frame's time.
@@ -345,13 +505,18 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let mut builds = Vec::new();
     let mut duration = 0.0;
     let mut frame_totals = Vec::new();
+    let mut build_faults = Vec::new();
     for r in 0..reps.min(3) {
         let out = tmp.path().join(format!("build{r}"));
         let t0 = Instant::now();
         let rep = build_log(&log, &out, &log_cfg, &mut |_, _| {})?;
         builds.push(t0.elapsed().as_secs_f64());
         duration = rep.log_duration_s;
+        let f0 = minor_faults();
         let rep = build_log(&log, &out, &online_cfg, &mut |_, _| {})?;
+        if let (Some(a), Some(b)) = (f0, minor_faults()) {
+            build_faults.push((b - a) as f64 / rep.frames_fused.max(1) as f64);
+        }
         frame_totals.extend(
             rep.stage_latency_ms
                 .iter()
@@ -368,6 +533,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         .copied()
         .unwrap_or(f64::NAN);
     let ingest_ms = stages_ms["ingest_4M_synthetic"];
+    let scan_points = lidar.map_or(0, |c| c.len()) as f64;
+    let scan_rate = |k: &str| stages_ms.get(k).map(|ms| scan_points / (ms * 1e-3));
+    let dense_rate = |k: &str| opts.ingest_points as f64 / (stages_ms[k] * 1e-3);
     Ok(BenchReport {
         input: log.display().to_string(),
         reps,
@@ -391,6 +559,24 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         log_duration_s: duration,
         peak_memory_bytes: peak_memory_bytes(),
         bytes_per_cell: RollingGrid::bytes_per_cell(),
+        bytes_per_cell_all: window_bytes.iter().map(|b| b.1).sum::<usize>() as f64
+            / window_cells.max(1) as f64,
+        bytes_per_cell_by_owner: window_bytes
+            .iter()
+            .map(|&(k, b)| (k.to_string(), b as f64 / window_cells.max(1) as f64))
+            .collect(),
+        page_faults_per_frame: faults,
+        page_faults_per_frame_build: (!build_faults.is_empty()).then(|| median(&mut build_faults)),
+        ingest_scan_points_per_s_1t: scan_rate("ingest_lidar_1t"),
+        plain_scan_points_per_s_1t: scan_rate("plain_lidar_1t"),
+        ingest_vs_plain_scan: scan_rate("ingest_lidar_1t")
+            .zip(scan_rate("plain_lidar_1t"))
+            .map(|(a, b)| a / b),
+        ingest_dense_points_per_s_1t: dense_rate("ingest_4M_synthetic_1t"),
+        plain_dense_points_per_s_1t: dense_rate("plain_4M_synthetic_1t"),
+        ingest_vs_plain_dense: dense_rate("ingest_4M_synthetic_1t")
+            / dense_rate("plain_4M_synthetic_1t"),
+        frame_lidar_shape: lidar.map(|c| (c.rows, c.cols)),
         stages_ms,
         frame_lidar_points: lidar.map_or(0, |c| c.len()),
         frame_stereo_points: stereo.map_or(0, |c| c.len()),
@@ -416,6 +602,26 @@ impl BenchReport {
             self.bytes_per_cell,
             self.threads,
             self.reps,
+        ));
+        let f = |v: Option<f64>, scale: f64, d: usize| {
+            v.map_or("–".to_string(), |v| format!("{:.d$}", v / scale))
+        };
+        s.push_str(&format!(
+            "one thread, M points/s: ingest of the frame's {} scan {} (plain binning {}, ratio {}); \
+             dense batch {:.1} (plain {:.1}, ratio {:.2})\n\
+             page faults per frame {} (steady state), {} (whole online build); \
+             {:.1} bytes per window cell over all per-cell allocations\n",
+            self.frame_lidar_shape
+                .map_or("–".into(), |(r, c)| format!("{r}×{c}")),
+            f(self.ingest_scan_points_per_s_1t, 1e6, 1),
+            f(self.plain_scan_points_per_s_1t, 1e6, 1),
+            f(self.ingest_vs_plain_scan, 1.0, 2),
+            self.ingest_dense_points_per_s_1t / 1e6,
+            self.plain_dense_points_per_s_1t / 1e6,
+            self.ingest_vs_plain_dense,
+            f(self.page_faults_per_frame, 1.0, 0),
+            f(self.page_faults_per_frame_build, 1.0, 0),
+            self.bytes_per_cell_all,
         ));
         s
     }
@@ -462,6 +668,15 @@ mod tests {
         assert!(r.ingest_points_per_s > 0.0 && r.offline_x_realtime > 0.0);
         assert!(r.log_duration_s > 0.0);
         assert_eq!(r.bytes_per_cell, RollingGrid::bytes_per_cell());
+        // Every per-cell allocation counts: at least the layers, and the owners add up.
+        assert!(r.bytes_per_cell_all >= r.bytes_per_cell as f64);
+        let owners: f64 = r.bytes_per_cell_by_owner.values().sum();
+        assert!((owners - r.bytes_per_cell_all).abs() < 1e-6);
+        assert!(r.ingest_vs_plain_scan.is_some_and(|v| v > 0.0));
+        assert!(r.ingest_vs_plain_dense > 0.0);
+        assert!(r.frame_lidar_shape.is_some_and(|(rows, _)| rows > 1));
+        #[cfg(unix)]
+        assert!(r.page_faults_per_frame.is_some() && r.page_faults_per_frame_build.is_some());
         let json = serde_json::to_value(&r).unwrap();
         for k in [
             "ingest_points_per_s",
@@ -489,6 +704,33 @@ mod tests {
         let b = cloud_build(100_000, 20.0).unwrap();
         assert_eq!(b.points, 100_000);
         assert!(b.cells_observed > 30_000 && b.cells_observed <= 40_401);
+    }
+
+    #[test]
+    fn plain_binning_counts_the_points_in_the_window() {
+        let c = PointCloud::unorganized(vec![
+            [0.05, 0.05, 1.0],
+            [0.06, 0.04, 3.0],
+            [-0.05, 0.0, 2.0],
+            [f32::NAN, 0.0, 0.0],
+            [50.0, 0.0, 0.0],
+        ]);
+        let mut b = PlainBins::new(4, 0.1, CellKey::new(-2, -2));
+        assert_eq!(plain_binning(&c, &mut b), 3);
+        assert_eq!(b.total(), 3);
+        // Cell (0, 0) is buffer index (0 + 2) * 4 + (0 + 2).
+        assert_eq!((b.count[10], b.sum_z[10]), (2, 4.0));
+        assert_eq!((b.count[9], b.sum_z[9]), (1, 2.0));
+    }
+
+    #[test]
+    fn minor_faults_grow_with_fresh_pages() {
+        let Some(before) = minor_faults() else { return };
+        let v = vec![1u8; 64 << 20];
+        assert!(v.iter().all(|&b| b == 1));
+        let after = minor_faults().unwrap();
+        // 64 MiB, above the allocator's largest mmap threshold: always fresh pages.
+        assert!(after > before, "{before} -> {after}");
     }
 
     #[test]
