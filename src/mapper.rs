@@ -823,6 +823,7 @@ impl Mapper {
             stereo: cfg.stereo.as_ref().filter(|s| s.reflections).map(|s| s.cue),
             mirror_check: cfg.stereo.as_ref().is_some_and(|s| s.mirror_check),
             surface_points: false,
+            stereo_surface: false,
         };
         let mut lidar_height = None;
         if let Some(l) = cfg.lidar.as_ref().filter(|l| l.cues) {
@@ -841,6 +842,7 @@ impl Mapper {
         fc.surface_points = models
             .as_ref()
             .is_some_and(|m| m.colour.is_some() && m.colour_check);
+        fc.stereo_surface = fc.surface_points && cfg.lidar.is_none();
         let labels = models.map(crate::project::FrameLabels::new).transpose()?;
         Ok(Mapper {
             cfg,
@@ -997,7 +999,12 @@ impl Mapper {
                 c.noise = noise;
             }
             if s.reflections {
-                self.cues.apply_stereo(frame, grid, &mut rep.cues)?;
+                if let Some(st) = self.cues.apply_stereo(frame, grid, &mut rep.cues)? {
+                    match surface.as_mut() {
+                        Some(l) => l.merge(st),
+                        None => surface = Some(st),
+                    }
+                }
             } else {
                 rep.stereo_ingest = Some(grid.ingest(cloud, &noise)?);
             }

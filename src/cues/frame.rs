@@ -8,7 +8,7 @@
 use serde::Serialize;
 
 use super::lidar::{LidarCueModel, LidarCueStats, ScanSurface};
-use super::stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig};
+use super::stereo::{stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig};
 use crate::error::Result;
 use crate::grid::{IngestStats, RangeNoise, RollingGrid};
 use crate::io::frames::Frame;
@@ -28,6 +28,13 @@ pub struct FrameCueConfig {
     /// Collect where the lidar found dry ground and water ([`ScanSurface`]) for the colour
     /// labels' check; off when no label stage reads them.
     pub surface_points: bool,
+    /// Collect what each stereo element says of the surface ([`ScanSurface::stereo`]) for
+    /// the same check: on a rig without a lidar, whose reflectivity says directly that a
+    /// return is not water, where the check would have no samples otherwise. Stereo says
+    /// less: a missing match only that ground with texture was not seen there, which dry
+    /// ground of little texture (snow, pale slabs) gives too; counted beside the lidar's
+    /// samples it would outweigh them.
+    pub stereo_surface: bool,
 }
 
 /// What one frame contributed.
@@ -111,13 +118,14 @@ impl FrameCues {
     }
 
     /// The stereo half of [`FrameCues::apply`]: runs only when the stereo cue is configured
-    /// and the frame has a stereo cloud.
+    /// and the frame has a stereo cloud. Returns what the cloud says of the surface
+    /// ([`ScanSurface::stereo`]) for the image labels that follow.
     pub fn apply_stereo(
         &self,
         frame: &Frame,
         grid: &mut RollingGrid,
         rep: &mut FrameCuesReport,
-    ) -> Result<()> {
+    ) -> Result<Option<ScanSurface>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(scfg), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
             let gray = match (&frame.image, self.cfg.mirror_check) {
@@ -131,7 +139,8 @@ impl FrameCues {
                     .map(|camera| MirrorCheck { camera, image: g }),
                 _ => None,
             };
-            let out = stereo_reflections(cloud, res, z_ref, check, scfg)?;
+            let out =
+                stereo_reflections_with(cloud, res, z_ref, check, scfg, self.cfg.stereo_surface)?;
             rep.stereo_ingest = Some(grid.ingest(&out.corrected, &scfg.noise)?);
             rep.stereo_runs = out.runs;
             rep.stereo_reflected_points = out.reflected_points;
@@ -140,7 +149,13 @@ impl FrameCues {
             let batch = out.evidence.into_batch();
             rep.evidence_cells += batch.len();
             rep.evidence_dropped += grid.apply_evidence(&batch);
+            if self.cfg.stereo_surface {
+                return Ok(Some(ScanSurface {
+                    stereo: out.seen,
+                    ..ScanSurface::default()
+                }));
+            }
         }
-        Ok(())
+        Ok(None)
     }
 }

@@ -299,6 +299,24 @@ pub struct ScanSurface {
     /// Where missing beams inside the interval (and short of the scan's dry limit) meet
     /// the ground level, and where bottom and specular returns' beams cross the water.
     pub wet: Vec<Point3<f64>>,
+    /// What each element of the frame's stereo cloud says of the surface under its pixel
+    /// ([`super::stereo::StereoCues::seen`]); empty without one.
+    pub stereo: Vec<super::stereo::StereoSeen>,
+}
+
+impl ScanSurface {
+    /// Adds another sensor's dry and wet points; the reach and the stereo verdicts stay
+    /// this one's, or become `other`'s when this has none.
+    pub fn merge(&mut self, other: ScanSurface) {
+        self.dry.extend(other.dry);
+        self.wet.extend(other.wet);
+        if self.reach.is_none() {
+            self.reach = other.reach;
+        }
+        if self.stereo.is_empty() {
+            self.stereo = other.stereo;
+        }
+    }
 }
 
 /// How far dry ground returned along each azimuth of one scan: the farthest lookahead of a

@@ -44,7 +44,10 @@ pub use lidar::{
     ScanSurface,
 };
 pub use reflectivity::{normalised_reflectivity, ReflectivityConfig};
-pub use stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig, StereoCues};
+pub use stereo::{
+    stereo_reflections, stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig,
+    StereoCues, StereoSeen,
+};
 
 /// A multiply-rotate hasher for cell keys (two integers): SipHash's resistance to chosen
 /// keys buys nothing for map cells and costs most of a lookup.

@@ -225,6 +225,31 @@ pub struct StereoCues {
     /// Cells strictly between consecutive reflection crossings up a column, counted once
     /// per span.
     pub span_cells: usize,
+    /// What each element says of the surface under its pixel ([`StereoSeen`]), for the
+    /// colour labels' check: empty unless [`stereo_reflections_with`] was asked for it.
+    pub seen: Vec<StereoSeen>,
+}
+
+/// What one element of a stereo cloud says of the surface under its pixel. Still water
+/// gives stereo no point at its level: it mirrors what stands above it, so the match is
+/// the virtual image below the level (by the object's height), or no match at all where it
+/// mirrors the sky. Textured dry ground gives a point at the level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StereoSeen {
+    /// Nothing to say: an object above the ground, a point below it that no confirmed run
+    /// explains, a point of a run that was not confirmed, the sky, no match beyond the
+    /// farthest ground the column matched.
+    #[default]
+    Nothing,
+    /// A point at the local ground level within its own vertical noise `σ_v` (see
+    /// [`StereoCueConfig::gate_sigma`]), not a reflection, and not below the frame's water
+    /// level up a column with confirmed water (there a shallow reflection, of the bank
+    /// just beyond the water, lies within the noise of the level).
+    Ground,
+    /// A reflection, or no match short of the farthest ground the column matched (where
+    /// ground with texture would have matched; still water mirroring the sky gives none):
+    /// not seen to be dry ground.
+    NotGround,
 }
 
 /// One candidate run: slots (bottom to top) and the shore level before it.
@@ -244,6 +269,19 @@ pub fn stereo_reflections(
     z_ref: f64,
     check: Option<MirrorCheck<'_>>,
     cfg: &StereoCueConfig,
+) -> Result<StereoCues> {
+    stereo_reflections_with(cloud, resolution, z_ref, check, cfg, false)
+}
+
+/// [`stereo_reflections`], filling [`StereoCues::seen`] only when `surface_points` (the
+/// image labels' colour check reads it).
+pub fn stereo_reflections_with(
+    cloud: &PointCloud,
+    resolution: f64,
+    z_ref: f64,
+    check: Option<MirrorCheck<'_>>,
+    cfg: &StereoCueConfig,
+    surface_points: bool,
 ) -> Result<StereoCues> {
     cloud.validate()?;
     cfg.validate()?;
@@ -281,11 +319,13 @@ pub fn stereo_reflections(
 
     // 1. Candidate runs up each column (columns are independent: in parallel, and
     // gathered in column order so the result does not depend on the threads).
-    let per_column: Vec<(Vec<Run>, usize)> = (0..cols)
+    let per_column: Vec<(Vec<Run>, usize, Vec<usize>)> = (0..cols)
         .into_par_iter()
         .map(|c| {
             let mut runs: Vec<Run> = Vec::new();
             let mut rejected_geometry = 0;
+            // Points at the local ground level within their own vertical noise `σ_v`.
+            let mut at_level: Vec<usize> = Vec::new();
             let mut z_g: Option<f64> = None;
             let mut h_g = 0.0;
             let mut invalid_since_ground = 0usize;
@@ -360,6 +400,9 @@ pub fn stereo_reflections(
                 let vertical = cfg.noise.sigma(range) * ((o.z - p.z).abs() / range.max(1e-9));
                 let gate = cfg.gate_min_m.max(cfg.gate_sigma * vertical);
                 let below = p.z < zg - gate && p.z < o.z;
+                if surface_points && p.z < o.z && (p.z - zg).abs() <= vertical {
+                    at_level.push(s);
+                }
                 if let Some(&last) = run.last() {
                     // Inside a run, points below the level whose range keeps wrapping backward
                     // are the upper part of the same virtual image.
@@ -402,11 +445,16 @@ pub fn stereo_reflections(
                 &mut runs,
                 &mut rejected_geometry,
             );
-            (runs, rejected_geometry)
+            (runs, rejected_geometry, at_level)
         })
         .collect();
     let mut rejected_geometry: usize = per_column.iter().map(|c| c.1).sum();
-    let runs: Vec<Run> = per_column.into_iter().flat_map(|c| c.0).collect();
+    let mut at_level: Vec<usize> = Vec::new();
+    let mut runs: Vec<Run> = Vec::new();
+    for (r, _, l) in per_column {
+        runs.extend(r);
+        at_level.extend(l);
+    }
 
     // 2. Water level by symmetry (one-parameter ICP against the non-reflected points).
     let mut in_run = vec![false; cloud.len()];
@@ -671,6 +719,7 @@ pub fn stereo_reflections(
             for s in new {
                 let m = Point3::new(pts[s].x, pts[s].y, 2.0 * l - pts[s].z);
                 reflect_at(&mut ev, &mut corrected, s, l, m);
+                reflected[s] = true;
                 level_points += 1;
                 reflected_points += 1;
             }
@@ -681,6 +730,19 @@ pub fn stereo_reflections(
             }
         }
     }
+    let seen = if surface_points {
+        seen_of(
+            cloud,
+            &pts,
+            &at_level,
+            &in_run,
+            &reflected,
+            &water_from,
+            waterline_level.or(symmetry_level),
+        )
+    } else {
+        Vec::new()
+    };
     Ok(StereoCues {
         evidence: ev,
         corrected,
@@ -694,7 +756,42 @@ pub fn stereo_reflections(
         rejected_geometry,
         rejected_image,
         reflected_points,
+        seen,
     })
+}
+
+/// [`StereoCues::seen`] from the walk's points at the ground level within their `σ_v`
+/// (`at_level`, in any order), the points of candidate runs, the reflections, each
+/// column's first row of confirmed water and the frame's water level.
+fn seen_of(
+    cloud: &PointCloud,
+    pts: &[Point3<f64>],
+    at_level: &[usize],
+    in_run: &[bool],
+    reflected: &[bool],
+    water_from: &[Option<usize>],
+    level: Option<f64>,
+) -> Vec<StereoSeen> {
+    let cols = cloud.cols;
+    let mut seen = vec![StereoSeen::Nothing; cloud.len()];
+    // Per column, the highest image row (the farthest ground) seen as ground.
+    let mut top: Vec<Option<usize>> = vec![None; cols];
+    for &s in at_level {
+        let (r, c) = (s / cols, s % cols);
+        let water_up = water_from[c].is_some_and(|r0| r <= r0);
+        if in_run[s] || reflected[s] || (water_up && level.is_none_or(|l| pts[s].z < l)) {
+            continue;
+        }
+        seen[s] = StereoSeen::Ground;
+        top[c] = Some(top[c].map_or(r, |t: usize| t.min(r)));
+    }
+    for (s, v) in seen.iter_mut().enumerate() {
+        let short_of_ground = top[s % cols].is_some_and(|t| s / cols > t);
+        if reflected[s] || (short_of_ground && !cloud.is_valid(s)) {
+            *v = StereoSeen::NotGround;
+        }
+    }
+    seen
 }
 
 /// Whether `p` lies below `level` by more than its noise: `max(gate_min_m, gate_sigma·σ_v)`,

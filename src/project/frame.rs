@@ -26,7 +26,7 @@ use crate::classify::horizon::GroundGeometry;
 use crate::classify::lut::ColorLut;
 use crate::classify::thermal::{classify_mwir, classify_swir, MwirConfig, SwirConfig};
 use crate::classify::{Label, LabelImage, MonoImage};
-use crate::cues::ScanSurface;
+use crate::cues::{ScanSurface, StereoSeen};
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{pose_is_finite, PointCloud, Pose};
@@ -411,8 +411,13 @@ const CHECK_Z: f64 = 1.645;
 /// √(dry + wet + 1)`, the normal form: four dry samples and none wet suffice), is not
 /// evidence of water in this log: its pixels become `Unknown` and place no vote, near or
 /// beyond the lidar's reach. The counts
-/// go on whether a colour is vetoed or not, so a verdict follows the log. Without a lidar
-/// nothing is counted and nothing vetoed: the check says nothing where it cannot tell.
+/// go on whether a colour is vetoed or not, so a verdict follows the log. On a rig with
+/// stereo and no lidar the stereo elements registered to the image are the samples
+/// ([`StereoSeen`]): a point at the local ground level within its own vertical noise is a
+/// dry one, a reflection or a missing match short of the ground its column matched one
+/// against (still water mirrors the sky and gives no match, or gives the mirror image well
+/// below its level). Without either nothing is counted and nothing vetoed: the check says
+/// nothing where it cannot tell.
 #[derive(Debug, Clone, Default)]
 struct ColourCheck {
     /// Per bin: lidar samples on dry ground and on water whose pixel is colour water.
@@ -433,8 +438,9 @@ impl ColourCheck {
         d - w >= CHECK_Z * (d + w + 1.0).sqrt()
     }
 
-    /// Counts the frame's lidar samples that land on colour water, then takes the water
-    /// label from pixels of vetoed colours. Returns the pixels vetoed.
+    /// Counts the frame's lidar samples, and the verdicts of the stereo `(cloud, k)`
+    /// registered to the image at `1/k` of its resolution, that land on colour water, then
+    /// takes the water label from pixels of vetoed colours. Returns the pixels vetoed.
     fn run(
         &mut self,
         labels: &mut LabelImage,
@@ -442,11 +448,34 @@ impl ColourCheck {
         camera: &CameraModel,
         cam_to_map: &Pose,
         lidar: &ScanSurface,
+        stereo: Option<(&PointCloud, usize)>,
     ) -> u64 {
         let bins = 1 << (3 * CHECK_BITS);
         self.dry.resize(bins, 0);
         self.wet.resize(bins, 0);
         let (w, h) = (labels.width, labels.height);
+        if let Some((cloud, k)) = stereo.filter(|(c, _)| c.len() == lidar.stereo.len()) {
+            let half = (k - 1) / 2;
+            for (e, seen) in lidar.stereo.iter().enumerate() {
+                let dry = match seen {
+                    StereoSeen::Nothing => continue,
+                    StereoSeen::Ground => true,
+                    StereoSeen::NotGround => false,
+                };
+                let (u, v) = (k * (e % cloud.cols) + half, k * (e / cloud.cols) + half);
+                let i = v * w + u;
+                if u >= w || v >= h || labels.data[i] != Label::Water {
+                    continue;
+                }
+                let b = Self::bin(px[i]);
+                let n = if dry {
+                    &mut self.dry[b]
+                } else {
+                    &mut self.wet[b]
+                };
+                *n = n.saturating_add(1);
+            }
+        }
         let to_cam = cam_to_map.inverse();
         for (points, dry) in [(&lidar.dry, true), (&lidar.wet, false)] {
             for p in points {
@@ -479,6 +508,17 @@ impl ColourCheck {
         }
         vetoed
     }
+}
+
+/// The whole factor `k` by which a `w × h` image upsamples the organized stereo `cloud`
+/// registered to it (element (row, col) is pixel block (k·row.., k·col..)); `None` when it
+/// is not one.
+fn stereo_factor(cloud: &PointCloud, w: usize, h: usize) -> Option<usize> {
+    if !(cloud.is_organized() && cloud.cols > 0 && w % cloud.cols == 0) {
+        return None;
+    }
+    let k = w / cloud.cols;
+    (k > 0 && cloud.rows * k == h).then_some(k)
 }
 
 /// Sky-above-horizon rule with the cached rays: the same as
@@ -982,8 +1022,10 @@ impl FrameLabels {
                         reflection_check(&mut l, px, map_rays, camera, cam_to_map, enc);
                 }
                 if let Some(lidar) = lidar.filter(|_| self.cfg.colour_check) {
-                    st.colour_check_vetoed +=
-                        self.colour_check.run(&mut l, px, camera, cam_to_map, lidar);
+                    let stereo = stereo.and_then(|c| Some((c, stereo_factor(c, w, h)?)));
+                    st.colour_check_vetoed += self
+                        .colour_check
+                        .run(&mut l, px, camera, cam_to_map, lidar, stereo);
                 }
                 l
             }
@@ -1002,13 +1044,7 @@ impl FrameLabels {
                 classify_mwir(&mono_of(img), &g, m.hour, &m.classifier)?
             }
         };
-        let k = match stereo {
-            Some(c) if c.is_organized() && c.cols > 0 && w % c.cols == 0 => {
-                let k = w / c.cols;
-                (c.rows * k == h).then_some(k)
-            }
-            _ => None,
-        };
+        let k = stereo.and_then(|c| stereo_factor(c, w, h));
         let origin = Point3::from(cam_to_map.translation.vector);
         let reach = lidar.and_then(|l| l.reach.as_ref());
         let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);

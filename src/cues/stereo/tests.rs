@@ -637,3 +637,56 @@ fn points_within_one_noise_gate_but_below_the_level_together_are_reflections() {
         .collect();
     assert!(!mean_below_level(&[0, 1, 2, 3, 4], &edge, o, 0.0, &cfg));
 }
+
+/// What each element says of the surface: ground at the level, reflections and missing
+/// matches short of the column's farthest ground not ground, the rest nothing; and nothing
+/// at all unless asked.
+#[test]
+fn stereo_elements_say_ground_at_the_level_and_not_ground_at_reflections_and_gaps() {
+    let cfg = StereoCueConfig {
+        min_far_shores: 1,
+        ..StereoCueConfig::default()
+    };
+    let mut columns = island_and_ditch();
+    // Column C: dry ground with one missing match amid it, nothing matched beyond 9 m.
+    let nan = Point3::new(f64::NAN, f64::NAN, f64::NAN);
+    let c: Vec<Point3<f64>> = [3.0, 4.0, 5.0, f64::NAN, 7.0, 8.0, 9.0]
+        .into_iter()
+        .map(|x| {
+            if x.is_nan() {
+                nan
+            } else {
+                Point3::new(x, -0.3 * x, 0.0)
+            }
+        })
+        .collect();
+    columns.push(c);
+    let cloud = columns_cloud(&columns);
+    let off = stereo_reflections(&cloud, RES, 0.0, None, &cfg).unwrap();
+    assert!(off.seen.is_empty());
+    let out = stereo_reflections_with(&cloud, RES, 0.0, None, &cfg, true).unwrap();
+    assert_eq!(out.runs, 1);
+    let (rows, cols) = (cloud.rows, cloud.cols);
+    let at = |c: usize, i: usize| out.seen[(rows - 1 - i) * cols + c];
+    use StereoSeen::*;
+    // Column A: the first point starts the walk; ground to 6 m, then the wall's
+    // reflection.
+    assert_eq!(at(0, 0), Nothing);
+    for i in 1..7 {
+        assert_eq!(at(0, i), Ground, "A {i}");
+    }
+    for i in 7..11 {
+        assert_eq!(at(0, i), NotGround, "A {i}");
+    }
+    // Column B: the dry ditch, below the level with no confirmed run, says nothing; the
+    // ground beyond it is ground.
+    assert_eq!((at(1, 6), at(1, 7)), (Nothing, Nothing));
+    assert_eq!((at(1, 9), at(1, 10)), (Ground, Ground));
+    // Column C: the missing match amid the ground is not ground; beyond the farthest
+    // ground the column matched, a missing match says nothing.
+    assert_eq!(at(2, 3), NotGround);
+    assert_eq!((at(2, 2), at(2, 4)), (Ground, Ground));
+    for i in 7..rows {
+        assert_eq!(at(2, i), Nothing, "C {i}");
+    }
+}

@@ -713,8 +713,9 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
             reach: None,
             dry: d,
             wet: on_pale[..wet].to_vec(),
+            stereo: Vec::new(),
         };
-        let n = check.run(&mut labels, &px, &cam, &pose, &lidar);
+        let n = check.run(&mut labels, &px, &cam, &pose, &lidar, None);
         (n, labels)
     };
     // Three dry samples and none wet: the sign test cannot rule yet.
@@ -733,4 +734,48 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
     }
     // Found as often on water as on dry ground: the colour keeps its votes.
     assert_eq!(run(6, 6).0, 0);
+}
+
+/// A stereo cloud registered to the image at half its resolution: elements seen as ground
+/// under pale pixels count as dry samples of that colour, elements not seen as ground
+/// (reflections, missing matches short of the ground) as samples against it.
+#[test]
+fn colour_check_counts_stereo_verdicts_at_their_pixels() {
+    let (cam, pose) = camera();
+    let (w, h) = (cam.width, cam.height);
+    const PALE: [u8; 3] = [200, 200, 190];
+    let px: Vec<[u8; 3]> = (0..w * h)
+        .map(|i| if i % w < w / 2 { PALE } else { SKY })
+        .collect();
+    let (rows, cols) = (h / 2, w / 2);
+    let cloud = PointCloud::organized(rows, cols, vec![[f32::NAN; 3]; rows * cols]).unwrap();
+    let run = |ground: usize, not_ground: usize| -> u64 {
+        let mut labels = LabelImage::filled(w, h, Label::Water);
+        let mut stereo = vec![StereoSeen::Nothing; rows * cols];
+        // Pale pixels are the left half: element columns below cols / 2.
+        // Element (0, e) for e < cols / 2 lies under pale pixels.
+        assert!(ground + not_ground <= cols / 2);
+        for v in stereo.iter_mut().take(ground) {
+            *v = StereoSeen::Ground;
+        }
+        for v in stereo.iter_mut().skip(ground).take(not_ground) {
+            *v = StereoSeen::NotGround;
+        }
+        let surface = ScanSurface {
+            stereo,
+            ..ScanSurface::default()
+        };
+        ColourCheck::default().run(&mut labels, &px, &cam, &pose, &surface, Some((&cloud, 2)))
+    };
+    assert_eq!(run(3, 0), 0);
+    assert_eq!(run(4, 0) as usize, w / 2 * h);
+    assert_eq!(run(6, 6), 0);
+    // Verdicts for a cloud of another size are not read.
+    let mut labels = LabelImage::filled(w, h, Label::Water);
+    let surface = ScanSurface {
+        stereo: vec![StereoSeen::Ground; 10],
+        ..ScanSurface::default()
+    };
+    let n = ColourCheck::default().run(&mut labels, &px, &cam, &pose, &surface, Some((&cloud, 2)));
+    assert_eq!(n, 0);
 }
