@@ -51,7 +51,10 @@ fn the_core_crate_compiles_no_cli_plot_font_or_simulator() {
     let deps = normal_deps(&[]);
     assert!(deps.iter().any(|d| d == "nalgebra"), "{deps:?}");
     for name in NOT_IN_THE_CORE {
-        assert!(!deps.iter().any(|d| d == name), "{name} is in the core's tree");
+        assert!(
+            !deps.iter().any(|d| d == name),
+            "{name} is in the core's tree"
+        );
     }
 }
 
@@ -60,6 +63,9 @@ fn the_picture_brings_only_its_font() {
     let deps = normal_deps(&["render"]);
     assert!(deps.iter().any(|d| d == "font8x8"), "{deps:?}");
     for name in NOT_IN_THE_CORE.iter().filter(|n| **n != "font8x8") {
-        assert!(!deps.iter().any(|d| d == name), "{name} is in the core's tree");
+        assert!(
+            !deps.iter().any(|d| d == name),
+            "{name} is in the core's tree"
+        );
     }
 }

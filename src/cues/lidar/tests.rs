@@ -276,7 +276,7 @@ fn bottom_returns_give_depth_within_five_centimetres() {
 }
 
 #[test]
-fn deep_below_level_return_is_specular_and_mirrored_back() {
+fn deep_below_level_return_is_specular_and_left_out_of_the_terrain() {
     let cue = LidarCueModel::new(
         optics(1.0),
         BeamModel::Infer {
@@ -296,7 +296,10 @@ fn deep_below_level_return_is_specular_and_mirrored_back() {
     let out = cue.run(&cloud, RES, 0.0).unwrap();
     assert_eq!(out.stats.specular, 1);
     assert_eq!(out.stats.bottom, 0);
-    assert_eq!(out.corrected.xyz[3], [8.0, 0.0, 2.0]);
+    // Not fused as terrain: mirrored about the walked level it would stand where the tree
+    // is only if the water lay at that level.
+    assert!(out.corrected.xyz[3].iter().all(|v| v.is_nan()));
+    assert_eq!(out.corrected.xyz[2], [4.0, 0.0, 0.0]);
     // The ray crosses the level at x = 8 · 1/3.
     let k = key_of(RES, 8.0 / 3.0, 0.0);
     assert_eq!(out.evidence.get(k).unwrap().reflect, 1);
