@@ -433,6 +433,17 @@ impl ColourCheck {
             | (b as usize >> k)
     }
 
+    /// One more dry (or wet) sample of `colour`.
+    fn count(&mut self, colour: [u8; 3], dry: bool) {
+        let b = Self::bin(colour);
+        let n = if dry {
+            &mut self.dry[b]
+        } else {
+            &mut self.wet[b]
+        };
+        *n = n.saturating_add(1);
+    }
+
     fn vetoed(&self, bin: usize) -> bool {
         let (d, w) = (f64::from(self.dry[bin]), f64::from(self.wet[bin]));
         d - w >= CHECK_Z * (d + w + 1.0).sqrt()
@@ -467,13 +478,7 @@ impl ColourCheck {
                 if u >= w || v >= h || labels.data[i] != Label::Water {
                     continue;
                 }
-                let b = Self::bin(px[i]);
-                let n = if dry {
-                    &mut self.dry[b]
-                } else {
-                    &mut self.wet[b]
-                };
-                *n = n.saturating_add(1);
+                self.count(px[i], dry);
             }
         }
         let to_cam = cam_to_map.inverse();
@@ -490,13 +495,7 @@ impl ColourCheck {
                 if labels.data[i] != Label::Water {
                     continue;
                 }
-                let b = Self::bin(px[i]);
-                let n = if dry {
-                    &mut self.dry[b]
-                } else {
-                    &mut self.wet[b]
-                };
-                *n = n.saturating_add(1);
+                self.count(px[i], dry);
             }
         }
         let mut vetoed = 0;
