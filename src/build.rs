@@ -784,7 +784,7 @@ pub struct CueCounts {
     pub lidar_diag_ret: u64,
     /// Lidar returns from under the water surface (bottom returns, their depth kept as evidence).
     pub lidar_bottom: u64,
-    /// Lidar returns mirrored by the water surface, put back where the object is.
+    /// Lidar returns mirrored by the water surface: reflection evidence, left out of the terrain.
     pub lidar_specular: u64,
     /// Lidar ground returns darker than the scan's dark threshold (reflectivity cue).
     pub lidar_dark: u64,

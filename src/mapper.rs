@@ -999,11 +999,10 @@ impl Mapper {
                 c.noise = noise;
             }
             if s.reflections {
+                // Stereo describes the surface only on a rig without a lidar
+                // (`FrameCueConfig::stereo_surface`), so it never replaces the lidar's.
                 if let Some(st) = self.cues.apply_stereo(frame, grid, &mut rep.cues)? {
-                    match surface.as_mut() {
-                        Some(l) => l.merge(st),
-                        None => surface = Some(st),
-                    }
+                    surface = Some(st);
                 }
             } else {
                 rep.stereo_ingest = Some(grid.ingest(cloud, &noise)?);

@@ -283,9 +283,10 @@ pub struct LidarCues {
     pub surface: ScanSurface,
 }
 
-/// What one scan says of the surface, for the image labels
-/// ([`crate::project::FrameLabels`]): how far dry ground returned, and points (map frame)
-/// where it found dry ground or water.
+/// What a frame's range sensor says of the surface, for the image labels
+/// ([`crate::project::FrameLabels`]): from a lidar scan, how far dry ground returned and
+/// points (map frame) where it found dry ground or water; from stereo on a rig without a
+/// lidar, what each element says of the surface under its pixel.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ScanSurface {
     /// How far dry ground returned along each azimuth of this scan
@@ -302,21 +303,6 @@ pub struct ScanSurface {
     /// What each element of the frame's stereo cloud says of the surface under its pixel
     /// ([`super::stereo::StereoCues::seen`]); empty without one.
     pub stereo: Vec<super::stereo::StereoSeen>,
-}
-
-impl ScanSurface {
-    /// Adds another sensor's dry and wet points; the reach and the stereo verdicts stay
-    /// this one's, or become `other`'s when this has none.
-    pub fn merge(&mut self, other: ScanSurface) {
-        self.dry.extend(other.dry);
-        self.wet.extend(other.wet);
-        if self.reach.is_none() {
-            self.reach = other.reach;
-        }
-        if self.stereo.is_empty() {
-            self.stereo = other.stereo;
-        }
-    }
 }
 
 /// How far dry ground returned along each azimuth of one scan: the farthest lookahead of a

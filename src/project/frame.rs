@@ -449,7 +449,7 @@ impl ColourCheck {
         d - w >= CHECK_Z * (d + w + 1.0).sqrt()
     }
 
-    /// Counts the frame's lidar samples, and the verdicts of the stereo `(cloud, k)`
+    /// Counts the frame's lidar `samples`, and the verdicts of the stereo `(cloud, k)`
     /// registered to the image at `1/k` of its resolution, that land on colour water, then
     /// takes the water label from pixels of vetoed colours. Returns the pixels vetoed.
     fn run(
@@ -458,16 +458,16 @@ impl ColourCheck {
         px: &[[u8; 3]],
         camera: &CameraModel,
         cam_to_map: &Pose,
-        lidar: &ScanSurface,
+        samples: &ScanSurface,
         stereo: Option<(&PointCloud, usize)>,
     ) -> u64 {
         let bins = 1 << (3 * CHECK_BITS);
         self.dry.resize(bins, 0);
         self.wet.resize(bins, 0);
         let (w, h) = (labels.width, labels.height);
-        if let Some((cloud, k)) = stereo.filter(|(c, _)| c.len() == lidar.stereo.len()) {
+        if let Some((cloud, k)) = stereo.filter(|(c, _)| c.len() == samples.stereo.len()) {
             let half = (k - 1) / 2;
-            for (e, seen) in lidar.stereo.iter().enumerate() {
+            for (e, seen) in samples.stereo.iter().enumerate() {
                 let dry = match seen {
                     StereoSeen::Nothing => continue,
                     StereoSeen::Ground => true,
@@ -482,7 +482,7 @@ impl ColourCheck {
             }
         }
         let to_cam = cam_to_map.inverse();
-        for (points, dry) in [(&lidar.dry, true), (&lidar.wet, false)] {
+        for (points, dry) in [(&samples.dry, true), (&samples.wet, false)] {
             for p in points {
                 let Some([u, v]) = camera.project(&(to_cam * p)) else {
                     continue;
@@ -915,7 +915,7 @@ impl FrameLabels {
         &mut self,
         frame: &Frame,
         grid: &mut RollingGrid,
-        lidar: Option<&ScanSurface>,
+        samples: Option<&ScanSurface>,
     ) -> Result<FrameLabelsReport> {
         let mut rep = FrameLabelsReport::default();
         let any = self.cfg.colour.is_some() || self.cfg.swir.is_some() || self.cfg.mwir.is_some();
@@ -959,7 +959,7 @@ impl FrameLabels {
                         None
                     };
                     rep.dropped += self.run(
-                        cue, img, cam, &pose, stereo, ground_z, &surface, lidar, grid, &mut st,
+                        cue, img, cam, &pose, stereo, ground_z, &surface, samples, grid, &mut st,
                     )?;
                 }
             }
@@ -983,7 +983,7 @@ impl FrameLabels {
         stereo: Option<&PointCloud>,
         ground_z: f64,
         surface: &GridSurface,
-        lidar: Option<&ScanSurface>,
+        samples: Option<&ScanSurface>,
         grid: &mut RollingGrid,
         st: &mut SensorLabelStats,
     ) -> Result<u64> {
@@ -1020,11 +1020,11 @@ impl FrameLabels {
                     st.reflection_vetoed +=
                         reflection_check(&mut l, px, map_rays, camera, cam_to_map, enc);
                 }
-                if let Some(lidar) = lidar.filter(|_| self.cfg.colour_check) {
+                if let Some(samples) = samples.filter(|_| self.cfg.colour_check) {
                     let stereo = stereo.and_then(|c| Some((c, stereo_factor(c, w, h)?)));
                     st.colour_check_vetoed += self
                         .colour_check
-                        .run(&mut l, px, camera, cam_to_map, lidar, stereo);
+                        .run(&mut l, px, camera, cam_to_map, samples, stereo);
                 }
                 l
             }
@@ -1045,7 +1045,7 @@ impl FrameLabels {
         };
         let k = stereo.and_then(|c| stereo_factor(c, w, h));
         let origin = Point3::from(cam_to_map.translation.vector);
-        let reach = lidar.and_then(|l| l.reach.as_ref());
+        let reach = samples.and_then(|l| l.reach.as_ref());
         let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);
         let stereo_range = self.cfg.stereo_max_range.min(max_range);
         let cols: Vec<usize> = (0..w).step_by(s).collect();
