@@ -340,10 +340,16 @@ impl MapperConfig {
     }
 
     /// The part of the config the water stage needs.
+    /// The significance of a bottom return's depth comes from the configured lidar's range
+    /// noise where `water.min_bottom_depth_m` is not set.
     pub fn hazard_config(&self) -> HazardConfig {
+        let mut water = self.water;
+        if let (None, Some(l)) = (water.min_bottom_depth_m, &self.lidar) {
+            water.min_bottom_depth_m = Some(2.0 * l.noise.sigma0);
+        }
         HazardConfig {
             fusion: self.fusion,
-            water: self.water,
+            water,
             vehicle: self.vehicle,
         }
     }

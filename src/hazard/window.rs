@@ -70,7 +70,7 @@ impl CellInfos for WindowInfos<'_> {
         }
         let c = l.get(i);
         let p = c.ev.water_probability_in(self.fusion);
-        Some(Info::of(&c, p, self.grid.config().z_ref))
+        Some(Info::of(&c, p, self.fusion, self.grid.config().z_ref))
     }
 
     fn column(&self, x: i64, ys: std::ops::Range<i64>, mut f: impl FnMut(CellKey, &Info)) {

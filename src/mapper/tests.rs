@@ -167,3 +167,16 @@ proptest::proptest! {
         proptest::prop_assert!((ux - x).abs() < 1e-6 * (1.0 + x.abs()) && (uy - y).abs() < 1e-6 * (1.0 + y.abs()));
     }
 }
+
+#[test]
+fn a_bottom_returns_significant_depth_follows_the_lidars_noise() {
+    let mut c = MapperConfig::default();
+    let l = c.lidar.as_mut().unwrap();
+    l.noise.sigma0 = 0.015;
+    assert_eq!(c.hazard_config().water.min_bottom_depth_m, Some(0.03));
+    c.water.min_bottom_depth_m = Some(0.1);
+    assert_eq!(c.hazard_config().water.min_bottom_depth_m, Some(0.1));
+    c.water.min_bottom_depth_m = None;
+    c.lidar = None;
+    assert_eq!(c.hazard_config().water.min_bottom_depth_m, None);
+}

@@ -974,3 +974,101 @@ fn the_far_shore_across_unobserved_water_places_the_surface() {
     eprintln!("stream seen across unobserved water: surface RMS {rms:.4} m from the far shore");
     assert!(rms <= 0.03, "{rms}");
 }
+
+/// Flat dry ground at 0 with a 2 m square of cells whose lidar bottom returns were
+/// corrected against a level `level` m (the top of a kerb the scan line walked) and lie
+/// `bed_below_ground` m below the ground around them, with unit gain.
+fn ground_with_bottom_returns(level: f64, bed_below_ground: f64, returns: u32) -> TileMap {
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    for ky in -30..30 {
+        for kx in -30..30 {
+            let mut c = dry(0.0);
+            if (-10..10).contains(&kx) && (-10..10).contains(&ky) {
+                let depth = level + bed_below_ground;
+                for _ in 0..returns {
+                    c.ev.add_bottom_return(depth, (level * 1000.0).round() as i32, 1.0);
+                }
+            }
+            t.add(CellKey::new(kx, ky), &c);
+        }
+    }
+    t
+}
+
+#[test]
+fn bottom_returns_at_the_shores_level_are_not_water() {
+    // Pavement behind a kerb 15 cm high: its returns are "bed" 15 cm below the kerb's top,
+    // and level with the ground the body's shore finds.
+    let t = ground_with_bottom_returns(0.15, 0.0, 10);
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert!(map.bodies.is_empty(), "{:?}", map.bodies);
+    assert!(map.cells.iter().all(|c| c.class != Class::Water));
+}
+
+#[test]
+fn bottom_returns_below_the_shores_level_are_water_with_their_depth() {
+    // The same returns 30 cm below the ground around them: a pond's bed.
+    let t = ground_with_bottom_returns(0.15, 0.30, 10);
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    assert_eq!(b.cells.len(), 400);
+    let mean = b.depth.mean_m.unwrap();
+    assert!((mean - 0.30).abs() < 0.01, "{mean}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+    /// Bottom returns count as water exactly when their bed lies deeper below the fitted
+    /// surface than `min_bottom_depth_m`, whatever level the cue corrected them against.
+    #[test]
+    fn bottom_returns_count_only_below_the_significant_depth(
+        level in 0.02f64..0.6,
+        bed in 0.0f64..0.2,
+        returns in 1u32..30,
+    ) {
+        let t = ground_with_bottom_returns(level, bed, returns);
+        let cfg = HazardConfig::default();
+        let min = cfg.water.min_bottom_depth();
+        prop_assume!((bed - min).abs() > 0.005);
+        let map = HazardMap::from_tiles(&t, &cfg).unwrap();
+        let seeds = {
+            let mut ev = Evidence::default();
+            for _ in 0..returns {
+                ev.add_depth(0.1);
+            }
+            seeds_body(ev.water_probability(&cfg.fusion), &cfg.water)
+        };
+        prop_assert_eq!(!map.bodies.is_empty(), bed > min && seeds);
+    }
+}
+
+#[test]
+fn shallow_bottom_returns_stay_in_a_body_other_evidence_holds() {
+    // A pond seen by its no-returns whose bed the lidar sees 1 cm down: the returns are
+    // no evidence, but the cells stay water with their depth.
+    let (t, _) = scene(40, pond(2.0, Some(0.01)));
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let d = map.bodies[0].depth;
+    assert_eq!(d.unknown_cells, 0);
+    assert!(d.max_m.unwrap() < 0.02, "{d:?}");
+}
+
+#[test]
+fn min_bottom_depth_is_validated_and_follows_the_lidar() {
+    let mut cfg = WaterConfig {
+        min_bottom_depth_m: Some(f64::NAN),
+        ..WaterConfig::default()
+    };
+    let e = cfg.validate().unwrap_err().to_string();
+    assert!(e.contains("water.min_bottom_depth_m"), "{e}");
+    cfg.min_bottom_depth_m = Some(-0.1);
+    assert!(cfg.validate().is_err());
+    cfg.min_bottom_depth_m = None;
+    assert!(cfg.validate().is_ok());
+    assert_eq!(
+        cfg.min_bottom_depth(),
+        2.0 * crate::grid::RangeNoise::LIDAR.sigma0
+    );
+}
