@@ -601,11 +601,21 @@ impl Info {
         self.depth.is_some() && self.bottom_counts
     }
 
+    /// The water probability a body grows by: without the bottom returns once they no
+    /// longer count. (`p` itself stays what the evidence says: the occluder test's dry
+    /// ground reads it, so that one body's fit never depends on what another's took away.)
+    fn p_evidence(&self) -> f64 {
+        if self.bottom_counts {
+            self.p
+        } else {
+            self.p_without_bottom
+        }
+    }
+
     /// The cell with its bottom returns no longer evidence of water (their depth is still
     /// the cell's depth if other evidence keeps it in a body).
     fn without_bottom_evidence(self) -> Info {
         Info {
-            p: self.p_without_bottom,
             bottom_counts: false,
             ..self
         }
@@ -692,12 +702,13 @@ impl CellInfos for BTreeMap<CellKey, Info> {
 }
 
 /// Connected components with hysteresis over `p`, grown from `seeds` (every cell that
-/// seeds a body, in increasing key order): deterministic.
-fn components(
+/// seeds a body, in increasing key order): deterministic. Each with the seed it grew from,
+/// its smallest.
+fn components_seeded(
     cells: &impl CellInfos,
     seeds: impl IntoIterator<Item = CellKey>,
     cfg: &WaterConfig,
-) -> Vec<Vec<CellKey>> {
+) -> Vec<(CellKey, Vec<CellKey>)> {
     let mut seen: BTreeSet<CellKey> = BTreeSet::new();
     let mut out = Vec::new();
     for k in seeds {
@@ -713,7 +724,7 @@ fn components(
                 if !seen.contains(&n)
                     && cells
                         .get(n)
-                        .is_some_and(|i| i.p >= cfg.p_low || i.has_bottom_evidence())
+                        .is_some_and(|i| i.p_evidence() >= cfg.p_low || i.has_bottom_evidence())
                 {
                     seen.insert(n);
                     body.push(n);
@@ -722,7 +733,7 @@ fn components(
             }
         }
         body.sort_unstable();
-        out.push(body);
+        out.push((k, body));
     }
     out
 }
@@ -796,54 +807,99 @@ pub(crate) fn bodies_from(
     cfg: &WaterConfig,
     previous: &[WaterBody],
 ) -> Vec<WaterBody> {
-    let seeds: Vec<CellKey> = seeds.into_iter().collect();
     // Bottom returns that do not lie below the surface found by more than the lidar's
-    // noise are what dry ground at the water's level gives: they are no evidence, and the
-    // bodies are found again without them until every bottom return left lies deep enough
-    // (module documentation, section 1). The set only grows, so this ends; a surface that
-    // moved with the cells taken away can void more.
+    // noise are what dry ground at the water's level gives: they are no evidence (module
+    // documentation, section 1). Taking them away only shrinks or splits a component, and
+    // a body's fit does not read what others took away, so each component is refined on
+    // its own.
+    let mut void = BTreeSet::new();
+    let mut comps: Vec<(CellKey, Vec<CellKey>)> = components_seeded(cells, seeds, cfg)
+        .into_iter()
+        .flat_map(|(seed, comp)| refine_component(cells, seed, comp, res, cfg, &mut void))
+        .collect();
+    comps.sort_unstable_by_key(|&(seed, _)| seed);
+    let cells = WithoutBottom {
+        inner: cells,
+        void: &void,
+    };
+    let comps: Vec<Vec<CellKey>> = comps.into_iter().map(|(_, c)| c).collect();
+    bodies_once(&cells, comps, res, cfg, previous)
+}
+
+/// Most passes of [`refine_component`].
+const MAX_BOTTOM_PASSES: usize = 8;
+
+/// The components a first-pass component `comp` (grown from `seed`) leaves once the bottom
+/// returns that lie no more than `min_bottom_depth_m` below its bodies' surfaces are taken
+/// out of the evidence (added to `void`), found again until every bottom return left in a
+/// body lies deeper, at most [`MAX_BOTTOM_PASSES`] times. Each with the seed it grew from.
+pub(crate) fn refine_component(
+    cells: &impl CellInfos,
+    seed: CellKey,
+    comp: Vec<CellKey>,
+    res: f64,
+    cfg: &WaterConfig,
+    void: &mut BTreeSet<CellKey>,
+) -> Vec<(CellKey, Vec<CellKey>)> {
+    if !comp
+        .iter()
+        .any(|&k| cells.get(k).is_some_and(|i| i.depth.is_some()))
+    {
+        return vec![(seed, comp)];
+    }
     let min_depth = cfg.min_bottom_depth();
-    let mut void: BTreeSet<CellKey> = BTreeSet::new();
-    let mut bodies = bodies_once(cells, &seeds, res, cfg, previous);
+    let cell_area = res * res;
+    let all = comp.clone();
+    let mut comps = vec![(seed, comp)];
     for _ in 0..MAX_BOTTOM_PASSES {
-        let before = void.len();
-        void.extend(
-            bodies
+        let shallow: Vec<CellKey> = {
+            let cells = WithoutBottom {
+                inner: cells,
+                void: &*void,
+            };
+            comps
                 .iter()
-                .flat_map(|b| b.cells.iter().zip(&b.cell_depth_m))
-                .filter(|(_, d)| d.is_finite() && f64::from(**d) <= min_depth)
-                .map(|(&k, _)| k),
-        );
+                .filter(|(_, c)| c.len() as f64 * cell_area >= cfg.min_body_area_m2)
+                .filter_map(|(_, c)| body_of(0, c.clone(), &cells, res, cfg))
+                .flat_map(|b| {
+                    b.cells
+                        .into_iter()
+                        .zip(b.cell_depth_m)
+                        .filter(|(_, d)| d.is_finite() && f64::from(*d) <= min_depth)
+                        .map(|(k, _)| k)
+                })
+                .collect()
+        };
+        let before = void.len();
+        void.extend(shallow);
         if void.len() == before {
             break;
         }
         let cells = WithoutBottom {
             inner: cells,
-            void: &void,
+            void: &*void,
         };
-        let seeds: Vec<CellKey> = seeds
-            .iter()
-            .copied()
-            .filter(|&k| cells.get(k).is_some_and(|i| seeds_body(i.p, cfg)))
-            .collect();
-        bodies = bodies_once(&cells, &seeds, res, cfg, previous);
+        let seeds = all.iter().copied().filter(|&k| {
+            cells
+                .get(k)
+                .is_some_and(|i| seeds_body(i.p_evidence(), cfg))
+        });
+        comps = components_seeded(&cells, seeds, cfg);
     }
-    bodies
+    comps
 }
 
-/// Most passes of [`bodies_from`] that take bottom returns out of the evidence.
-const MAX_BOTTOM_PASSES: usize = 8;
-
-/// One pass of [`bodies_from`]: components, ids and each body's shore, surface and depth.
+/// The bodies of components `comps` (in increasing order of their seeds): ids, and each
+/// body's shore, surface and depth.
 fn bodies_once(
     cells: &impl CellInfos,
-    seeds: &[CellKey],
+    comps: Vec<Vec<CellKey>>,
     res: f64,
     cfg: &WaterConfig,
     previous: &[WaterBody],
 ) -> Vec<WaterBody> {
     let cell_area = res * res;
-    let comps: Vec<Vec<CellKey>> = components(cells, seeds.iter().copied(), cfg)
+    let comps: Vec<Vec<CellKey>> = comps
         .into_iter()
         .filter(|b| b.len() as f64 * cell_area >= cfg.min_body_area_m2)
         .collect();
