@@ -355,6 +355,10 @@ impl Scratch {
     }
 }
 
+/// The buckets one task of pass 2 fuses: each with its index, its cells' records and its
+/// part of the sort buffer.
+type Task<'a> = Vec<(usize, ElevMut<'a>, &'a mut [Sample])>;
+
 /// The elevation records of one bucket's cells (indices local to the bucket).
 struct ElevMut<'a> {
     occupied: &'a mut [bool],
@@ -702,15 +706,14 @@ impl RollingGrid {
             scratch.acc.resize_with(chunks, Vec::new);
         }
         let mut rest = &mut scratch.sorted[..total];
-        let mut tasks: Vec<Vec<(usize, ElevMut, &mut [Sample])>> =
-            (0..chunks).map(|_| Vec::new()).collect();
+        let mut tasks: Vec<Task> = (0..chunks).map(|_| Vec::new()).collect();
         for (bi, (lay, &c)) in split_buckets(layers).into_iter().zip(&counts).enumerate() {
             let (out, r) = std::mem::take(&mut rest).split_at_mut(sorted_len(c));
             rest = r;
             tasks[bi % chunks].push((bi, lay, out));
         }
         let add = |a: (u64, u64), b: (u64, u64)| (a.0 + b.0, a.1 + b.1);
-        let run = |(task, acc): (Vec<(usize, ElevMut, &mut [Sample])>, &mut Vec<Acc>)| {
+        let run = |(task, acc): (Task, &mut Vec<Acc>)| {
             let mut sum = (0, 0);
             for (bi, mut lay, out) in task {
                 let r = if dense(counts[bi]) {
