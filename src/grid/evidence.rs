@@ -550,8 +550,8 @@ mod tests {
     #[test]
     fn storage_per_cell() {
         assert_eq!(EVIDENCE_BYTES_PER_CELL, 54);
-        // Occupancy, elevation statistics, evidence.
-        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 1 + 56 + 54);
+        // Occupancy, the elevation record (one cache line), evidence.
+        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 1 + 64 + 54);
         let mut e = Evidence::default();
         let c: [u16; EVIDENCE_COUNTS] = std::array::from_fn(|i| i as u16 + 1);
         e.set_counts(c);

@@ -3,9 +3,10 @@
 //! One call to [`RollingGrid::ingest`] is one batch (a scan, a stereo frame, a chunk of a
 //! file). Points are range-weighted (σ grows with range, [`RangeNoise`]) and fused as exact
 //! integer sums in two passes: classify the points (in parallel over contiguous chunks of
-//! the cloud) into buckets of cells, then fuse each bucket (in parallel over buckets, each
-//! bucket's accumulators small enough to stay in cache). Since the sums are exact, the
-//! result depends neither on how many threads ran nor on how the cloud was cut.
+//! the cloud) into buckets of cells, then fuse each bucket (in parallel over buckets: a
+//! bucket's samples sorted by cell, each cell's one-line record read and written once).
+//! Since the sums are exact, the result depends neither on how many threads ran nor on
+//! how the cloud was cut.
 //!
 //! The below-surface gate. A point far below its cell's surface (a reflection seen in still
 //! water, the floor of a hole) must not drag the elevation down, and must not be lost: it
@@ -26,7 +27,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::cell::{quantize_mm, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
-use super::{Layers, RollingGrid};
+use super::{Elev, Layers, RollingGrid};
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
 
@@ -127,14 +128,20 @@ impl IngestStats {
     }
 }
 
-/// Cells per bucket: a bucket's accumulators (64 bytes each) take 256 KiB, so they stay in
-/// a core's L2 cache while the bucket's points are fused.
+/// Cells per bucket: a bucket's cell records (64 bytes each) take 256 KiB, so they stay in
+/// a core's L2 cache while the bucket's points are fused, and its samples are sorted by
+/// cell with one count per cell (16 KiB, in L1).
 const BUCKET_SHIFT: u32 = 12;
 const BUCKET_CELLS: usize = 1 << BUCKET_SHIFT;
 
-/// A bucket with fewer than `BUCKET_CELLS / SPARSE` samples is fused by sorting
-/// ([`fuse_sparse`]) rather than through its dense accumulators.
-const SPARSE: usize = 4;
+/// A bucket with fewer than `BUCKET_CELLS / SPARSE` samples is sorted by comparison: its
+/// samples cost less to sort than a pass over one count per cell of the bucket.
+const SPARSE: usize = 16;
+
+/// A bucket with at least `BUCKET_CELLS * DENSE` samples (several a cell, as in a dense
+/// batch) is fused through one accumulator a cell of the bucket instead of being sorted:
+/// each sample then costs one access to a line in L2, not three passes of sorting.
+const DENSE: usize = 4;
 
 /// One chunk of points after classification: its samples, bucketed by buffer index
 /// (`idx >> BUCKET_SHIFT`), and what happened to the rest.
@@ -144,8 +151,8 @@ struct Binned {
     stats: IngestStats,
 }
 
-/// A batch's accumulator for one cell: elevation only (ingest never writes evidence),
-/// with the cell's gate threshold cached, in exactly one 64-byte cache line.
+/// A dense bucket's accumulator for one cell: elevation only (ingest never writes
+/// evidence), with the cell's gate threshold cached, in exactly one 64-byte cache line.
 #[derive(Debug, Clone, Copy)]
 #[repr(C, align(64))]
 struct Acc {
@@ -197,18 +204,61 @@ impl Acc {
         self.zmin = self.zmin.min(z_mm);
         self.zmax = self.zmax.max(z_mm);
     }
+
+    /// The statistics accumulated.
+    #[inline]
+    fn elev(&self) -> Elev {
+        Elev {
+            hits: self.hits,
+            below: self.below,
+            zmin: self.zmin,
+            zmax: self.zmax,
+            sw: self.sw,
+            swz: self.swz,
+            swzz: self.swzz,
+        }
+    }
 }
 
 /// The prior's gate reference for cell `i`: (mean mm, spread variance mm²), or `None` when
 /// the prior has too few points to gate.
 #[inline]
 fn prior_gate(prior: &ElevMut, i: usize, support: u32) -> Option<(f32, f32)> {
-    (prior.hits[i] >= support).then(|| {
-        let sw = prior.sw[i] as f64;
-        let mean = prior.swz[i] as f64 / sw;
-        let var = (prior.swzz[i] as f64 / sw - mean * mean).max(0.0);
+    let e = &prior.elev[i];
+    (e.hits >= support).then(|| {
+        let sw = e.sw as f64;
+        let mean = i128_to_f64(e.swz) / sw;
+        let var = (i128_to_f64(e.swzz) / sw - mean * mean).max(0.0);
         (mean as f32, var as f32)
     })
+}
+
+/// `v as f64` (rounded to nearest, ties to even), through the one-instruction `i64`
+/// conversion whenever `v` fits in an `i64`: the same integer rounded by the same rule,
+/// so the same value, without the library call the `i128` conversion is.
+#[inline]
+fn i128_to_f64(v: i128) -> f64 {
+    match i64::try_from(v) {
+        Ok(s) => s as f64,
+        Err(_) => wide_to_f64(v),
+    }
+}
+
+/// `v as f64` out of line: inlined, the compiler computes the library call on both arms
+/// and selects, paying for it on every cell.
+#[cold]
+#[inline(never)]
+fn wide_to_f64(v: i128) -> f64 {
+    v as f64
+}
+
+/// A height (mm) at and above which no point is below the prior surface of `e`, whatever
+/// its noise, or `None` when the prior cannot gate: the gate is never nearer than
+/// `min_mm`, so a point below the surface lies below `mean − min_mm` ([`is_below`]
+/// compares with the same rounded mean, and floating-point subtraction is monotonic).
+#[inline]
+fn never_below(e: &Elev, support: u32, min_mm: f64) -> Option<f64> {
+    (e.hits >= support).then(|| (i128_to_f64(e.swz) / e.sw as f64) as f32 as f64 - min_mm)
 }
 
 /// The height (mm) at and above which a point is fused whatever its own noise: the gate
@@ -271,8 +321,12 @@ pub(crate) fn weight_of(sigma_m: f64) -> u32 {
 pub(crate) struct Scratch {
     /// One per chunk of points.
     binned: Vec<Binned>,
-    /// One per cell of the window, all `Acc::default()` between batches.
-    acc: Vec<Acc>,
+    /// The batch's samples sorted by cell, bucket after bucket (dense buckets excepted).
+    sorted: Vec<Sample>,
+    /// One per task of pass 2: the accumulators of the dense bucket it fuses (`BUCKET_CELLS`
+    /// of them, allocated when a task first meets a dense bucket), all `Acc::default()`
+    /// between buckets.
+    acc: Vec<Vec<Acc>>,
 }
 
 impl Scratch {
@@ -291,71 +345,43 @@ impl Scratch {
             .sum();
         self.binned.capacity() * std::mem::size_of::<Binned>()
             + buckets
-            + self.acc.capacity() * std::mem::size_of::<Acc>()
+            + self.sorted.capacity() * std::mem::size_of::<Sample>()
+            + self.acc.capacity() * std::mem::size_of::<Vec<Acc>>()
+            + self
+                .acc
+                .iter()
+                .map(|a| a.capacity() * std::mem::size_of::<Acc>())
+                .sum::<usize>()
     }
 }
 
-/// The elevation layers of one bucket's cells (indices local to the bucket).
+/// The buckets one task of pass 2 fuses: each with its index, its cells' records and its
+/// part of the sort buffer.
+type Task<'a> = Vec<(usize, ElevMut<'a>, &'a mut [Sample])>;
+
+/// The elevation records of one bucket's cells (indices local to the bucket).
 struct ElevMut<'a> {
     occupied: &'a mut [bool],
-    hits: &'a mut [u32],
-    below: &'a mut [u32],
-    sw: &'a mut [u64],
-    swz: &'a mut [i128],
-    swzz: &'a mut [i128],
-    zmin: &'a mut [i32],
-    zmax: &'a mut [i32],
+    elev: &'a mut [Elev],
 }
 
 impl ElevMut<'_> {
     /// [`Layers::merge_at`] for a cell without evidence.
     #[inline]
-    fn merge(&mut self, i: usize, a: &Acc) {
-        self.hits[i] += a.hits;
-        self.below[i] += a.below;
-        self.sw[i] += a.sw;
-        self.swz[i] += a.swz;
-        self.swzz[i] += a.swzz;
-        self.zmin[i] = self.zmin[i].min(a.zmin);
-        self.zmax[i] = self.zmax[i].max(a.zmax);
-        self.occupied[i] |= a.hits != 0 || a.below != 0;
+    fn merge(&mut self, i: usize, a: &Elev) {
+        self.elev[i].merge(a);
+        self.occupied[i] |= !a.no_points();
     }
 }
 
-/// The layers cut into buckets of `BUCKET_CELLS` cells, each with its accumulators.
-fn split_buckets<'a>(
-    layers: &'a mut Layers,
-    acc: &'a mut [Acc],
-) -> Vec<(ElevMut<'a>, &'a mut [Acc])> {
+/// The layers cut into buckets of `BUCKET_CELLS` cells.
+fn split_buckets(layers: &mut Layers) -> Vec<ElevMut<'_>> {
     let b = BUCKET_CELLS;
     layers
-        .hits
+        .elev
         .chunks_mut(b)
-        .zip(layers.below.chunks_mut(b))
-        .zip(layers.sw.chunks_mut(b))
-        .zip(layers.swz.chunks_mut(b))
-        .zip(layers.swzz.chunks_mut(b))
-        .zip(layers.zmin.chunks_mut(b))
-        .zip(layers.zmax.chunks_mut(b))
         .zip(layers.occupied.chunks_mut(b))
-        .zip(acc.chunks_mut(b))
-        .map(
-            |((((((((hits, below), sw), swz), swzz), zmin), zmax), occupied), acc)| {
-                (
-                    ElevMut {
-                        occupied,
-                        hits,
-                        below,
-                        sw,
-                        swz,
-                        swzz,
-                        zmin,
-                        zmax,
-                    },
-                    acc,
-                )
-            },
-        )
+        .map(|(elev, occupied)| ElevMut { occupied, elev })
         .collect()
 }
 
@@ -366,6 +392,16 @@ struct Sample {
     z_mm: i32,
     w: u32,
     sigma_mm: f32,
+}
+
+impl Sample {
+    /// Filler of the sort buffer (every slot is written before it is read).
+    const ZERO: Sample = Sample {
+        idx: 0,
+        z_mm: 0,
+        w: 0,
+        sigma_mm: 0.0,
+    };
 }
 
 enum Classified {
@@ -629,9 +665,6 @@ impl RollingGrid {
         if scratch.binned.len() < chunks {
             scratch.binned.resize_with(chunks, Binned::default);
         }
-        if scratch.acc.len() != ncells {
-            scratch.acc = vec![Acc::default(); ncells];
-        }
         let step = npts.div_ceil(chunks);
 
         // Pass 1, in parallel over contiguous chunks of points: classify every point and
@@ -651,23 +684,60 @@ impl RollingGrid {
         }
         let binned = &scratch.binned[..chunks];
 
-        // Pass 2, in parallel over buckets (each owns its cells' layers and accumulators):
-        // gate each sample against the prior surface and accumulate; then merge each touched
-        // cell, or split its batch points at height gaps. All sums are exact integers, so
-        // neither the chunking nor the order of the samples changes a cell.
-        let parts = split_buckets(layers, &mut scratch.acc);
-        let fuse = |(bi, (mut lay, cells)): (usize, (ElevMut, &mut [Acc]))| {
-            fuse_bucket(binned, bi, &mut lay, cells, k, min_mm, support)
-        };
+        // Pass 2, in parallel over buckets (each owns its cells' records and its part of
+        // the sort buffer): sort the bucket's samples by cell, then walk the cells in
+        // buffer order, each read and written once: gate its samples against the prior
+        // surface, accumulate, and merge, or split its batch points at height gaps. All
+        // sums are exact integers, so neither the chunking nor the order of the samples
+        // changes a cell.
+        let counts: Vec<usize> = (0..nbuckets)
+            .map(|bi| binned.iter().map(|p| p.buckets[bi].len()).sum())
+            .collect();
+        let dense = |c: usize| c >= BUCKET_CELLS * DENSE;
+        let sorted_len = |c: usize| if dense(c) { 0 } else { c };
+        let total: usize = counts.iter().map(|&c| sorted_len(c)).sum();
+        if scratch.sorted.len() < total {
+            scratch.sorted.resize(total, Sample::ZERO);
+        }
+        // Buckets are dealt to `chunks` tasks in turn (bucket `bi` to task `bi % chunks`),
+        // each with its own dense accumulators; a bucket's result does not depend on which
+        // task fuses it.
+        if scratch.acc.len() < chunks {
+            scratch.acc.resize_with(chunks, Vec::new);
+        }
+        let mut rest = &mut scratch.sorted[..total];
+        let mut tasks: Vec<Task> = (0..chunks).map(|_| Vec::new()).collect();
+        for (bi, (lay, &c)) in split_buckets(layers).into_iter().zip(&counts).enumerate() {
+            let (out, r) = std::mem::take(&mut rest).split_at_mut(sorted_len(c));
+            rest = r;
+            tasks[bi % chunks].push((bi, lay, out));
+        }
         let add = |a: (u64, u64), b: (u64, u64)| (a.0 + b.0, a.1 + b.1);
+        let run = |(task, acc): (Task, &mut Vec<Acc>)| {
+            let mut sum = (0, 0);
+            for (bi, mut lay, out) in task {
+                let r = if dense(counts[bi]) {
+                    if acc.is_empty() {
+                        *acc = vec![Acc::default(); BUCKET_CELLS];
+                    }
+                    fuse_dense(binned, bi, &mut lay, acc, k, min_mm, support)
+                } else {
+                    let counting = out.len() >= BUCKET_CELLS / SPARSE;
+                    fuse_bucket(binned, bi, &mut lay, out, counting, k, min_mm, support)
+                };
+                sum = add(sum, r);
+            }
+            sum
+        };
+        let pool = &mut scratch.acc[..chunks];
         let (fused, below) = if chunks == 1 {
             // A batch too small to split into chunks is fused on this thread too.
-            parts.into_iter().enumerate().map(fuse).fold((0, 0), add)
+            tasks.into_iter().zip(pool).map(run).fold((0, 0), add)
         } else {
-            parts
+            tasks
                 .into_par_iter()
-                .enumerate()
-                .map(fuse)
+                .zip(pool.par_iter_mut())
+                .map(run)
                 .reduce(|| (0, 0), add)
         };
 
@@ -758,9 +828,123 @@ fn bin_chunk_impl(ctx: &Ctx, range: std::ops::Range<usize>, nbuckets: usize, p: 
     p.stats = st;
 }
 
-/// Pass 2 for bucket `bi`: returns (fused, below) point counts.
+/// How many samples ahead of the cell being fused [`fuse_bucket`] prefetches a record.
+const PREFETCH_SAMPLES: usize = 16;
+
+/// Asks for the cache line at `p` (a hint; nothing where the target has no such hint).
+#[inline(always)]
+fn prefetch<T>(p: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch reads nothing architecturally and cannot fault; `p` is valid.
+    #[allow(unused_unsafe)]
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>((p as *const T).cast::<i8>());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
+/// Pass 2 for bucket `bi`: sorts its samples by cell into `out` (which holds exactly
+/// their number), by counting or else by comparison, then fuses each cell's run; returns
+/// (fused, below) point counts.
+#[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn fuse_bucket(
+    binned: &[Binned],
+    bi: usize,
+    lay: &mut ElevMut,
+    out: &mut [Sample],
+    counting: bool,
+    k: f64,
+    min_mm: f64,
+    support: u32,
+) -> (u64, u64) {
+    if out.is_empty() {
+        return (0, 0);
+    }
+    let mask = (BUCKET_CELLS - 1) as u32;
+    let samples = || binned.iter().flat_map(|p| &p.buckets[bi]);
+    if !counting {
+        for (o, s) in out.iter_mut().zip(samples()) {
+            *o = *s;
+        }
+        out.sort_unstable_by_key(|s| s.idx);
+    } else {
+        // Counting sort on the cell's index within the bucket.
+        let mut next = [0u32; BUCKET_CELLS];
+        for s in samples() {
+            next[(s.idx & mask) as usize] += 1;
+        }
+        let mut at = 0u32;
+        for n in next.iter_mut() {
+            let c = *n;
+            *n = at;
+            at += c;
+        }
+        for s in samples() {
+            let n = &mut next[(s.idx & mask) as usize];
+            out[*n as usize] = *s;
+            *n += 1;
+        }
+    }
+    let (mut fused, mut below) = (0u64, 0u64);
+    let mut i = 0;
+    while i < out.len() {
+        let idx = out[i].idx;
+        let mut j = i + 1;
+        while j < out.len() && out[j].idx == idx {
+            j += 1;
+        }
+        // The record a few cells on is asked for now: the cells are visited in buffer
+        // order but sparsely, where the hardware prefetcher does not follow.
+        if let Some(s) = out.get(j + PREFETCH_SAMPLES) {
+            prefetch(&lay.elev[(s.idx & mask) as usize]);
+        }
+        let run = &mut out[i..j];
+        i = j;
+        let l = (idx & mask) as usize;
+        // Every point fused; then, only if one of them may lie below the prior surface,
+        // again through the gate.
+        let mut a = Elev::default();
+        for s in run.iter() {
+            a.add(s.z_mm, s.w);
+        }
+        fused += a.hits as u64;
+        if never_below(&lay.elev[l], support, min_mm).is_some_and(|h| (a.zmin as f64) < h) {
+            let gate_fast = fast_threshold(prior_gate(lay, l, support), k, min_mm);
+            fused -= a.hits as u64;
+            a = Elev::default();
+            for s in run.iter() {
+                if s.z_mm < gate_fast && is_below(lay, l, support, s, k, min_mm) {
+                    a.below += 1;
+                    below += 1;
+                    continue;
+                }
+                a.add(s.z_mm, s.w);
+                fused += 1;
+            }
+        }
+        let needs_split =
+            lay.elev[l].hits < support && a.hits >= 2 && (a.zmax as f64 - a.zmin as f64) > min_mm;
+        if needs_split {
+            // A cell seen for the first time with a wide spread: split its points at
+            // height gaps.
+            let nbelow = split_and_merge(lay, l, run, k, min_mm);
+            fused -= nbelow as u64;
+            below += nbelow as u64;
+        } else {
+            lay.merge(l, &a);
+        }
+    }
+    (fused, below)
+}
+
+/// Pass 2 for a dense bucket `bi`, through its accumulators `cells` (all
+/// `Acc::default()` on entry and on return): returns (fused, below) point counts. The
+/// same rules as [`fuse_bucket`], sample by sample.
+#[inline(never)]
+fn fuse_dense(
     binned: &[Binned],
     bi: usize,
     lay: &mut ElevMut,
@@ -769,10 +953,6 @@ fn fuse_bucket(
     min_mm: f64,
     support: u32,
 ) -> (u64, u64) {
-    let count: usize = binned.iter().map(|p| p.buckets[bi].len()).sum();
-    if count < BUCKET_CELLS / SPARSE {
-        return fuse_sparse(binned, bi, lay, k, min_mm, support);
-    }
     let mask = (BUCKET_CELLS - 1) as u32;
     let samples = || binned.iter().flat_map(|p| &p.buckets[bi]);
     let mut touched: Vec<u32> = Vec::new();
@@ -799,12 +979,12 @@ fn fuse_bucket(
         let l = l as usize;
         let b = cells[l];
         let needs_split =
-            lay.hits[l] < support && b.hits >= 2 && (b.zmax as f64 - b.zmin as f64) > min_mm;
+            lay.elev[l].hits < support && b.hits >= 2 && (b.zmax as f64 - b.zmin as f64) > min_mm;
         if needs_split {
             cells[l].group = flagged.len() as u32;
             flagged.push(l as u32);
         } else {
-            lay.merge(l, &b);
+            lay.merge(l, &b.elev());
             cells[l] = Acc::default();
         }
     }
@@ -835,62 +1015,12 @@ fn split_and_merge(lay: &mut ElevMut, l: usize, pts: &mut [Sample], k: f64, min_
     let (kept, nbelow) = split_cell(pts, k, min_mm);
     // No point of a split cell was gated (its prior was unsupported), so the batch's
     // statistics are exactly `kept` and `nbelow`.
-    let a = Acc {
-        hits: kept.hits,
+    let a = Elev {
         below: nbelow,
-        sw: kept.sw,
-        swz: kept.swz,
-        swzz: kept.swzz,
-        zmin: kept.zmin,
-        zmax: kept.zmax,
-        ..Acc::default()
+        ..Elev::of(&kept)
     };
     lay.merge(l, &a);
     nbelow
-}
-
-/// Pass 2 for a bucket with few samples for its cells (a small batch): the dense
-/// accumulators would cost a cache miss per touched cell, so the samples are sorted by
-/// cell instead and each cell's run is fused on the stack, by the same rules.
-fn fuse_sparse(
-    binned: &[Binned],
-    bi: usize,
-    lay: &mut ElevMut,
-    k: f64,
-    min_mm: f64,
-    support: u32,
-) -> (u64, u64) {
-    let mask = (BUCKET_CELLS - 1) as u32;
-    let mut v: Vec<Sample> = binned
-        .iter()
-        .flat_map(|p| p.buckets[bi].iter().copied())
-        .collect();
-    v.sort_unstable_by_key(|s| s.idx);
-    let (mut fused, mut below) = (0u64, 0u64);
-    for run in v.chunk_by_mut(|a, b| a.idx == b.idx) {
-        let l = (run[0].idx & mask) as usize;
-        let gate_fast = fast_threshold(prior_gate(lay, l, support), k, min_mm);
-        let mut a = Acc::default();
-        for s in run.iter() {
-            if s.z_mm < gate_fast && is_below(lay, l, support, s, k, min_mm) {
-                a.below += 1;
-                below += 1;
-                continue;
-            }
-            a.add(s.z_mm, s.w);
-            fused += 1;
-        }
-        let needs_split =
-            lay.hits[l] < support && a.hits >= 2 && (a.zmax as f64 - a.zmin as f64) > min_mm;
-        if needs_split {
-            let nbelow = split_and_merge(lay, l, run, k, min_mm);
-            fused -= nbelow as u64;
-            below += nbelow as u64;
-        } else {
-            lay.merge(l, &a);
-        }
-    }
-    (fused, below)
 }
 
 /// The exact gate test against the prior surface (taken only below the fast threshold).
@@ -984,6 +1114,81 @@ mod tests {
             1 => Just(f32::INFINITY),
             1 => prop_oneof![Just(1e30f32), Just(-3e9), Just(2.1e9), Just(1e-40)],
         ]
+    }
+
+    /// Pass 2 of `cloud` into `g` with every bucket fused by one path: 0 sorts by
+    /// comparison, 1 by counting, 2 through dense accumulators.
+    fn fuse_by(g: &mut RollingGrid, cloud: &PointCloud, path: u8) -> (u64, u64) {
+        let ctx = g.ctx(cloud, &RangeNoise::LIDAR);
+        let nb = (g.n * g.n).div_ceil(BUCKET_CELLS);
+        let mut p = Binned::default();
+        bin_chunk(&ctx, 0..cloud.len(), nb, &mut p);
+        let binned = [p];
+        let (k, min_mm) = (g.cfg.gate_sigma, g.cfg.gate_min_m * 1000.0);
+        let support = g.cfg.min_support.max(1);
+        let mut acc = vec![Acc::default(); BUCKET_CELLS];
+        let mut sum = (0, 0);
+        for (bi, mut lay) in split_buckets(&mut g.layers).into_iter().enumerate() {
+            let mut out = vec![Sample::ZERO; binned[0].buckets[bi].len()];
+            let (f, b) = match path {
+                2 => fuse_dense(&binned, bi, &mut lay, &mut acc, k, min_mm, support),
+                _ => fuse_bucket(
+                    &binned,
+                    bi,
+                    &mut lay,
+                    &mut out,
+                    path == 1,
+                    k,
+                    min_mm,
+                    support,
+                ),
+            };
+            assert!(acc.iter().all(|a| a.is_untouched() && a.group == u32::MAX));
+            sum = (sum.0 + f, sum.1 + b);
+        }
+        sum
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// The three ways pass 2 fuses a bucket (sorted by comparison, sorted by counting,
+        /// dense accumulators) give the same grid and the same counts, batch after batch:
+        /// the prior gate (second batch) and the first batch's split both run.
+        #[test]
+        fn every_fuse_path_gives_the_same_grid(
+            pts in prop::collection::vec(
+                (-1.0f32..1.0, -1.0f32..1.0, -0.05f32..0.05, 0u8..8), 1..3000),
+            cut in 0usize..3000,
+        ) {
+            let xyz: Vec<[f32; 3]> = pts
+                .iter()
+                .map(|&(x, y, dz, kind)| {
+                    [x, y, 0.2 * (x * 0.5).sin() + dz - if kind == 0 { 0.9 } else { 0.0 }]
+                })
+                .collect();
+            let cut = cut % xyz.len();
+            let batches = [
+                PointCloud::unorganized(xyz[..cut].to_vec()),
+                PointCloud::unorganized(xyz[cut..].to_vec()),
+            ];
+            let cfg = GridConfig { size_cells: 100, ..GridConfig::default() };
+            let run = |path: u8| {
+                let mut g = RollingGrid::new(cfg.clone(), 0.0, 0.0).unwrap();
+                let counts: Vec<_> = batches.iter().map(|b| fuse_by(&mut g, b, path)).collect();
+                (g, counts)
+            };
+            let (g0, c0) = run(0);
+            // Cells of 0.1 m: a few points a cell, so that the prior gates the second
+            // batch (whose reflections are counted below) once the first is large.
+            if cut >= 2000 && xyz.len() - cut >= 200 {
+                prop_assert!(c0[1].1 > 0, "no point of the second batch was gated");
+            }
+            for path in [1, 2] {
+                let (g, c) = run(path);
+                prop_assert_eq!(&c, &c0, "path {}", path);
+                prop_assert!(g == g0, "grids differ on path {}", path);
+            }
+        }
     }
 
     proptest! {

@@ -1,7 +1,8 @@
 //! The rolling elevation grid and the global tiled map.
 //!
-//! [`RollingGrid`] is a square window of cells that follows the vehicle. Its layers are
-//! structure-of-arrays over a circular buffer: a cell with global key `(kx, ky)` lives at
+//! [`RollingGrid`] is a square window of cells that follows the vehicle. Its layers (one
+//! elevation record a cell, the evidence as structure-of-arrays) are laid over a circular
+//! buffer: a cell with global key `(kx, ky)` lives at
 //! buffer position `(kx mod N, ky mod N)`, so moving the window only changes which keys
 //! are in view and clears the rows and columns that wrap; nothing is copied. Users address
 //! cells by world position or by [`CellKey`], never by buffer index.
@@ -157,20 +158,98 @@ impl CellSink for DiscardSink {
     fn accept(&mut self, _key: CellKey, _cell: &CellStats) {}
 }
 
-/// Structure-of-arrays storage of [`CellStats`].
+/// The elevation statistics of one cell ([`CellStats`] without its evidence), laid out
+/// in exactly one 64-byte cache line: everything ingest reads and writes for a cell (the
+/// prior surface its gate tests points against, and the merge of a batch) is one line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(C, align(64))]
+pub(crate) struct Elev {
+    pub hits: u32,
+    pub below: u32,
+    pub zmin: i32,
+    pub zmax: i32,
+    pub sw: u64,
+    pub swz: i128,
+    pub swzz: i128,
+}
+
+impl Default for Elev {
+    fn default() -> Self {
+        Elev::of(&CellStats::default())
+    }
+}
+
+impl Elev {
+    /// The elevation statistics of `c`.
+    #[inline]
+    pub fn of(c: &CellStats) -> Self {
+        Elev {
+            hits: c.hits,
+            below: c.below,
+            zmin: c.zmin,
+            zmax: c.zmax,
+            sw: c.sw,
+            swz: c.swz,
+            swzz: c.swzz,
+        }
+    }
+
+    /// As [`CellStats`], with empty evidence.
+    #[inline]
+    pub fn stats(&self) -> CellStats {
+        CellStats {
+            hits: self.hits,
+            below: self.below,
+            sw: self.sw,
+            swz: self.swz,
+            swzz: self.swzz,
+            zmin: self.zmin,
+            zmax: self.zmax,
+            ev: Evidence::default(),
+        }
+    }
+
+    /// Fuses one quantized measurement ([`CellStats::add`]).
+    #[inline]
+    pub fn add(&mut self, z_mm: i32, w: u32) {
+        // |w·z| < 2^55 fits i64; the square needs one widening multiply.
+        let wz = w as i64 * z_mm as i64;
+        self.hits += 1;
+        self.sw += w as u64;
+        self.swz += wz as i128;
+        self.swzz += wz as i128 * z_mm as i128;
+        self.zmin = self.zmin.min(z_mm);
+        self.zmax = self.zmax.max(z_mm);
+    }
+
+    /// The elevation part of [`CellStats::merge`].
+    #[inline]
+    pub fn merge(&mut self, o: &Elev) {
+        self.hits += o.hits;
+        self.below += o.below;
+        self.sw += o.sw;
+        self.swz += o.swz;
+        self.swzz += o.swzz;
+        self.zmin = self.zmin.min(o.zmin);
+        self.zmax = self.zmax.max(o.zmax);
+    }
+
+    /// True when no point was recorded (fused or below the surface).
+    #[inline]
+    pub fn no_points(&self) -> bool {
+        self.hits == 0 && self.below == 0
+    }
+}
+
+/// Storage of [`CellStats`]: the elevation statistics as one record a cell, the evidence
+/// as structure-of-arrays.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Layers {
     /// Whether the cell holds anything (`!CellStats::is_empty`), kept by every writer: the
     /// water stage asks it of every cell of the window every frame, and one byte a cell is
-    /// read far faster than the dozen layers it stands for.
+    /// read far faster than the records it stands for.
     occupied: Vec<bool>,
-    pub hits: Vec<u32>,
-    pub below: Vec<u32>,
-    pub sw: Vec<u64>,
-    pub swz: Vec<i128>,
-    pub swzz: Vec<i128>,
-    pub zmin: Vec<i32>,
-    pub zmax: Vec<i32>,
+    pub elev: Vec<Elev>,
     /// Evidence event counts in [`Evidence::counts`] order.
     pub ev_counts: Vec<[u16; EVIDENCE_COUNTS]>,
     pub ev_level_n: Vec<u32>,
@@ -182,16 +261,9 @@ pub(crate) struct Layers {
 
 impl Layers {
     fn new(n: usize) -> Self {
-        let e = CellStats::default();
         Layers {
             occupied: vec![false; n],
-            hits: vec![e.hits; n],
-            below: vec![e.below; n],
-            sw: vec![e.sw; n],
-            swz: vec![e.swz; n],
-            swzz: vec![e.swzz; n],
-            zmin: vec![e.zmin; n],
-            zmax: vec![e.zmax; n],
+            elev: vec![Elev::default(); n],
             ev_counts: vec![[0; EVIDENCE_COUNTS]; n],
             ev_level_n: vec![0; n],
             ev_level_sum: vec![0; n],
@@ -200,9 +272,9 @@ impl Layers {
         }
     }
 
-    /// Bytes of layer storage per cell: 1 for occupancy, 56 for the elevation statistics,
-    /// the rest evidence.
-    pub const BYTES_PER_CELL: usize = 1 + 4 + 4 + 8 + 16 + 16 + 4 + 4 + EVIDENCE_BYTES_PER_CELL;
+    /// Bytes of layer storage per cell: 1 for occupancy, 64 for the elevation record, the
+    /// rest evidence.
+    pub const BYTES_PER_CELL: usize = 1 + std::mem::size_of::<Elev>() + EVIDENCE_BYTES_PER_CELL;
 
     /// Bytes allocated by the layers (their capacities).
     fn heap_bytes(&self) -> usize {
@@ -210,13 +282,7 @@ impl Layers {
             v.capacity() * std::mem::size_of::<T>()
         }
         b(&self.occupied)
-            + b(&self.hits)
-            + b(&self.below)
-            + b(&self.sw)
-            + b(&self.swz)
-            + b(&self.swzz)
-            + b(&self.zmin)
-            + b(&self.zmax)
+            + b(&self.elev)
             + b(&self.ev_counts)
             + b(&self.ev_level_n)
             + b(&self.ev_level_sum)
@@ -242,7 +308,7 @@ impl Layers {
 
     #[inline]
     pub fn set_ev(&mut self, i: usize, e: &Evidence) {
-        self.occupied[i] = self.hits[i] != 0 || self.below[i] != 0 || !e.is_empty();
+        self.occupied[i] = !self.elev[i].no_points() || !e.is_empty();
         self.ev_counts[i] = e.counts();
         self.ev_level_n[i] = e.level_n;
         self.ev_level_sum[i] = e.level_sum_mm;
@@ -254,12 +320,13 @@ impl Layers {
     /// [`CellStats::mean_mm`] and [`CellStats::elevation_std_m`] read.
     #[inline]
     pub fn elevation_stats(&self, i: usize) -> CellStats {
+        let e = &self.elev[i];
         CellStats {
-            hits: self.hits[i],
-            below: self.below[i],
-            sw: self.sw[i],
-            swz: self.swz[i],
-            swzz: self.swzz[i],
+            hits: e.hits,
+            below: e.below,
+            sw: e.sw,
+            swz: e.swz,
+            swzz: e.swzz,
             ..CellStats::default()
         }
     }
@@ -267,34 +334,20 @@ impl Layers {
     #[inline]
     pub fn get(&self, i: usize) -> CellStats {
         CellStats {
-            zmin: self.zmin[i],
-            zmax: self.zmax[i],
             ev: self.get_ev(i),
-            ..self.elevation_stats(i)
+            ..self.elev[i].stats()
         }
     }
 
     #[inline]
     pub fn set(&mut self, i: usize, c: &CellStats) {
-        self.hits[i] = c.hits;
-        self.below[i] = c.below;
-        self.sw[i] = c.sw;
-        self.swz[i] = c.swz;
-        self.swzz[i] = c.swzz;
-        self.zmin[i] = c.zmin;
-        self.zmax[i] = c.zmax;
+        self.elev[i] = Elev::of(c);
         self.set_ev(i, &c.ev);
     }
 
     #[inline]
     pub fn merge_at(&mut self, i: usize, c: &CellStats) {
-        self.hits[i] += c.hits;
-        self.below[i] += c.below;
-        self.sw[i] += c.sw;
-        self.swz[i] += c.swz;
-        self.swzz[i] += c.swzz;
-        self.zmin[i] = self.zmin[i].min(c.zmin);
-        self.zmax[i] = self.zmax[i].max(c.zmax);
+        self.elev[i].merge(&Elev::of(c));
         self.occupied[i] |= c.hits != 0 || c.below != 0;
         if !c.ev.is_empty() {
             self.merge_ev_at(i, &c.ev);
@@ -374,8 +427,9 @@ impl RollingGrid {
     }
 
     /// Bytes the grid holds on the heap: `(layers, ingest scratch)`, from the capacities
-    /// of every allocation (the layers are per cell; the scratch is one accumulator per
-    /// cell plus the binned points of the largest batch so far).
+    /// of every allocation (the layers are per cell; the scratch is the binned and sorted
+    /// points of the largest batch so far, and the accumulators of a bucket of cells per
+    /// thread once a batch has had a dense bucket).
     pub fn heap_bytes(&self) -> (usize, usize) {
         (self.layers.heap_bytes(), self.scratch.heap_bytes())
     }
