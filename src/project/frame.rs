@@ -1146,13 +1146,16 @@ impl FrameLabels {
         // level it gives (see `tighten_hole_levels`); rows in parallel, into the buffers
         // of the last frame.
         buf.hits.resize(nr * nc, None);
+        // Zeroed here, not per row: a row without sampled columns (an image 0 pixels wide)
+        // is never visited.
+        buf.counts.clear();
         buf.counts.resize(nr, [0; 4]);
         buf.hits
             .par_chunks_mut(nc.max(1))
             .zip(buf.counts[..nr].par_iter_mut())
             .zip(rows.par_iter())
             .for_each(|((out, n), &y)| {
-                *n = [0u64; 4]; // via point, via ray, no hit, beyond reach
+                // n: via point, via ray, no hit, beyond reach
                 for (slot, &x) in out.iter_mut().zip(cols) {
                     *slot = (|| {
                         let i = y * w + x;
