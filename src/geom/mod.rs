@@ -39,6 +39,14 @@ pub fn floor_i64(v: f64) -> i64 {
     t.saturating_sub((v < t as f64) as i64)
 }
 
+/// `v.ceil() as i64`, bit for bit (NaN → 0, saturating), without a call: see
+/// [`floor_i64`].
+#[inline(always)]
+pub fn ceil_i64(v: f64) -> i64 {
+    let t = v as i64;
+    t.saturating_add((v > t as f64) as i64)
+}
+
 /// True when every component of the pose is finite and the rotation is a unit quaternion.
 pub fn pose_is_finite(p: &Pose) -> bool {
     let q = p.rotation.coords;
@@ -210,6 +218,11 @@ mod tests {
         fn floor_i64_is_floor_as_i64(v in proptest::num::f64::ANY) {
             proptest::prop_assert_eq!(super::floor_i64(v), v.floor() as i64);
         }
+
+        #[test]
+        fn ceil_i64_is_ceil_as_i64(v in proptest::num::f64::ANY) {
+            proptest::prop_assert_eq!(super::ceil_i64(v), v.ceil() as i64);
+        }
     }
 
     #[test]
@@ -229,8 +242,11 @@ mod tests {
             i64::MIN as f64,
             -9.3e18,
             4503599627370495.5,
+            -4503599627370495.5,
+            9.3e18,
         ] {
             assert_eq!(super::floor_i64(v), v.floor() as i64, "{v}");
+            assert_eq!(super::ceil_i64(v), v.ceil() as i64, "{v}");
         }
     }
 

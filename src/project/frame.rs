@@ -29,7 +29,7 @@ use crate::classify::{Label, LabelImage, MonoImage};
 use crate::cues::{ScanSurface, StereoSeen};
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
-use crate::geom::{pose_is_finite, PointCloud, Pose};
+use crate::geom::{ceil_i64, floor_i64, pose_is_finite, PointCloud, Pose};
 use crate::grid::{CellKey, Evidence, RollingGrid};
 use crate::io::frames::{Frame, SensorImage};
 use crate::io::ros::convert::Pixels;
@@ -378,8 +378,9 @@ impl RayCache {
     }
 }
 
-/// The per-frame label runner. Keeps each camera's pixel rays and the vote raster between
-/// frames, so a frame pays neither undistortion nor allocation.
+/// The per-frame label runner. Keeps each camera's pixel rays, the vote raster, the
+/// elevation raster and the per-pixel buffers (labels, sampled pixels' hits, per-row votes)
+/// between frames, so a frame pays neither undistortion nor allocation.
 #[derive(Debug, Clone)]
 pub struct FrameLabels {
     /// Which sensors label, and how.
@@ -392,6 +393,27 @@ pub struct FrameLabels {
     raster: Vec<f32>,
     /// What the log's range sensors said of the ground under each colour so far.
     colour_check: ColourCheck,
+    /// Per-pixel storage of the last frame, reused.
+    bufs: PixelBuffers,
+}
+
+/// The label stage's per-pixel buffers, kept from frame to frame so that a frame allocates
+/// nothing: their sizes follow the image, not the window.
+#[derive(Debug, Clone, Default)]
+struct PixelBuffers {
+    /// The colour image's labels.
+    labels: Vec<Label>,
+    /// The sampled image rows and columns.
+    rows: Vec<usize>,
+    cols: Vec<usize>,
+    /// Per sampled pixel, row-major: its hit.
+    hits: Vec<Option<Hit>>,
+    /// Per sampled row: pixels placed via a point, via a ray, not placed, beyond reach.
+    counts: Vec<[u64; 4]>,
+    /// Scratch of `tighten_hole_levels`.
+    levels: Vec<f64>,
+    /// Per sampled row: its cell votes (raster index, water, level).
+    votes: Vec<Vec<(u32, bool, f32)>>,
 }
 
 /// Bits per channel of the colour bins the [`ColourCheck`] counts in.
@@ -763,52 +785,54 @@ const HOLE_LEVEL_WINDOW: usize = 8;
 /// below its banks, on the near bank. It moves along its ray to where the ray meets the
 /// tightened level.
 fn tighten_hole_levels(
-    per_row: &mut [(Vec<Option<Hit>>, [u64; 4])],
+    hits: &mut [Option<Hit>],
     nc: usize,
     origin: Point3<f64>,
+    scratch: &mut Vec<f64>,
 ) {
-    let nr = per_row.len();
-    let upper: Vec<f64> = per_row
-        .iter()
-        .flat_map(|(hits, _)| {
-            hits.iter().map(|h| match h {
-                Some(h @ Hit { floor: Some(_), .. }) => h.p.z,
-                _ => f64::INFINITY,
-            })
-        })
-        .collect();
-    if upper.iter().all(|b| b.is_infinite()) {
+    if nc == 0 {
         return;
     }
-    // The window minimum, over columns, then rows.
+    let nr = hits.len() / nc;
+    // Per sampled pixel its upper bound (∞: none), then the window minimum over columns.
+    scratch.clear();
+    scratch.extend(hits.iter().map(|h| match h {
+        Some(h @ Hit { floor: Some(_), .. }) => h.p.z,
+        _ => f64::INFINITY,
+    }));
+    if scratch.iter().all(|b| b.is_infinite()) {
+        return;
+    }
     let k = HOLE_LEVEL_WINDOW;
-    let across: Vec<f64> = (0..nr * nc)
-        .map(|i| {
-            let (r, c) = (i / nc, i % nc);
-            upper[r * nc + c.saturating_sub(k)..r * nc + (c + k + 1).min(nc)]
+    let n = scratch.len();
+    scratch.extend_from_within(..);
+    let (upper, across) = scratch.split_at_mut(n);
+    for (r, row) in across.chunks_mut(nc).enumerate() {
+        let up = &upper[r * nc..(r + 1) * nc];
+        for (c, a) in row.iter_mut().enumerate() {
+            *a = up[c.saturating_sub(k)..(c + k + 1).min(nc)]
                 .iter()
-                .fold(f64::INFINITY, |a, &b| a.min(b))
-        })
-        .collect();
-    for (r, (hits, _)) in per_row.iter_mut().enumerate() {
-        for (c, h) in hits.iter_mut().enumerate() {
-            let Some(Hit {
-                floor: Some(floor),
-                level,
-                p,
-                open,
-                ..
-            }) = h
-            else {
-                continue;
-            };
-            let low = (r.saturating_sub(k)..(r + k + 1).min(nr))
-                .map(|rr| across[rr * nc + c])
-                .fold(f64::INFINITY, f64::min);
-            *level = low.max(*floor).min(*level);
-            if *open && *level < p.z && p.z < origin.z {
-                *p = origin + (*p - origin) * ((origin.z - *level) / (origin.z - p.z));
-            }
+                .fold(f64::INFINITY, |a, &b| a.min(b));
+        }
+    }
+    for (i, h) in hits.iter_mut().enumerate() {
+        let Some(Hit {
+            floor: Some(floor),
+            level,
+            p,
+            open,
+            ..
+        }) = h
+        else {
+            continue;
+        };
+        let (r, c) = (i / nc, i % nc);
+        let low = (r.saturating_sub(k)..(r + k + 1).min(nr))
+            .map(|rr| across[rr * nc + c])
+            .fold(f64::INFINITY, f64::min);
+        *level = low.max(*floor).min(*level);
+        if *open && *level < p.z && p.z < origin.z {
+            *p = origin + (*p - origin) * ((origin.z - *level) / (origin.z - p.z));
         }
     }
 }
@@ -826,64 +850,101 @@ fn quad_cells(surface: &GridSurface, q: [Vector4<f64>; 4], mut f: impl FnMut(usi
     }
     let [a, b, c, d] = q;
     let res = surface.resolution();
-    let half = 0.5 * res;
     let (o, n) = (surface.origin(), surface.size() as i64);
-    // Barycentric coordinates of the centre (x, y) in triangle t, if the cell overlaps it.
-    let bary = |t: &[Vector4<f64>; 3], x: f64, y: f64| -> Option<[f64; 3]> {
-        let [p0, p1, p2] = t;
-        let det = (p1.x - p0.x) * (p2.y - p0.y) - (p2.x - p0.x) * (p1.y - p0.y);
+    // The quad is split into the triangles a-b-d and a-d-c. Everything of a triangle that
+    // does not depend on the cell is taken once (the same arithmetic, in the same order,
+    // as a cell-by-cell barycentric test: the results are bit for bit those).
+    let tris = [
+        Tri::new([a, b, d], res, o, n),
+        Tri::new([a, d, c], res, o, n),
+    ];
+    for (k, t) in tris.iter().enumerate() {
+        let Some(t) = t else { continue };
+        let [i0, i1, j0, j1] = t.range;
+        for j in j0..=j1 {
+            let y = (j as f64 + 0.5) * res;
+            for i in i0..=i1 {
+                let x = (i as f64 + 0.5) * res;
+                let Some(l) = t.bary(x, y) else { continue };
+                // A cell that overlaps both triangles counts once, with the first.
+                if k == 1 && tris[0].as_ref().is_some_and(|t0| t0.overlaps(i, j, x, y)) {
+                    continue;
+                }
+                let level = l[0] * t.p[0].w + l[1] * t.p[1].w + l[2] * t.p[2].w;
+                f(((j - o.y) * n + (i - o.x)) as usize, level);
+            }
+        }
+    }
+}
+
+/// One triangle of [`quad_cells`]: what the test of a cell against it needs, taken once.
+struct Tri {
+    p: [Vector4<f64>; 3],
+    /// p1 − p0 and p2 − p0 (x, y).
+    u: [f64; 2],
+    v: [f64; 2],
+    det: f64,
+    /// Per vertex i: −half·(|e.x| + |e.y|) for the edge e opposite it: how far outside
+    /// that edge (times |det|·|e|⁻¹) a cell centre may lie while the cell still reaches it.
+    reach: [f64; 3],
+    /// Cells (global keys) whose centres lie within half a cell of the bounding box,
+    /// clipped to the window: i0, i1, j0, j1.
+    range: [i64; 4],
+}
+
+impl Tri {
+    /// `None` for a triangle without area (no cell overlaps it).
+    fn new(p: [Vector4<f64>; 3], res: f64, o: CellKey, n: i64) -> Option<Self> {
+        let [p0, p1, p2] = p;
+        let (u, v) = ([p1.x - p0.x, p1.y - p0.y], [p2.x - p0.x, p2.y - p0.y]);
+        let det = u[0] * v[1] - v[0] * u[1];
         if det.abs() <= f64::EPSILON * res * res {
             return None;
         }
-        let l1 = ((x - p0.x) * (p2.y - p0.y) - (p2.x - p0.x) * (y - p0.y)) / det;
-        let l2 = ((p1.x - p0.x) * (y - p0.y) - (x - p0.x) * (p1.y - p0.y)) / det;
-        let l = [1.0 - l1 - l2, l1, l2];
-        // l[i]·|det| / |e| is the distance of the centre inside the edge e opposite vertex
-        // i; the cell reaches (|e.x| + |e.y|)·half / |e| beyond its centre along that
-        // edge's normal.
-        let inside = (0..3).all(|i| {
-            let e = t[(i + 1) % 3] - t[(i + 2) % 3];
-            l[i] * det.abs() >= -half * (e.x.abs() + e.y.abs())
+        let half = 0.5 * res;
+        let reach = std::array::from_fn(|i| {
+            let e = p[(i + 1) % 3] - p[(i + 2) % 3];
+            -half * (e.x.abs() + e.y.abs())
         });
-        inside.then_some(l)
-    };
-    let tris = [[a, b, d], [a, d, c]];
-    // Per triangle, the cells (global keys) that overlap its bounding box (their centres
-    // (i + ½)·res within half a cell of it), clipped to the window: i0, i1, j0, j1.
-    let ranges = tris.map(|t| {
-        let lo = |v: fn(&Vector4<f64>) -> f64| t.iter().map(v).fold(f64::INFINITY, f64::min);
-        let hi = |v: fn(&Vector4<f64>) -> f64| t.iter().map(v).fold(f64::NEG_INFINITY, f64::max);
-        let first = |m: f64, origin: i64| (((m - half) / res - 0.5).ceil() as i64).max(origin);
-        let last =
-            |m: f64, origin: i64| (((m + half) / res - 0.5).floor() as i64).min(origin + n - 1);
-        [
+        let lo = |v: fn(&Vector4<f64>) -> f64| p.iter().map(v).fold(f64::INFINITY, f64::min);
+        let hi = |v: fn(&Vector4<f64>) -> f64| p.iter().map(v).fold(f64::NEG_INFINITY, f64::max);
+        let first = |m: f64, origin: i64| ceil_i64((m - half) / res - 0.5).max(origin);
+        let last = |m: f64, origin: i64| floor_i64((m + half) / res - 0.5).min(origin + n - 1);
+        let range = [
             first(lo(|p| p.x), o.x),
             last(hi(|p| p.x), o.x),
             first(lo(|p| p.y), o.y),
             last(hi(|p| p.y), o.y),
-        ]
-    });
-    let overlap = |k: usize, i: i64, j: i64| {
-        let [i0, i1, j0, j1] = ranges[k];
-        let (x, y) = ((i as f64 + 0.5) * res, (j as f64 + 0.5) * res);
-        (i0..=i1)
-            .contains(&i)
-            .then(|| (j0..=j1).contains(&j).then(|| bary(&tris[k], x, y)))
-            .flatten()
-            .flatten()
-    };
-    for (k, t) in tris.iter().enumerate() {
-        let [i0, i1, j0, j1] = ranges[k];
-        for j in j0..=j1 {
-            for i in i0..=i1 {
-                let Some(l) = overlap(k, i, j) else { continue };
-                if k == 1 && overlap(0, i, j).is_some() {
-                    continue;
-                }
-                let level = l[0] * t[0].w + l[1] * t[1].w + l[2] * t[2].w;
-                f(((j - o.y) * n + (i - o.x)) as usize, level);
-            }
-        }
+        ];
+        Some(Tri {
+            p,
+            u,
+            v,
+            det,
+            reach,
+            range,
+        })
+    }
+
+    /// Barycentric coordinates of the centre (x, y), if the cell overlaps the triangle:
+    /// `l[i]·|det| / |e|` is the distance of the centre inside the edge e opposite vertex
+    /// i, and the cell reaches `(|e.x| + |e.y|)·half / |e|` beyond its centre along that
+    /// edge's normal.
+    #[inline]
+    fn bary(&self, x: f64, y: f64) -> Option<[f64; 3]> {
+        let (p0, [ux, uy], [vx, vy], det) = (&self.p[0], self.u, self.v, self.det);
+        let l1 = ((x - p0.x) * vy - vx * (y - p0.y)) / det;
+        let l2 = (ux * (y - p0.y) - (x - p0.x) * uy) / det;
+        let l = [1.0 - l1 - l2, l1, l2];
+        let ad = det.abs();
+        (0..3).all(|i| l[i] * ad >= self.reach[i]).then_some(l)
+    }
+
+    /// Whether cell (i, j), centre (x, y), is in the range and overlaps the triangle.
+    #[inline]
+    fn overlaps(&self, i: i64, j: i64, x: f64, y: f64) -> bool {
+        let [i0, i1, j0, j1] = self.range;
+        (i0..=i1).contains(&i) && (j0..=j1).contains(&j) && self.bary(x, y).is_some()
     }
 }
 
@@ -898,6 +959,7 @@ impl FrameLabels {
             touched: Vec::new(),
             raster: Vec::new(),
             colour_check: ColourCheck::default(),
+            bufs: PixelBuffers::default(),
         })
     }
 
@@ -1013,8 +1075,23 @@ impl FrameLabels {
                         format!("{}: not a colour image", img.image.frame_id),
                     ));
                 };
-                let mut l = LabelImage::filled(w, h, Label::Other);
-                lut.classify_into(px.as_flattened(), &mut l.data)?;
+                if px.len() != w * h {
+                    return Err(Error::invalid(
+                        "colour image",
+                        format!("{} pixels for {w} × {h}", px.len()),
+                    ));
+                }
+                let mut data = std::mem::take(&mut self.bufs.labels);
+                data.resize(w * h, Label::Other);
+                // Rows in parallel; every label is written.
+                data.par_chunks_mut(w.max(1))
+                    .zip(px.par_chunks(w.max(1)))
+                    .try_for_each(|(l, p)| lut.classify_into(p.as_flattened(), l))?;
+                let mut l = LabelImage {
+                    width: w,
+                    height: h,
+                    data,
+                };
                 apply_horizon(&mut l, map_rays);
                 if let Some(enc) = self.cfg.reflection_check {
                     st.reflection_vetoed +=
@@ -1048,27 +1125,39 @@ impl FrameLabels {
         let reach = samples.and_then(|l| l.reach.as_ref());
         let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);
         let stereo_range = self.cfg.stereo_max_range.min(max_range);
-        let cols: Vec<usize> = (0..w).step_by(s).collect();
-        let rows = if self.cfg.wide_rows {
-            sampled_rows(
+        let mut buf = std::mem::take(&mut self.bufs);
+        buf.cols.clear();
+        buf.cols.extend((0..w).step_by(s));
+        if self.cfg.wide_rows {
+            buf.rows = sampled_rows(
                 map_rays,
                 w,
                 s,
                 cam_to_map.translation.z - ground_z,
                 surface.resolution(),
-            )
+            );
         } else {
-            (0..h).step_by(s).collect()
-        };
+            buf.rows.clear();
+            buf.rows.extend((0..h).step_by(s));
+        }
+        let (rows, cols) = (&buf.rows, &buf.cols);
+        let (nr, nc) = (rows.len(), cols.len());
         // Per sampled pixel: its hit, whether it is water (`None`: no vote), and the water
-        // level it gives (see `tighten_hole_levels`).
-        let mut per_row: Vec<(Vec<Option<Hit>>, [u64; 4])> = rows
-            .par_iter()
-            .map(|&y| {
-                let mut n = [0u64; 4]; // via point, via ray, no hit, beyond reach
-                let hits = cols
-                    .iter()
-                    .map(|&x| {
+        // level it gives (see `tighten_hole_levels`); rows in parallel, into the buffers
+        // of the last frame.
+        buf.hits.resize(nr * nc, None);
+        // Zeroed here, not per row: a row without sampled columns (an image 0 pixels wide)
+        // is never visited.
+        buf.counts.clear();
+        buf.counts.resize(nr, [0; 4]);
+        buf.hits
+            .par_chunks_mut(nc.max(1))
+            .zip(buf.counts[..nr].par_iter_mut())
+            .zip(rows.par_iter())
+            .for_each(|((out, n), &y)| {
+                // n: via point, via ray, no hit, beyond reach
+                for (slot, &x) in out.iter_mut().zip(cols) {
+                    *slot = (|| {
                         let i = y * w + x;
                         let water = match labels.data[i] {
                             Label::Water => true,
@@ -1116,25 +1205,28 @@ impl FrameLabels {
                                 None
                             }
                         }
-                    })
-                    .collect();
-                (hits, n)
-            })
-            .collect();
-        tighten_hole_levels(&mut per_row, cols.len(), origin);
+                    })();
+                }
+            });
+        tighten_hole_levels(&mut buf.hits, nc, origin, &mut buf.levels);
         // Each sampled pixel stands for the quad spanned by its hit and those of its right,
         // lower and diagonal neighbours: when all four agree and the quad is no larger than
         // `QUAD_MAX_M` (larger ones straddle an occlusion edge), every cell the quad
         // overlaps gets the vote once (a pixel row covers a metre of ground at 20 m, far more
         // than a cell; `quad_cells`); otherwise only the pixel's own cell.
         const QUAD_MAX_M: f64 = 3.0;
-        let hits: Vec<Vec<(u32, bool, f32)>> = (0..rows.len())
-            .into_par_iter()
-            .map(|r| {
-                let mut out = Vec::new();
-                let row = &per_row[r].0;
-                let next = per_row.get(r + 1).map(|n| &n.0);
-                for c in 0..cols.len() {
+        if buf.votes.len() < nr {
+            buf.votes.resize_with(nr, Vec::new);
+        }
+        let per_row = &buf.hits;
+        buf.votes[..nr]
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(r, out)| {
+                out.clear();
+                let row = &per_row[r * nc..(r + 1) * nc];
+                let next = per_row.get((r + 1) * nc..(r + 2) * nc);
+                for c in 0..nc {
                     let Some(h00) = row[c] else { continue };
                     let wet = h00.wet;
                     let quad = next.and_then(|nx| {
@@ -1143,10 +1235,12 @@ impl FrameLabels {
                             .all(|h| h.wet == wet)
                             .then_some([h00, q[0], q[1], q[2]])
                     });
+                    // |a − b| ≤ QUAD_MAX_M as |a − b|² ≤ QUAD_MAX_M², the same verdict:
+                    // the root is correctly rounded and QUAD_MAX_M² exact.
                     let quad = quad.filter(|q| {
-                        [(0, 1), (0, 2), (1, 3), (2, 3)]
-                            .iter()
-                            .all(|&(a, b)| (q[a].p - q[b].p).norm() <= QUAD_MAX_M)
+                        [(0, 1), (0, 2), (1, 3), (2, 3)].iter().all(|&(a, b)| {
+                            (q[a].p - q[b].p).norm_squared() <= QUAD_MAX_M * QUAD_MAX_M
+                        })
                     });
                     match quad {
                         None => {
@@ -1171,10 +1265,8 @@ impl FrameLabels {
                         }
                     }
                 }
-                out
-            })
-            .collect();
-        for (_, n) in &per_row {
+            });
+        for n in &buf.counts[..nr] {
             st.via_point += n[0];
             st.via_ray += n[1];
             st.no_hit += n[2];
@@ -1187,7 +1279,7 @@ impl FrameLabels {
                 _ => {}
             }
         }
-        for out in &hits {
+        for out in &buf.votes[..nr] {
             for &(j, water, z) in out {
                 let t = &mut self.tally[j as usize];
                 if t.0 == 0 && t.1 == 0 {
@@ -1238,6 +1330,10 @@ impl FrameLabels {
             }
         }
         self.touched.clear();
+        if cue == Cue::Colour {
+            buf.labels = labels.data;
+        }
+        self.bufs = buf;
         Ok(dropped)
     }
 }

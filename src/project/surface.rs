@@ -369,7 +369,8 @@ impl GridSurface {
                 .filter(|&(ci, cj)| ci / size == bi && cj / size == bj)
                 .map(|(ci, cj)| cj * self.n + ci)
         };
-        let mut k = ((t / dt).floor() as usize).clamp(s, steps);
+        // `floor() as usize` (negative and NaN to 0), without libm's floor.
+        let mut k = (floor_i64(t / dt).max(0) as usize).clamp(s, steps);
         let mut cell = in_block(k);
         while cell.is_none() && k > s {
             k -= 1;

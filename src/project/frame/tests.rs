@@ -243,25 +243,21 @@ fn cached_horizon_equals_the_classifier_horizon() {
 
 /// Sampled pixels on an `nr` × `nc` grid: hole-placed water (upper bound `level`, lower
 /// bound `floor`; kind 0 a hole with a far rim, 3 an open one), other water, or no hit.
-fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<(Vec<Option<Hit>>, [u64; 4])> {
-    (0..nr)
-        .map(|r| {
-            let hits = (0..nc)
-                .map(|c| {
-                    let (kind, upper, floor) = cells[r * nc + c];
-                    let p = Point3::new(c as f64, r as f64, upper);
-                    match kind {
-                        0 | 3 => Some(Hit {
-                            floor: Some(floor),
-                            open: kind == 3,
-                            ..Hit::at(p, true)
-                        }),
-                        1 => Some(Hit::at(p, true)),
-                        _ => None,
-                    }
-                })
-                .collect();
-            (hits, [0; 4])
+fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<Option<Hit>> {
+    (0..nr * nc)
+        .map(|i| {
+            let (r, c) = (i / nc, i % nc);
+            let (kind, upper, floor) = cells[i];
+            let p = Point3::new(c as f64, r as f64, upper);
+            match kind {
+                0 | 3 => Some(Hit {
+                    floor: Some(floor),
+                    open: kind == 3,
+                    ..Hit::at(p, true)
+                }),
+                1 => Some(Hit::at(p, true)),
+                _ => None,
+            }
         })
         .collect()
 }
@@ -289,11 +285,11 @@ proptest::proptest! {
         let before = hole_rows(nr, nc, &cells);
         let mut after = before.clone();
         let origin = Point3::new(cam.0, cam.1, cam.2);
-        tighten_hole_levels(&mut after, nc, origin);
+        tighten_hole_levels(&mut after, nc, origin, &mut vec![7.0; 5]);
         let k = HOLE_LEVEL_WINDOW as i64;
         for r in 0..nr {
             for c in 0..nc {
-                let (b, a) = (before[r].0[c], after[r].0[c]);
+                let (b, a) = (before[r * nc + c], after[r * nc + c]);
                 let (Some(b), Some(a)) = (b, a) else {
                     proptest::prop_assert!(b.is_none() && a.is_none());
                     continue;
@@ -306,7 +302,7 @@ proptest::proptest! {
                 let mut low = f64::INFINITY;
                 for rr in (r as i64 - k).max(0)..(r as i64 + k + 1).min(nr as i64) {
                     for cc in (c as i64 - k).max(0)..(c as i64 + k + 1).min(nc as i64) {
-                        if let Some(h) = before[rr as usize].0[cc as usize].filter(|h| h.floor.is_some()) {
+                        if let Some(h) = before[rr as usize * nc + cc as usize].filter(|h| h.floor.is_some()) {
                             low = low.min(h.p.z);
                         }
                     }
@@ -423,6 +419,114 @@ proptest::proptest! {
                 proptest::prop_assert!(outer, "cell {} voted but not overlapped", j);
             }
         }
+    }
+}
+
+/// [`quad_cells`] as first written, every cell tested against each triangle from scratch:
+/// the reference the precomputed triangles must match bit for bit.
+fn reference_quad_cells(
+    surface: &GridSurface,
+    q: [Vector4<f64>; 4],
+    mut f: impl FnMut(usize, f64),
+) {
+    if !q.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+        return;
+    }
+    let [a, b, c, d] = q;
+    let res = surface.resolution();
+    let half = 0.5 * res;
+    let (o, n) = (surface.origin(), surface.size() as i64);
+    // Barycentric coordinates of the centre (x, y) in triangle t, if the cell overlaps it.
+    let bary = |t: &[Vector4<f64>; 3], x: f64, y: f64| -> Option<[f64; 3]> {
+        let [p0, p1, p2] = t;
+        let det = (p1.x - p0.x) * (p2.y - p0.y) - (p2.x - p0.x) * (p1.y - p0.y);
+        if det.abs() <= f64::EPSILON * res * res {
+            return None;
+        }
+        let l1 = ((x - p0.x) * (p2.y - p0.y) - (p2.x - p0.x) * (y - p0.y)) / det;
+        let l2 = ((p1.x - p0.x) * (y - p0.y) - (x - p0.x) * (p1.y - p0.y)) / det;
+        let l = [1.0 - l1 - l2, l1, l2];
+        // l[i]·|det| / |e| is the distance of the centre inside the edge e opposite vertex
+        // i; the cell reaches (|e.x| + |e.y|)·half / |e| beyond its centre along that
+        // edge's normal.
+        let inside = (0..3).all(|i| {
+            let e = t[(i + 1) % 3] - t[(i + 2) % 3];
+            l[i] * det.abs() >= -half * (e.x.abs() + e.y.abs())
+        });
+        inside.then_some(l)
+    };
+    let tris = [[a, b, d], [a, d, c]];
+    // Per triangle, the cells (global keys) that overlap its bounding box (their centres
+    // (i + ½)·res within half a cell of it), clipped to the window: i0, i1, j0, j1.
+    let ranges = tris.map(|t| {
+        let lo = |v: fn(&Vector4<f64>) -> f64| t.iter().map(v).fold(f64::INFINITY, f64::min);
+        let hi = |v: fn(&Vector4<f64>) -> f64| t.iter().map(v).fold(f64::NEG_INFINITY, f64::max);
+        let first = |m: f64, origin: i64| (((m - half) / res - 0.5).ceil() as i64).max(origin);
+        let last =
+            |m: f64, origin: i64| (((m + half) / res - 0.5).floor() as i64).min(origin + n - 1);
+        [
+            first(lo(|p| p.x), o.x),
+            last(hi(|p| p.x), o.x),
+            first(lo(|p| p.y), o.y),
+            last(hi(|p| p.y), o.y),
+        ]
+    });
+    let overlap = |k: usize, i: i64, j: i64| {
+        let [i0, i1, j0, j1] = ranges[k];
+        let (x, y) = ((i as f64 + 0.5) * res, (j as f64 + 0.5) * res);
+        (i0..=i1)
+            .contains(&i)
+            .then(|| (j0..=j1).contains(&j).then(|| bary(&tris[k], x, y)))
+            .flatten()
+            .flatten()
+    };
+    for (k, t) in tris.iter().enumerate() {
+        let [i0, i1, j0, j1] = ranges[k];
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let Some(l) = overlap(k, i, j) else { continue };
+                if k == 1 && overlap(0, i, j).is_some() {
+                    continue;
+                }
+                let level = l[0] * t[0].w + l[1] * t[1].w + l[2] * t[2].w;
+                f(((j - o.y) * n + (i - o.x)) as usize, level);
+            }
+        }
+    }
+}
+
+proptest::proptest! {
+    /// The cells, their order and their levels are exactly the reference's, for quads
+    /// small and large against the cell, folded and degenerate ones, anywhere, clipped by
+    /// the window's edge.
+    #[test]
+    fn quad_cells_match_reference(
+        ox in -1000i64..1000,
+        oy in -1000i64..1000,
+        res in proptest::prop_oneof![proptest::strategy::Just(0.1), 0.02f64..0.5],
+        scale in proptest::prop_oneof![0.001f64..0.05, 0.05f64..1.0, 1.0f64..8.0],
+        centre in (-0.2f64..1.2, -0.2f64..1.2),
+        corners in proptest::collection::vec((-1.0f64..1.0, -1.0f64..1.0, -2.0f64..2.0), 4),
+        same in 0usize..6,
+    ) {
+        let n = 40usize;
+        let origin = CellKey::new(ox, oy);
+        let s = GridSurface::from_raster(n, res, origin, vec![0.0; n * n]).unwrap();
+        let w = n as f64 * res;
+        let (cx, cy) = (ox as f64 * res + centre.0 * w, oy as f64 * res + centre.1 * w);
+        let mut q: Vec<Vector4<f64>> = corners
+            .iter()
+            .map(|&(u, v, l)| Vector4::new(cx + u * scale, cy + v * scale, 0.0, l))
+            .collect();
+        // Coincident corners: degenerate triangles.
+        if same < 4 {
+            q[(same + 1) % 4] = q[same];
+        }
+        let q = [q[0], q[1], q[2], q[3]];
+        let (mut got, mut want) = (Vec::new(), Vec::new());
+        quad_cells(&s, q, |j, l| got.push((j, l.to_bits())));
+        reference_quad_cells(&s, q, |j, l| want.push((j, l.to_bits())));
+        proptest::prop_assert_eq!(got, want);
     }
 }
 
