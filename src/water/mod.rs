@@ -246,7 +246,7 @@ fn check(what: &str, ok: bool, v: impl std::fmt::Display, must: &str) -> Result<
 
 impl WaterConfig {
     /// `shore_radius_m` in whole cells of size `resolution` (at least 1).
-    fn shore_radius_cells(&self, resolution: f64) -> i64 {
+    pub(crate) fn shore_radius_cells(&self, resolution: f64) -> i64 {
         (self.shore_radius_m / resolution).ceil().max(1.0) as i64
     }
 
@@ -560,6 +560,17 @@ impl Bottom {
 }
 
 impl Info {
+    /// The cell's water probability.
+    pub(crate) fn p(&self) -> f64 {
+        self.p
+    }
+
+    /// Whether a body grows over the cell: water probability at least `p_low`, or bottom
+    /// returns.
+    pub(crate) fn joins(&self, cfg: &WaterConfig) -> bool {
+        self.p >= cfg.p_low || self.depth.is_some()
+    }
+
     /// The info of an observed cell `c` whose water probability is `p`, in a map of
     /// reference height `z_ref`.
     pub(crate) fn of(c: &CellStats, p: f64, z_ref: f64) -> Info {
@@ -604,7 +615,7 @@ impl CellInfos for BTreeMap<CellKey, Info> {
 
 /// Connected components with hysteresis over `p`, grown from `seeds` (every cell that
 /// seeds a body, in increasing key order): deterministic.
-fn components(
+pub(crate) fn components(
     cells: &impl CellInfos,
     seeds: impl IntoIterator<Item = CellKey>,
     cfg: &WaterConfig,
@@ -621,11 +632,7 @@ fn components(
         while let Some(c) = q.pop_front() {
             for d in N8 {
                 let n = add(c, d);
-                if !seen.contains(&n)
-                    && cells
-                        .get(n)
-                        .is_some_and(|i| i.p >= cfg.p_low || i.depth.is_some())
-                {
+                if !seen.contains(&n) && cells.get(n).is_some_and(|i| i.joins(cfg)) {
                     seen.insert(n);
                     body.push(n);
                     q.push_back(n);
@@ -658,6 +665,28 @@ pub(crate) fn find_bodies_among(
     previous: &[WaterBody],
 ) -> Result<Vec<WaterBody>> {
     cfg.validate()?;
+    let info = infos(tiles, observed, cfg);
+    let seeds = info
+        .iter()
+        .filter(|(_, i)| seeds_body(i.p, &cfg.water))
+        .map(|(&k, _)| k);
+    Ok(bodies_from(
+        &info,
+        seeds,
+        tiles.resolution(),
+        &cfg.water,
+        previous,
+    ))
+}
+
+/// The [`Info`] of the `observed` cells of `tiles` that the body search reads (see
+/// [`find_bodies_among`]): the cells within blocks of 2n + 2 cells next to the block of a
+/// cell a body can grow over.
+pub(crate) fn infos(
+    tiles: &TileMap,
+    observed: &[(CellKey, CellStats)],
+    cfg: &HazardConfig,
+) -> BTreeMap<CellKey, Info> {
     let res = tiles.resolution();
     // Only the neighbourhood of possible water matters: the cells a body can grow over
     // (p ≥ p_low, or with bottom returns), their shore and the ground the occluder test
@@ -683,17 +712,12 @@ pub(crate) fn find_bodies_among(
             }
         }
     }
-    let info: BTreeMap<CellKey, Info> = observed
+    observed
         .iter()
         .zip(p)
         .filter(|((k, _), _)| near.contains(&block(*k)))
         .map(|(&(k, c), p)| (k, Info::of(&c, p, tiles.z_ref())))
-        .collect();
-    let seeds = info
-        .iter()
-        .filter(|(_, i)| seeds_body(i.p, &cfg.water))
-        .map(|(&k, _)| k);
-    Ok(bodies_from(&info, seeds, res, &cfg.water, previous))
+        .collect()
 }
 
 /// The water bodies of `cells` at resolution `res`, grown from `seeds` (every observed
@@ -772,7 +796,10 @@ fn assign_ids(comps: &[Vec<CellKey>], previous: &[WaterBody]) -> Vec<u32> {
         .collect()
 }
 
-fn body_of(
+/// The body of the component `cells` (sorted) with id `id`: shore, surface, depths; `None`
+/// when no surface can be fitted. Reads the cells within 2n of the component, n =
+/// ⌈shore_radius / resolution⌉ (the occluder test's ground, [`ground_near`]).
+pub(crate) fn body_of(
     id: u32,
     cells: Vec<CellKey>,
     info: &impl CellInfos,
