@@ -339,25 +339,40 @@ impl TileSet {
             .collect()
     }
 
-    /// Splits by blocks of `side × side` tiles: `{(bx, by): TileSet}`, block `(bx, by)`
-    /// holding the tiles `bx·side <= tx < (bx + 1)·side`, likewise `ty`.
-    fn blocks(&self, py: Python<'_>, side: i64) -> PyResult<Vec<((i64, i64), TileSet)>> {
+    /// Splits by blocks of `side × side` tiles counted from the tile `origin`:
+    /// `[((bx, by), TileSet)]` in block order, block `(bx, by)` holding the tiles with
+    /// `ox + bx·side <= tx < ox + (bx + 1)·side`, likewise `ty`.
+    #[pyo3(signature = (side, origin = (0, 0)))]
+    fn blocks(
+        &self,
+        py: Python<'_>,
+        side: i64,
+        origin: TileKey,
+    ) -> PyResult<Vec<((i64, i64), TileSet)>> {
         if side < 1 {
             return Err(PyValueError::new_err(format!(
                 "blocks of {side} tiles: the side is at least 1"
             )));
         }
         let t = &self.tiles;
+        let block = move |(tx, ty): TileKey| {
+            (
+                tx.saturating_sub(origin.0).div_euclid(side),
+                ty.saturating_sub(origin.1).div_euclid(side),
+            )
+        };
         let out = py.detach(|| {
-            let mut blocks: std::collections::BTreeSet<(i64, i64)> = Default::default();
-            for (tx, ty) in t.tile_keys() {
-                blocks.insert((tx.div_euclid(side), ty.div_euclid(side)));
-            }
+            let blocks: std::collections::BTreeSet<(i64, i64)> =
+                t.tile_keys().into_iter().map(block).collect();
             blocks
                 .into_iter()
                 .map(|b| {
-                    let part = t.select(|(tx, ty)| (tx.div_euclid(side), ty.div_euclid(side)) == b);
-                    (b, TileSet { tiles: part })
+                    (
+                        b,
+                        TileSet {
+                            tiles: t.select(|k| block(k) == b),
+                        },
+                    )
                 })
                 .collect()
         });

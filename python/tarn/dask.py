@@ -5,8 +5,8 @@
 1. one task per log builds its ``TileSet`` (``tarn.build_tiles``; the Rust code releases
    the interpreter, so threaded workers build in parallel); the client gathers only the
    tile keys, for the map's bounds;
-2. the map's tiles are cut into regions of ``region_tiles`` x ``region_tiles`` tiles
-   (``TileSet.blocks``); each region is tree-reduced on the workers: pairwise merges of
+2. the map's tiles are cut into regions of ``region_tiles`` x ``region_tiles`` tiles from
+   the corner of its bounds (``TileSet.blocks``); each region is tree-reduced on the workers: pairwise merges of
    the logs' parts, ``log(n)`` levels deep;
 3. each region's water stage runs on a worker (``tarn.finish_region``) over the region and
    a halo of ``halo`` tiles around it, cut from the merged neighbouring regions
@@ -51,8 +51,8 @@ def _keys(t) -> list:
     return t.tile_keys()
 
 
-def _blocks(t, side: int) -> dict:
-    return dict(t.blocks(side))
+def _blocks(t, side: int, origin) -> dict:
+    return dict(t.blocks(side, origin))
 
 
 def _pick(blocks: dict, b):
@@ -83,7 +83,7 @@ def _points(t) -> int:
 
 
 def _side(bounds, parts: int) -> int:
-    """A region side (tiles) cutting the bounds into about ``parts`` square regions."""
+    """A region side (tiles) cutting the bounds into at most ceil(sqrt(parts)) squares a side."""
     (x0, y0), (x1, y1) = bounds
     across = max(x1 - x0, y1 - y0) + 1
     return max(1, math.ceil(across / math.ceil(math.sqrt(max(1, parts)))))
@@ -102,9 +102,9 @@ def build_many(
 
     ``config``: a ``tarn.toml`` path readable by the workers (``None``: what ``tarn build``
     uses). ``region_tiles``: the side of a region, tiles (64 cells); by default the map's
-    bounds are cut into about ``parts`` square regions (default: the cluster's worker
-    threads, at least 1). ``halo``: tiles read around a region (at least 1). ``stats``: a
-    dict to fill with what travelled: ``log_bytes`` (the logs' parts of each region, as
+    bounds are cut into at most ``ceil(sqrt(parts))`` squares a side (``parts`` defaults
+    to the cluster's worker threads, at least 1). ``halo``: tiles read around a region (at
+    least 1). ``stats``: a dict to fill with what travelled: ``log_bytes`` (the logs' parts of each region, as
     tile-set bytes), ``merge_bytes`` (the merged sets each merge produced), ``halo_bytes``
     (the cuts of merged regions each finish read), ``result_bytes`` (the finished regions
     the client gathered), ``points`` (points in the logs' cells), ``parts`` (regions),
@@ -143,10 +143,12 @@ def build_many(
     extent = max(bounds[1][0] - bounds[0][0], bounds[1][1] - bounds[0][1])
     side = region_tiles if region_tiles is not None else _side(bounds, parts)
 
-    def block(k):
-        return (k[0] // side, k[1] // side)
+    ox, oy = bounds[0]
 
-    per_log_blocks = [client.submit(_blocks, f, side, pure=False) for f in per_log]
+    def block(k):
+        return ((k[0] - ox) // side, (k[1] - oy) // side)
+
+    per_log_blocks = [client.submit(_blocks, f, side, bounds[0], pure=False) for f in per_log]
     holders: dict = {}
     for i, ks in enumerate(keys):
         for b in {block(k) for k in ks}:
@@ -177,13 +179,13 @@ def build_many(
         return [
             b
             for b in merged
-            if b[0] * side <= x1 and (b[0] + 1) * side - 1 >= x0
-            and b[1] * side <= y1 and (b[1] + 1) * side - 1 >= y0
+            if ox + b[0] * side <= x1 and ox + (b[0] + 1) * side - 1 >= x0
+            and oy + b[1] * side <= y1 and oy + (b[1] + 1) * side - 1 >= y0
         ]
 
     pending = [
         (
-            [(bx * side + i, by * side + j) for i in range(side) for j in range(side)],
+            [(ox + bx * side + i, oy + by * side + j) for i in range(side) for j in range(side)],
             halo,
         )
         for (bx, by) in sorted(merged)
@@ -260,7 +262,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         help="LocalCluster workers as threads of this process (processes=False)",
     )
     ap.add_argument(
-        "--parts", type=int, help="about this many regions (default: worker threads)"
+        "--parts",
+        type=int,
+        help="regions: at most ceil(sqrt(N)) a side (default: worker threads)",
     )
     ap.add_argument("--region-tiles", type=int, help="side of a region, tiles (overrides --parts)")
     ap.add_argument("--halo", type=int, default=2, help="tiles read around a region (default 2)")
