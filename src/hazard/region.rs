@@ -879,6 +879,17 @@ mod tests {
     /// a disc `(cx, cy, r)` in cells, its cells seen through no-return evidence (p ≈ 0.84,
     /// a seed), a fringe ring of weaker evidence (joins only), bottom returns in some cells.
     fn map(ponds: &[(i64, i64, i64)], seed: u64, extent: (i64, i64)) -> TileMap {
+        map_with(ponds, &[], seed, extent)
+    }
+
+    /// [`map`] with channels of weak evidence (one reflection: a body grows over them, none
+    /// starts in them), rectangles `(x0, y0, x1, y1)` of cells seen only that way.
+    fn map_with(
+        ponds: &[(i64, i64, i64)],
+        channels: &[(i64, i64, i64, i64)],
+        seed: u64,
+        extent: (i64, i64),
+    ) -> TileMap {
         let mut t = TileMap::new(0.1, 0.0).unwrap();
         let mut h = seed;
         let mut next = || {
@@ -904,7 +915,13 @@ mod tests {
                     .map(d2)
                     .any(|(d, r2)| d > r2 && d <= r2 + 4 * r2.max(1).isqrt() + 4);
                 let mut c = CellStats::default();
-                if inside {
+                let channel = channels
+                    .iter()
+                    .any(|&(x0, y0, x1, y1)| (x0..=x1).contains(&x) && (y0..=y1).contains(&y));
+                if channel && !inside {
+                    c.ev.reflect = 1;
+                    c.ev.add_level(((r >> 8) % 30) as i32);
+                } else if inside {
                     let mut ev = Evidence {
                         noret: 20,
                         ..Evidence::default()
@@ -918,8 +935,16 @@ mod tests {
                     if fringe && r % 2 == 0 {
                         c.ev.reflect = 1;
                     }
-                    // Ground 5–15 cm above the water, noisy, some cells unreliable.
-                    let z = 50 + ((r >> 20) % 100) as i32 + (x / 20) as i32;
+                    // Ground 5–15 cm above the water in ±15 cm waves, noisy, some cells
+                    // unreliable, one in four a bush 30–60 cm high: which shore samples
+                    // the occluder test keeps depends on the ground around them.
+                    let bush = if (r >> 40) % 4 == 0 {
+                        300 + ((r >> 44) % 300) as i32
+                    } else {
+                        0
+                    };
+                    let wave = (150.0 * (x as f64 * 0.37).sin() * (y as f64 * 0.29).cos()) as i32;
+                    let z = 50 + ((r >> 20) % 100) as i32 + wave + bush;
                     let pts = 1 + (r >> 32) % 6;
                     for i in 0..pts {
                         c.add(z + (i as i32 * 7) % 23, 65536);
@@ -951,11 +976,17 @@ mod tests {
     fn a_pond_across_regions_is_the_whole_maps() {
         // Three ponds: one across the corner of four tiles, one large (beyond a 1-tile
         // halo), one small inside a tile; and a tiny one below the smallest body.
-        let ponds = [(64, 64, 9), (150, 120, 60), (30, 170, 5), (170, 20, 1)];
-        let t = map(&ponds, 7, (256, 224));
+        // A channel of weak evidence runs from the small pond across the map: the tiles
+        // along it are water only through the pond, which most regions do not hold.
+        let ponds = [(64, 64, 9), (150, 120, 60), (30, 205, 5), (170, 20, 1)];
+        let t = map_with(&ponds, &[(30, 204, 255, 206)], 7, (256, 224));
         let cfg = HazardConfig::default();
         let whole = HazardMap::from_tiles(&t, &cfg).unwrap();
         assert!(whole.bodies.len() >= 3, "{}", whole.bodies.len());
+        assert!(whole
+            .bodies
+            .iter()
+            .any(|b| b.cells.iter().any(|k| k.x == 255)));
         let mut refinished = false;
         for (side, halo) in [(1, 1), (2, 1), (1, 2), (3, 3), (4, 8)] {
             let (m, s) = finish_by_regions(&t, &cfg, side, halo).unwrap();
@@ -968,6 +999,23 @@ mod tests {
         }
         // The large pond does not fit a 1-tile halo: some tiles were finished again.
         assert!(refinished);
+    }
+
+    #[test]
+    fn a_body_whose_ring_crosses_the_halo_is_not_decided_there() {
+        // With regions of one tile and one tile of halo, the region of tile (1, 1) reads
+        // cells 0..192 a side. The pond (x 102..178, its fringe to about 180) lies inside
+        // that, but the ground its shore fit reads reaches past cell 191: the region must
+        // leave it to a larger halo.
+        let t = map(&[(140, 96, 38)], 5, (256, 256));
+        let cfg = HazardConfig::default();
+        let whole = HazardMap::from_tiles(&t, &cfg).unwrap();
+        assert_eq!(whole.bodies.len(), 1);
+        let (m, s) = finish_by_regions(&t, &cfg, 1, 1).unwrap();
+        same(&m, &whole);
+        assert!(s.refinished_tiles > 0);
+        let r = finish_region(&t, &[(1, 1)], 1, ((0, 0), (3, 3)), &cfg).unwrap();
+        assert_eq!(r.undecided, vec![(1, 1)]);
     }
 
     #[test]
@@ -1031,12 +1079,18 @@ mod tests {
         #[test]
         fn any_split_and_halo_is_the_whole_map(
             ponds in prop::collection::vec((0i64..200, 0i64..200, 0i64..40), 1..4),
+            channels in prop::collection::vec((0i64..200, 0i64..200, 0i64..200, 0i64..4), 0..2),
             seed in 1u64..u64::MAX,
             side in 1i64..4,
             halo in 1i64..4,
             shift in (-2i64..2, -2i64..2),
         ) {
-            let t = map(&ponds, seed, (200, 200));
+            // Channels along x or y, 1 to 4 cells wide.
+            let channels: Vec<_> = channels
+                .iter()
+                .map(|&(a, b, c, w)| if a % 2 == 0 { (a.min(c), b, a.max(c), b + w) } else { (b, a.min(c), b + w, a.max(c)) })
+                .collect();
+            let t = map_with(&ponds, &channels, seed, (200, 200));
             // Maps off the origin too: negative tile keys.
             let mut moved = TileMap::new(0.1, 0.0).unwrap();
             for (k, c) in t.observed() {
