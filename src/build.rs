@@ -1271,8 +1271,15 @@ pub fn build_tiles(
 /// The water stage over a (merged) tile map: water bodies, classes, hazards and depth
 /// under `cfg`'s fusion, water and vehicle settings, as [`build_log`] runs it at the end of
 /// a log. It runs on the whole map at once, so a water body that crosses tile borders, or
-/// the areas of several logs, is found whole.
+/// the areas of several logs, is found whole. [`finish_tiles_by_regions`] gives the same
+/// map region by region.
 pub fn finish_tiles(tiles: &TileMap, cfg: &MapperConfig) -> Result<HazardMap> {
+    check_tiles(tiles, cfg)?;
+    HazardMap::from_tiles(tiles, &cfg.hazard_config())
+}
+
+/// Refuses a tile map whose resolution or reference height is not the config's.
+fn check_tiles(tiles: &TileMap, cfg: &MapperConfig) -> Result<()> {
     let expect = (cfg.grid.resolution, cfg.grid.z_ref);
     if (tiles.resolution(), tiles.z_ref()) != expect {
         return Err(Error::invalid(
@@ -1286,7 +1293,33 @@ pub fn finish_tiles(tiles: &TileMap, cfg: &MapperConfig) -> Result<HazardMap> {
             ),
         ));
     }
-    HazardMap::from_tiles(tiles, &cfg.hazard_config())
+    Ok(())
+}
+
+/// [`finish_tiles`] region by region: regions of `side × side` tiles, each finished with a
+/// halo of `halo` tiles, the tiles a region cannot decide finished again with larger halos
+/// ([`crate::hazard::finish_by_regions`]). The same map, byte for byte.
+pub fn finish_tiles_by_regions(
+    tiles: &TileMap,
+    cfg: &MapperConfig,
+    side: i64,
+    halo: i64,
+) -> Result<(HazardMap, crate::hazard::SplitStats)> {
+    check_tiles(tiles, cfg)?;
+    crate::hazard::finish_by_regions(tiles, &cfg.hazard_config(), side, halo)
+}
+
+/// The water stage of one region of a merged map whose tile keys lie within `bounds`,
+/// read with a halo of `halo` tiles ([`crate::hazard::finish_region`]).
+pub fn finish_tile_region(
+    tiles: &TileMap,
+    region: &[crate::hazard::TileKey],
+    halo: i64,
+    bounds: (crate::hazard::TileKey, crate::hazard::TileKey),
+    cfg: &MapperConfig,
+) -> Result<crate::hazard::RegionMap> {
+    check_tiles(tiles, cfg)?;
+    crate::hazard::finish_region(tiles, region, halo, bounds, &cfg.hazard_config())
 }
 
 /// The comment lines that mark `map.ply` of a map built from a damaged log: the input, how

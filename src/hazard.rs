@@ -10,7 +10,10 @@ use crate::error::Result;
 use crate::grid::{centre_of, CellKey, CellStats, Fusion, TileMap};
 use crate::water::{find_bodies_among, HazardConfig, Vehicle, WaterBody};
 
+mod region;
 mod window;
+
+pub use region::{finish_by_regions, finish_region, join_regions, RegionMap, SplitStats, TileKey};
 
 pub(crate) use window::WindowScratch;
 
@@ -342,7 +345,10 @@ fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<(f64, f64)> {
 }
 
 /// Surface z and depth of the water cells of `bodies`.
-fn water_surface(bodies: &[WaterBody], res: f64) -> CellMap<(f64, f32)> {
+fn water_surface<'a>(
+    bodies: impl IntoIterator<Item = &'a WaterBody>,
+    res: f64,
+) -> CellMap<(f64, f32)> {
     let mut water: CellMap<(f64, f32)> = CellMap::default();
     for b in bodies {
         let s = b.surface.evaluator();
@@ -419,6 +425,38 @@ impl<'a> CellRule<'a> {
             Hazard::Free,
         ))
     }
+}
+
+/// The records of the `observed` cells (unique keys, in map order) that `keep` selects,
+/// given the water cells of the map's bodies (`water`, from [`water_surface`]); the step
+/// and slope tests read the dry cells among all of `observed`. Of `tiles` only the
+/// resolution and reference height are read.
+fn cell_records(
+    tiles: &TileMap,
+    observed: &[(CellKey, CellStats)],
+    cfg: &HazardConfig,
+    water: &CellMap<(f64, f32)>,
+    keep: impl Fn(CellKey) -> bool,
+) -> Vec<MapCell> {
+    let res = tiles.resolution();
+    // Dry terrain for the step and slope tests.
+    let dry = DryCells::new(
+        observed
+            .iter()
+            .filter(|(k, _)| !water.contains_key(k))
+            .filter_map(|&(k, c)| Some((k, dry_terrain(&c, tiles.z_ref())?)))
+            .collect(),
+    );
+    let rule = CellRule::new(cfg, res, tiles.z_ref(), water, &dry);
+    let logs = cfg.fusion.logs();
+    observed
+        .iter()
+        .filter(|(key, _)| keep(*key))
+        .filter_map(|(key, c)| {
+            let p = c.ev.water_probability_in(&logs) as f32;
+            rule.record(Seen::of(*key, c, p), || c.ev.level_mm())
+        })
+        .collect()
 }
 
 impl HazardMap {
@@ -508,23 +546,7 @@ impl HazardMap {
         let bodies = find_bodies_among(tiles, &observed, cfg, previous)?;
         let res = tiles.resolution();
         let water = water_surface(&bodies, res);
-        // Dry terrain for the step and slope tests.
-        let dry = DryCells::new(
-            observed
-                .iter()
-                .filter(|(k, _)| !water.contains_key(k))
-                .filter_map(|&(k, c)| Some((k, dry_terrain(&c, tiles.z_ref())?)))
-                .collect(),
-        );
-        let rule = CellRule::new(cfg, res, tiles.z_ref(), &water, &dry);
-        let logs = cfg.fusion.logs();
-        let cells = observed
-            .iter()
-            .filter_map(|(key, c)| {
-                let p = c.ev.water_probability_in(&logs) as f32;
-                rule.record(Seen::of(*key, c, p), || c.ev.level_mm())
-            })
-            .collect();
+        let cells = cell_records(tiles, &observed, cfg, &water, |_| true);
         Ok(HazardMap {
             resolution: res,
             cells,

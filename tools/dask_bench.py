@@ -1,5 +1,6 @@
 """Measures `tarn.dask.build_many` on this machine: wall time with 1, 2 and 4 workers
-against the one-process build, and the bytes of tile sets that travel per million points.
+against the one-process build, the bytes of tile sets that travel per million points, and
+the finished regions the client gathers.
 Writes the tables of docs/distributed.md to stdout (markdown).
 
     .venv/bin/python tools/dask_bench.py [--logs 4] [--frames 12] [--workers 1,2,4]
@@ -91,13 +92,14 @@ def main() -> int:
         for w, t, _ in rows:
             print(f"| {w} | {t / best:.2f} | {rows[0][1] / t:.2f} | yes |")
         print()
-        print("| workers (= regions) | per-log tile sets (bytes) | merge results | gathered by the client | total | total per million points |")
-        print("| --- | --- | --- | --- | --- | --- |")
+        print("| workers | regions | per-log parts → merges | merge results | halo cuts → finishes | tile sets in all | per million points | finished regions gathered by the client | tiles finished again |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for w, _, s in rows:
-            tot = s["log_bytes"] + s["merge_bytes"] + s["result_bytes"]
+            tot = s["log_bytes"] + s["merge_bytes"] + s["halo_bytes"]
             print(
-                f"| {w} | {s['log_bytes']:,} | {s['merge_bytes']:,} | {s['result_bytes']:,} | "
-                f"{tot:,} | {tot / (s['points'] / 1e6):,.0f} |"
+                f"| {w} | {s['parts']} | {s['log_bytes']:,} | {s['merge_bytes']:,} | "
+                f"{s['halo_bytes']:,} | {tot:,} | {tot / (s['points'] / 1e6):,.0f} | "
+                f"{s['result_bytes']:,} | {s['refinished_tiles']} |"
             )
         one = tarn.merge([tarn.build_tiles(p) for p in logs])
         print(f"\nmerged map: {len(one)} cells, {one.tile_count} tiles, "

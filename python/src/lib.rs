@@ -15,9 +15,11 @@ use pyo3::exceptions::{PyException, PyOSError, PyStopIteration, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 
-use tarn::build::{build_tiles as core_build_tiles, finish_tiles, LogBuildConfig};
+use tarn::build::{
+    build_tiles as core_build_tiles, finish_tile_region, finish_tiles, LogBuildConfig,
+};
 use tarn::grid::{CellKey, TileMap};
-use tarn::hazard::HazardMap;
+use tarn::hazard::{join_regions as core_join_regions, HazardMap, RegionMap, TileKey};
 use tarn::io::frames::{Frame as CoreFrame, FrameStream};
 use tarn::mapper::{Mapper as CoreMapper, MapperConfig};
 
@@ -337,6 +339,62 @@ impl TileSet {
             .collect()
     }
 
+    /// Splits by blocks of `side × side` tiles counted from the tile `origin`:
+    /// `[((bx, by), TileSet)]` in block order, block `(bx, by)` holding the tiles with
+    /// `ox + bx·side <= tx < ox + (bx + 1)·side`, likewise `ty`.
+    #[pyo3(signature = (side, origin = (0, 0)))]
+    fn blocks(
+        &self,
+        py: Python<'_>,
+        side: i64,
+        origin: TileKey,
+    ) -> PyResult<Vec<((i64, i64), TileSet)>> {
+        if side < 1 {
+            return Err(PyValueError::new_err(format!(
+                "blocks of {side} tiles: the side is at least 1"
+            )));
+        }
+        let t = &self.tiles;
+        let block = move |(tx, ty): TileKey| {
+            (
+                tx.saturating_sub(origin.0).div_euclid(side),
+                ty.saturating_sub(origin.1).div_euclid(side),
+            )
+        };
+        let out = py.detach(|| {
+            let blocks: std::collections::BTreeSet<(i64, i64)> =
+                t.tile_keys().into_iter().map(block).collect();
+            blocks
+                .into_iter()
+                .map(|b| {
+                    (
+                        b,
+                        TileSet {
+                            tiles: t.select(|k| block(k) == b),
+                        },
+                    )
+                })
+                .collect()
+        });
+        Ok(out)
+    }
+
+    /// The tiles within `halo` tiles (Chebyshev) of any tile of `region`: what a region's
+    /// water stage reads of this set.
+    fn select_near(&self, py: Python<'_>, region: Vec<TileKey>, halo: i64) -> TileSet {
+        let t = &self.tiles;
+        let tiles = py.detach(|| {
+            let region: std::collections::BTreeSet<TileKey> = region.into_iter().collect();
+            let h = halo.max(0);
+            t.select(|k| {
+                region
+                    .range((k.0.saturating_sub(h), i64::MIN)..=(k.0.saturating_add(h), i64::MAX))
+                    .any(|r| r.1.abs_diff(k.1) <= h as u64)
+            })
+        });
+        TileSet { tiles }
+    }
+
     /// A copy.
     fn copy(&self) -> TileSet {
         TileSet {
@@ -415,6 +473,101 @@ fn build_many(py: Python<'_>, paths: Vec<PathBuf>, config: Option<PathBuf>) -> P
             finish_tiles(&all, &mapper)
         })
         .map_err(err)?;
+    Ok(Map { map })
+}
+
+/// The water stage of one region of a merged map (`finish_region`): the records and
+/// bodies of the tiles it decided, and the tiles it could not decide (a water body, or
+/// the ring of cells its surface fit reads, reaching beyond the halo).
+#[pyclass(module = "tarn", frozen)]
+struct Region {
+    region: RegionMap,
+}
+
+#[pymethods]
+impl Region {
+    /// The decided tiles holding observed cells, in increasing key order.
+    #[getter]
+    fn tiles(&self) -> Vec<TileKey> {
+        self.region.tiles.clone()
+    }
+
+    /// The region's tiles it could not decide: finish them again with a larger halo.
+    #[getter]
+    fn undecided(&self) -> Vec<TileKey> {
+        self.region.undecided.clone()
+    }
+
+    /// Tiles of the map the finish read (the region's and its halo's).
+    #[getter]
+    fn tiles_read(&self) -> usize {
+        self.region.tiles_read
+    }
+
+    /// Records (observed cells) of the decided tiles.
+    fn __len__(&self) -> usize {
+        self.region.cells.len()
+    }
+
+    /// The region in tarn's region format (magic `TARNREGN`, CRC).
+    fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        let b = py.detach(|| self.region.to_bytes());
+        PyBytes::new(py, &b)
+    }
+
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<Region> {
+        let region = py.detach(|| RegionMap::from_bytes(data)).map_err(err)?;
+        Ok(Region { region })
+    }
+
+    /// Pickles as its bytes (Dask moves finished regions to the client this way).
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<Reduced<'py>> {
+        let cls = py.get_type::<Region>().getattr("from_bytes")?;
+        Ok((cls, (self.to_bytes(py),)))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<tarn.Region {} cells in {} tiles, {} undecided, {} tiles read>",
+            self.region.cells.len(),
+            self.region.tiles.len(),
+            self.region.undecided.len(),
+            self.region.tiles_read
+        )
+    }
+}
+
+/// The water stage of the region `region` (tile keys) of a merged map whose tile keys lie
+/// within `bounds` = `((tx0, ty0), (tx1, ty1))`, inclusive. `tiles` holds every tile of
+/// the merged map within `halo` tiles of the region (more is ignored). The records and
+/// bodies are those `finish` of the whole merged map gives, for the tiles the region
+/// decides; `Region.undecided` lists the others.
+#[pyfunction]
+#[pyo3(signature = (tiles, region, halo, bounds, config = None))]
+fn finish_region(
+    py: Python<'_>,
+    tiles: PyRef<'_, TileSet>,
+    region: Vec<TileKey>,
+    halo: i64,
+    bounds: (TileKey, TileKey),
+    config: Option<PathBuf>,
+) -> PyResult<Region> {
+    let cfg = config_of(config)?;
+    let t = &tiles.tiles;
+    let region = py
+        .detach(|| finish_tile_region(t, &region, halo, bounds, &cfg))
+        .map_err(err)?;
+    Ok(Region { region })
+}
+
+/// The map of regions that decided every tile between them, each tile once: the map
+/// `finish` of the whole merged map gives, byte for byte, bodies numbered as it numbers
+/// them.
+#[pyfunction]
+fn join_regions(py: Python<'_>, regions: Vec<PyRef<'_, Region>>) -> PyResult<Map> {
+    let parts: Vec<RegionMap> = regions.iter().map(|r| r.region.clone()).collect();
+    let map = py.detach(|| core_join_regions(parts)).map_err(err)?;
     Ok(Map { map })
 }
 
@@ -631,6 +784,7 @@ fn _tarn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<Map>()?;
     m.add_class::<TileSet>()?;
+    m.add_class::<Region>()?;
     m.add_class::<Frame>()?;
     m.add_class::<FrameIter>()?;
     m.add_class::<Mapper>()?;
@@ -638,6 +792,8 @@ fn _tarn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(build_many, m)?)?;
     m.add_function(wrap_pyfunction!(build_tiles, m)?)?;
     m.add_function(wrap_pyfunction!(finish, m)?)?;
+    m.add_function(wrap_pyfunction!(finish_region, m)?)?;
+    m.add_function(wrap_pyfunction!(join_regions, m)?)?;
     m.add_function(wrap_pyfunction!(read_map, m)?)?;
     m.add_function(wrap_pyfunction!(read_frames, m)?)?;
     Ok(())

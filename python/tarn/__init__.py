@@ -9,6 +9,9 @@ The functions and classes are tarn's Rust library (``tarn._tarn``); numpy arrays
   order of merging.
 - ``read_frames(path)`` and ``Mapper(config).update(frame)``: the online mapper.
 - ``read_map(dir)``: a map that ``tarn build`` wrote.
+- ``finish_region(tiles, region, halo, bounds)`` -> ``Region``; ``join_regions(regions)``:
+  the water stage region by region, each read with a halo of tiles; joined, ``finish`` of
+  the whole, byte for byte (tiles a region cannot decide are finished again, larger halo).
 - ``tarn.dask.build_many(logs, client)``: logs built on a Dask cluster.
 
 Errors are ``TarnError`` (``OSError`` for files that cannot be opened) with tarn's message.
@@ -19,6 +22,7 @@ from ._tarn import (
     FrameIter,
     Map,
     Mapper,
+    Region,
     TarnError,
     TileSet,
     __version__,
@@ -26,6 +30,8 @@ from ._tarn import (
     build_many,
     build_tiles,
     finish,
+    finish_region,
+    join_regions,
     read_frames,
     read_map,
 )
@@ -35,6 +41,7 @@ __all__ = [
     "FrameIter",
     "Map",
     "Mapper",
+    "Region",
     "TarnError",
     "TileSet",
     "__version__",
@@ -42,6 +49,8 @@ __all__ = [
     "build_many",
     "build_tiles",
     "finish",
+    "finish_region",
+    "join_regions",
     "merge",
     "read_frames",
     "read_map",

@@ -3,18 +3,27 @@
 ``build_many(logs, client)``:
 
 1. one task per log builds its ``TileSet`` (``tarn.build_tiles``; the Rust code releases
-   the interpreter, so threaded workers build in parallel) and splits it by tile key into
-   ``parts`` regions (``TileSet.partition``: a fixed hash of the tile key, the same in every
-   process);
-2. each region is tree-reduced on the workers: pairwise merges, ``log(n)`` levels deep;
-3. the client gathers the ``parts`` merged regions, joins them (they share no tile) and runs
-   the water stage once over the whole merged map (``tarn.finish``), so a water body cut by
-   log, tile or region borders is found whole.
+   the interpreter, so threaded workers build in parallel); the client gathers only the
+   tile keys, for the map's bounds;
+2. the map's tiles are cut into regions of ``region_tiles`` x ``region_tiles`` tiles from
+   the corner of its bounds (``TileSet.blocks``); each region is tree-reduced on the workers: pairwise merges of
+   the logs' parts, ``log(n)`` levels deep;
+3. each region's water stage runs on a worker (``tarn.finish_region``) over the region and
+   a halo of ``halo`` tiles around it, cut from the merged neighbouring regions
+   (``TileSet.select_near``). A region decides every tile whose cells' classes, hazards
+   and water bodies do not depend on anything beyond its halo; a water body (or the ring
+   of cells its surface fit reads) that reaches the halo's edge leaves the tiles it
+   touches undecided, and those are finished again, as a region of their own, with twice
+   the halo, until none is left;
+4. the client gathers the finished regions and joins them (``tarn.join_regions``).
 
-Merging is exact (integer sums), so the map is byte-identical to ``tarn.build_many`` in one
-process, for any number of workers and any order the merges run in. Logs are the unit of
-work: time chunks of one log would not merge to its one-pass map (a frame's cues read the
-window the earlier frames left), so a log is never split.
+Merging is exact (integer sums) and a decided tile's records are those of the whole map's
+water stage, so the map is byte-identical to ``tarn.build_many`` in one process, for any
+number of workers, any region size and halo, and any order the tasks run in. A worker
+holds two logs' parts of one region (a merge) or one region and its halo (a finish),
+except where a body is larger than the halo: the halo then grows until it holds the body.
+Logs are the unit of work: time chunks of one log would not merge to its one-pass map (a
+frame's cues read the window the earlier frames left), so a log is never split.
 
 Command line: ``python -m tarn.dask LOG... --out DIR [--scheduler ADDRESS]`` (a
 ``LocalCluster`` by default).
@@ -23,6 +32,7 @@ Command line: ``python -m tarn.dask LOG... --out DIR [--scheduler ADDRESS]`` (a
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -33,12 +43,20 @@ import tarn
 __all__ = ["build_many", "main"]
 
 
-def _tiles_of_log(path: str, config: Optional[str], parts: int) -> list:
-    return tarn.build_tiles(path, config).partition(parts)
+def _tiles_of_log(path: str, config: Optional[str]):
+    return tarn.build_tiles(path, config)
 
 
-def _pick(parts: list, i: int):
-    return parts[i]
+def _keys(t) -> list:
+    return t.tile_keys()
+
+
+def _blocks(t, side: int, origin) -> dict:
+    return dict(t.blocks(side, origin))
+
+
+def _pick(blocks: dict, b):
+    return blocks[b]
 
 
 def _merge2(a, b):
@@ -48,12 +66,27 @@ def _merge2(a, b):
     return out
 
 
+def _near(t, region: list, halo: int):
+    return t.select_near(region, halo)
+
+
+def _finish(crops: list, region: list, halo: int, bounds, config: Optional[str]):
+    return tarn.finish_region(tarn.merge(crops), region, halo, bounds, config)
+
+
 def _nbytes(t) -> int:
     return len(t.to_bytes())
 
 
-def _points(parts: list) -> int:
-    return sum(p.points for p in parts)
+def _points(t) -> int:
+    return t.points
+
+
+def _side(bounds, parts: int) -> int:
+    """A region side (tiles) cutting the bounds into at most ceil(sqrt(parts)) squares a side."""
+    (x0, y0), (x1, y1) = bounds
+    across = max(x1 - x0, y1 - y0) + 1
+    return max(1, math.ceil(across / math.ceil(math.sqrt(max(1, parts)))))
 
 
 def build_many(
@@ -62,33 +95,69 @@ def build_many(
     config: Optional[str | os.PathLike] = None,
     parts: Optional[int] = None,
     stats: Optional[dict] = None,
+    region_tiles: Optional[int] = None,
+    halo: int = 2,
 ) -> "tarn.Map":
     """The map of ``logs`` built on the Dask ``client``'s cluster (see the module doc).
 
     ``config``: a ``tarn.toml`` path readable by the workers (``None``: what ``tarn build``
-    uses). ``parts``: regions the reduction is split into (default: the cluster's worker
-    threads, at least 1). ``stats``: a dict to fill with what travelled: ``log_bytes`` (the
-    per-log tile sets, as bytes), ``merge_bytes`` (the merged sets each merge produced),
-    ``result_bytes`` (what the client gathered), ``points`` (points in the logs' cells),
-    ``parts``, and ``seconds`` (wall time of build and reduction, and of the water stage).
+    uses). ``region_tiles``: the side of a region, tiles (64 cells); by default the map's
+    bounds are cut into at most ``ceil(sqrt(parts))`` squares a side (``parts`` defaults
+    to the cluster's worker threads, at least 1). ``halo``: tiles read around a region (at
+    least 1). ``stats``: a dict to fill with what travelled: ``log_bytes`` (the logs' parts of each region, as
+    tile-set bytes), ``merge_bytes`` (the merged sets each merge produced), ``halo_bytes``
+    (the cuts of merged regions each finish read), ``result_bytes`` (the finished regions
+    the client gathered), ``points`` (points in the logs' cells), ``parts`` (regions),
+    ``refinished_tiles`` (tiles finished again with a larger halo), ``largest_halo``,
+    ``most_tiles_read`` (the most tiles one finish read), and ``seconds`` (wall time from
+    the first task to the joined map: builds, merges and finishes overlap).
     """
     paths = [os.fspath(p) for p in logs]
     if not paths:
         raise ValueError("no logs to build")
+    if halo < 1:
+        raise ValueError(f"a halo of {halo} tiles: a region reads at least 1 tile around it")
+    if region_tiles is not None and region_tiles < 1:
+        raise ValueError(f"regions of {region_tiles} tiles: the side is at least 1")
     cfg = None if config is None else os.fspath(config)
     if parts is None:
         nthreads = client.nthreads() if hasattr(client, "nthreads") else {}
         parts = max(1, sum(nthreads.values()))
     t0 = time.perf_counter()
     per_log = [
-        client.submit(_tiles_of_log, p, cfg, parts, key=f"tarn-tiles-{i}", pure=False)
+        client.submit(_tiles_of_log, p, cfg, key=f"tarn-tiles-{i}", pure=False)
         for i, p in enumerate(paths)
     ]
+    keys = [
+        [tuple(k) for k in ks]
+        for ks in client.gather([client.submit(_keys, f, pure=False) for f in per_log])
+    ]
+    every = sorted(set().union(*map(set, keys)))
+    if not every:
+        # Nothing observed: the empty map, with the logs' resolution.
+        return tarn.finish(tarn.merge(client.gather(per_log)), cfg)
+    bounds = (
+        (min(k[0] for k in every), min(k[1] for k in every)),
+        (max(k[0] for k in every), max(k[1] for k in every)),
+    )
+    extent = max(bounds[1][0] - bounds[0][0], bounds[1][1] - bounds[0][1])
+    side = region_tiles if region_tiles is not None else _side(bounds, parts)
+
+    ox, oy = bounds[0]
+
+    def block(k):
+        return ((k[0] - ox) // side, (k[1] - oy) // side)
+
+    per_log_blocks = [client.submit(_blocks, f, side, bounds[0], pure=False) for f in per_log]
+    holders: dict = {}
+    for i, ks in enumerate(keys):
+        for b in {block(k) for k in ks}:
+            holders.setdefault(b, []).append(i)
     picks = []
     merges = []
-    roots = []
-    for r in range(parts):
-        level = [client.submit(_pick, f, r, pure=False) for f in per_log]
+    merged = {}
+    for b in sorted(holders):
+        level = [client.submit(_pick, per_log_blocks[i], b, pure=False) for i in holders[b]]
         picks.extend(level)
         while len(level) > 1:
             nxt = [
@@ -99,29 +168,80 @@ def build_many(
             if len(level) % 2:
                 nxt.append(level[-1])
             level = nxt
-        roots.append(level[0])
+        merged[b] = level[0]
+
+    def reading(region: list, h: int) -> list:
+        """The merged regions holding tiles within ``h`` of ``region``."""
+        x0 = min(t[0] for t in region) - h
+        x1 = max(t[0] for t in region) + h
+        y0 = min(t[1] for t in region) - h
+        y1 = max(t[1] for t in region) + h
+        return [
+            b
+            for b in merged
+            if ox + b[0] * side <= x1 and ox + (b[0] + 1) * side - 1 >= x0
+            and oy + b[1] * side <= y1 and oy + (b[1] + 1) * side - 1 >= y0
+        ]
+
+    pending = [
+        (
+            [(ox + bx * side + i, oy + by * side + j) for i in range(side) for j in range(side)],
+            halo,
+        )
+        for (bx, by) in sorted(merged)
+    ]
+    crops_all = []
+    finished = []
+    regions_done = []
+    refinished = 0
+    largest = halo
+    while pending:
+        futures = []
+        for region, h in pending:
+            crops = [
+                client.submit(_near, merged[b], region, h, pure=False)
+                for b in reading(region, h)
+            ]
+            crops_all.extend(crops)
+            futures.append(client.submit(_finish, crops, region, h, bounds, cfg, pure=False))
+        done = client.gather(futures)
+        finished.extend(futures)
+        regions_done.extend(done)
+        nxt = []
+        for (region, h), r in zip(pending, done):
+            if r.undecided:
+                if h >= extent:
+                    raise RuntimeError(
+                        f"{len(r.undecided)} tiles undecided with a halo of {h} tiles over a "
+                        f"map {extent} tiles across"
+                    )
+                refinished += len(r.undecided)
+                largest = max(largest, min(2 * h, extent))
+                nxt.append((list(r.undecided), min(2 * h, extent)))
+        pending = nxt
+    m = tarn.join_regions(regions_done)
+    t1 = time.perf_counter()
     if stats is not None:
 
         def total(futures):
             sizes = client.gather([client.submit(_nbytes, f, pure=False) for f in futures])
             return int(sum(sizes))
 
-        # Each per-log part goes into a merge (or to the client when it is alone); each
-        # merge result into the next merge or to the client.
+        # Each per-log part goes into a merge (or straight to the finishes when it is
+        # alone); each merge result into the next merge or to the finishes; cuts of the
+        # merged regions into the finishes; the finished regions to the client.
         stats["log_bytes"] = total(picks)
         stats["merge_bytes"] = total(merges)
-        stats["result_bytes"] = total(roots)
+        stats["halo_bytes"] = total(crops_all)
+        stats["result_bytes"] = total(finished)
         stats["points"] = int(
             sum(client.gather([client.submit(_points, f, pure=False) for f in per_log]))
         )
-        stats["parts"] = parts
-    merged = client.gather(roots)
-    whole = tarn.merge(merged)
-    t1 = time.perf_counter()
-    m = tarn.finish(whole, cfg)
-    t2 = time.perf_counter()
-    if stats is not None:
-        stats["seconds"] = {"build_and_reduce": t1 - t0, "water": t2 - t1}
+        stats["parts"] = len(merged)
+        stats["refinished_tiles"] = refinished
+        stats["largest_halo"] = largest
+        stats["most_tiles_read"] = max(r.tiles_read for r in regions_done)
+        stats["seconds"] = t1 - t0
     return m
 
 
@@ -141,7 +261,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         action="store_true",
         help="LocalCluster workers as threads of this process (processes=False)",
     )
-    ap.add_argument("--parts", type=int, help="regions of the reduction (default: worker threads)")
+    ap.add_argument(
+        "--parts",
+        type=int,
+        help="regions: at most ceil(sqrt(N)) a side (default: worker threads)",
+    )
+    ap.add_argument("--region-tiles", type=int, help="side of a region, tiles (overrides --parts)")
+    ap.add_argument("--halo", type=int, default=2, help="tiles read around a region (default 2)")
     a = ap.parse_args(argv)
 
     from dask.distributed import Client, LocalCluster
@@ -159,9 +285,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         client = Client(cluster)
     try:
         stats: dict = {}
-        m = build_many(a.logs, client, config=a.config, parts=a.parts, stats=stats)
+        m = build_many(
+            a.logs,
+            client,
+            config=a.config,
+            parts=a.parts,
+            stats=stats,
+            region_tiles=a.region_tiles,
+            halo=a.halo,
+        )
         m.write(a.out)
-    except (tarn.TarnError, OSError) as e:
+    except (tarn.TarnError, OSError, ValueError) as e:
         print(f"python -m tarn.dask: {e}", file=sys.stderr)
         return 1
     finally:
@@ -170,8 +304,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             cluster.close()
     print(
         f"{len(a.logs)} logs: {len(m)} cells, {len(m.bodies)} water bodies -> {a.out}; "
-        f"{stats['log_bytes'] + stats['merge_bytes'] + stats['result_bytes']} bytes of tile "
-        f"sets for {stats['points']} points"
+        f"{stats['parts']} regions, {stats['refinished_tiles']} tiles finished again; "
+        f"{stats['log_bytes'] + stats['merge_bytes'] + stats['halo_bytes']} bytes of tile "
+        f"sets and {stats['result_bytes']} bytes of finished regions for {stats['points']} "
+        "points"
     )
     return 0
 

@@ -321,6 +321,21 @@ impl TileMap {
         self.tiles.keys().copied().collect()
     }
 
+    /// A new map (same resolution and reference height) of the tiles whose key `keep`
+    /// accepts.
+    pub fn select(&self, keep: impl Fn((i64, i64)) -> bool) -> TileMap {
+        TileMap {
+            resolution: self.resolution,
+            z_ref: self.z_ref,
+            tiles: self
+                .tiles
+                .iter()
+                .filter(|(&k, _)| keep(k))
+                .map(|(&k, t)| (k, t.clone()))
+                .collect(),
+        }
+    }
+
     /// Splits the map into `parts` maps (at least one) by tile key: every tile goes whole
     /// to part [`TileMap::part_of`]. Merging the parts gives the map back; merging the same
     /// part of many maps reduces one region independently of the others.

@@ -264,7 +264,7 @@ fn check(what: &str, ok: bool, v: impl std::fmt::Display, must: &str) -> Result<
 
 impl WaterConfig {
     /// `shore_radius_m` in whole cells of size `resolution` (at least 1).
-    fn shore_radius_cells(&self, resolution: f64) -> i64 {
+    pub(crate) fn shore_radius_cells(&self, resolution: f64) -> i64 {
         (self.shore_radius_m / resolution).ceil().max(1.0) as i64
     }
 
@@ -623,9 +623,16 @@ impl Info {
 }
 
 /// The cells of `inner` with the bottom evidence of the cells in `void` taken away.
-struct WithoutBottom<'a, C> {
+pub(crate) struct WithoutBottom<'a, C> {
     inner: &'a C,
     void: &'a BTreeSet<CellKey>,
+}
+
+impl<'a, C> WithoutBottom<'a, C> {
+    /// `inner`'s cells, those in `void` without their bottom evidence.
+    pub(crate) fn new(inner: &'a C, void: &'a BTreeSet<CellKey>) -> Self {
+        WithoutBottom { inner, void }
+    }
 }
 
 impl<C: CellInfos> CellInfos for WithoutBottom<'_, C> {
@@ -650,6 +657,17 @@ impl<C: CellInfos> CellInfos for WithoutBottom<'_, C> {
 }
 
 impl Info {
+    /// The cell's water probability, as its evidence gives it.
+    pub(crate) fn p(&self) -> f64 {
+        self.p
+    }
+
+    /// Whether a body grows over the cell: water probability (without the bottom returns
+    /// once they no longer count) at least `p_low`, or bottom returns that count.
+    pub(crate) fn joins(&self, cfg: &WaterConfig) -> bool {
+        self.p_evidence() >= cfg.p_low || self.has_bottom_evidence()
+    }
+
     /// The info of an observed cell `c` whose water probability under `logs` is `p`, in a
     /// map of reference height `z_ref`.
     pub(crate) fn of(c: &CellStats, p: f64, logs: &FusionLogs, z_ref: f64) -> Info {
@@ -704,7 +722,7 @@ impl CellInfos for BTreeMap<CellKey, Info> {
 /// Connected components with hysteresis over `p`, grown from `seeds` (every cell that
 /// seeds a body, in increasing key order): deterministic. Each with the seed it grew from,
 /// its smallest.
-fn components_seeded(
+pub(crate) fn components_seeded(
     cells: &impl CellInfos,
     seeds: impl IntoIterator<Item = CellKey>,
     cfg: &WaterConfig,
@@ -721,11 +739,7 @@ fn components_seeded(
         while let Some(c) = q.pop_front() {
             for d in N8 {
                 let n = add(c, d);
-                if !seen.contains(&n)
-                    && cells
-                        .get(n)
-                        .is_some_and(|i| i.p_evidence() >= cfg.p_low || i.has_bottom_evidence())
-                {
+                if !seen.contains(&n) && cells.get(n).is_some_and(|i| i.joins(cfg)) {
                     seen.insert(n);
                     body.push(n);
                     q.push_back(n);
@@ -758,6 +772,28 @@ pub(crate) fn find_bodies_among(
     previous: &[WaterBody],
 ) -> Result<Vec<WaterBody>> {
     cfg.validate()?;
+    let info = infos(tiles, observed, cfg);
+    let seeds = info
+        .iter()
+        .filter(|(_, i)| seeds_body(i.p, &cfg.water))
+        .map(|(&k, _)| k);
+    Ok(bodies_from(
+        &info,
+        seeds,
+        tiles.resolution(),
+        &cfg.water,
+        previous,
+    ))
+}
+
+/// The [`Info`] of the `observed` cells of `tiles` that the body search reads (see
+/// [`find_bodies_among`]): the cells within blocks of 2n + 2 cells next to the block of a
+/// cell a body can grow over.
+pub(crate) fn infos(
+    tiles: &TileMap,
+    observed: &[(CellKey, CellStats)],
+    cfg: &HazardConfig,
+) -> BTreeMap<CellKey, Info> {
     let res = tiles.resolution();
     // Only the neighbourhood of possible water matters: the cells a body can grow over
     // (p ≥ p_low, or with bottom returns), their shore and the ground the occluder test
@@ -783,17 +819,12 @@ pub(crate) fn find_bodies_among(
             }
         }
     }
-    let info: BTreeMap<CellKey, Info> = observed
+    observed
         .iter()
         .zip(p)
         .filter(|((k, _), _)| near.contains(&block(*k)))
         .map(|(&(k, c), p)| (k, Info::of(&c, p, &logs, tiles.z_ref())))
-        .collect();
-    let seeds = info
-        .iter()
-        .filter(|(_, i)| seeds_body(i.p, &cfg.water))
-        .map(|(&k, _)| k);
-    Ok(bodies_from(&info, seeds, res, &cfg.water, previous))
+        .collect()
 }
 
 /// The water bodies of `cells` at resolution `res`, grown from `seeds` (every observed
@@ -963,7 +994,10 @@ fn assign_ids(comps: &[Vec<CellKey>], previous: &[WaterBody]) -> Vec<u32> {
         .collect()
 }
 
-fn body_of(
+/// The body of the component `cells` (sorted) with id `id`: shore, surface, depths; `None`
+/// when no surface can be fitted. Reads the cells within 2n of the component, n =
+/// ⌈shore_radius / resolution⌉ (the occluder test's ground, [`ground_near`]).
+pub(crate) fn body_of(
     id: u32,
     cells: Vec<CellKey>,
     info: &impl CellInfos,
