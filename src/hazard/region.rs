@@ -1011,7 +1011,10 @@ mod tests {
         let mut counted = cfg;
         counted.water.min_bottom_depth_m = Some(0.0);
         let all_count = HazardMap::from_tiles(&t, &counted).unwrap();
-        assert_ne!(format!("{:?}", all_count.bodies), format!("{:?}", whole.bodies));
+        assert_ne!(
+            format!("{:?}", all_count.bodies),
+            format!("{:?}", whole.bodies)
+        );
         assert!(whole
             .bodies
             .iter()
