@@ -48,8 +48,8 @@ use super::{cell_records, water_surface, Class, Hazard, HazardMap, MapCell};
 use crate::error::{Error, Result};
 use crate::grid::{CellKey, CellStats, TileMap, TILE_CELLS};
 use crate::water::{
-    body_of, components_seeded, infos, refine_component, seeds_body, DepthStats, HazardConfig,
-    ShoreSample, SurfaceModel, SurfaceSource, WaterBody, WithoutBottom,
+    add, body_of, components_seeded, infos, refine_component, seeds_body, DepthStats, HazardConfig,
+    ShoreSample, SurfaceModel, SurfaceSource, WaterBody, WithoutBottom, N8,
 };
 
 /// A tile key `(tx, ty)`: the tile of cells `tx·64 ..< tx·64 + 64` along x, likewise y.
@@ -123,21 +123,6 @@ impl Domain {
         self.ranges.insert(key, d);
         d
     }
-}
-
-const N8: [(i64, i64); 8] = [
-    (-1, -1),
-    (0, -1),
-    (1, -1),
-    (-1, 0),
-    (1, 0),
-    (-1, 1),
-    (0, 1),
-    (1, 1),
-];
-
-fn add(k: CellKey, (dx, dy): (i64, i64)) -> CellKey {
-    CellKey::new(k.x + dx, k.y + dy)
 }
 
 /// The water stage of the region `region` (tile keys) of a merged map whose tile keys lie

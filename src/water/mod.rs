@@ -538,7 +538,8 @@ pub fn bodies_report(bodies: &[WaterBody]) -> serde_json::Value {
     serde_json::Value::Array(bodies.iter().map(WaterBody::report).collect())
 }
 
-const N8: [(i64, i64); 8] = [
+/// The eight neighbours of a cell, as key offsets.
+pub(crate) const N8: [(i64, i64); 8] = [
     (-1, -1),
     (0, -1),
     (1, -1),
@@ -550,7 +551,8 @@ const N8: [(i64, i64); 8] = [
 ];
 const N4: [(i64, i64); 4] = [(0, -1), (-1, 0), (1, 0), (0, 1)];
 
-fn add(k: CellKey, (dx, dy): (i64, i64)) -> CellKey {
+/// The key `k` moved by an offset.
+pub(crate) fn add(k: CellKey, (dx, dy): (i64, i64)) -> CellKey {
     CellKey::new(k.x + dx, k.y + dy)
 }
 
