@@ -256,6 +256,42 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
     let thr = out.reflectivity_threshold.expect("a threshold");
     // The decoy budget: under 0.3 % of the dry cells called water by all cues fused.
     assert!((called_all as f64) < 0.003 * dry.len() as f64);
+
+    // The same evidence through the water stage, over the scan's own terrain (the points
+    // the cues left in it): what the map calls water on dry ground and on the puddles.
+    let mut tiles = tarn::grid::TileMap::new(RES, 0.0).unwrap();
+    for i in (0..out.corrected.len()).filter(|&i| out.corrected.is_valid(i)) {
+        let p = out.corrected.point_in_map(i);
+        let mut c = tarn::grid::CellStats::default();
+        c.add((p.z * 1000.0).round() as i32, 65536);
+        tiles.add(key_of(RES, p.x, p.y), &c);
+    }
+    for (&k, e) in out.evidence.iter() {
+        let c = tarn::grid::CellStats {
+            ev: *e,
+            ..Default::default()
+        };
+        tiles.add(k, &c);
+    }
+    let map =
+        tarn::hazard::HazardMap::from_tiles(&tiles, &tarn::water::HazardConfig::default()).unwrap();
+    let water: std::collections::BTreeSet<CellKey> = map
+        .cells
+        .iter()
+        .filter(|c| c.class == tarn::hazard::Class::Water)
+        .map(|c| c.key)
+        .collect();
+    let map_dry = dry.iter().filter(|k| water.contains(k)).count();
+    let map_puddle = puddle_cells.iter().filter(|k| water.contains(k)).count();
+    eprintln!(
+        "through the water stage: dry cells called water {map_dry} of {} ({:.2} %), puddle \
+         cells {map_puddle} of {}, {} bodies",
+        dry.len(),
+        100.0 * map_dry as f64 / dry.len() as f64,
+        puddle_cells.len(),
+        map.bodies.len()
+    );
+    assert!((map_dry as f64) < 0.003 * dry.len() as f64);
     let law = out.reflectivity_law.expect("a fitted law");
     eprintln!("the scan's fitted channel law: {law:?}");
     // Residuals from the fitted law, by label; and how well they separate puddles.
