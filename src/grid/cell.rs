@@ -8,6 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::evidence::Evidence;
+use super::Elev;
 
 /// Reference standard deviation for weights: a point with σ = 1 cm has weight [`W_UNIT`].
 pub const SIGMA_REF_M: f64 = 0.01;
@@ -89,26 +90,17 @@ impl CellStats {
     /// Fuses one quantized measurement.
     #[inline]
     pub fn add(&mut self, z_mm: i32, w: u32) {
-        // |w·z| < 2^55 fits i64; the square needs one widening multiply.
-        let wz = w as i64 * z_mm as i64;
-        self.hits += 1;
-        self.sw += w as u64;
-        self.swz += wz as i128;
-        self.swzz += wz as i128 * z_mm as i128;
-        self.zmin = self.zmin.min(z_mm);
-        self.zmax = self.zmax.max(z_mm);
+        let mut e = Elev::of(self);
+        e.add(z_mm, w);
+        e.write_to(self);
     }
 
     /// The commutative, associative combine.
     #[inline]
     pub fn merge(&mut self, o: &CellStats) {
-        self.hits += o.hits;
-        self.below += o.below;
-        self.sw += o.sw;
-        self.swz += o.swz;
-        self.swzz += o.swzz;
-        self.zmin = self.zmin.min(o.zmin);
-        self.zmax = self.zmax.max(o.zmax);
+        let mut e = Elev::of(self);
+        e.merge(&Elev::of(o));
+        e.write_to(self);
         self.ev.merge(&o.ev);
     }
 

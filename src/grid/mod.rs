@@ -21,6 +21,7 @@ pub use evidence::{
     CueLogOdds, Evidence, Fusion, FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS,
 };
 pub use ingest::{IngestStats, RangeNoise};
+pub(crate) use tiles::ByteReader;
 pub use tiles::{TileMap, TILESET_MAGIC, TILESET_VERSION, TILE_CELLS};
 
 use rayon::prelude::*;
@@ -197,19 +198,24 @@ impl Elev {
     /// As [`CellStats`], with empty evidence.
     #[inline]
     pub fn stats(&self) -> CellStats {
-        CellStats {
-            hits: self.hits,
-            below: self.below,
-            sw: self.sw,
-            swz: self.swz,
-            swzz: self.swzz,
-            zmin: self.zmin,
-            zmax: self.zmax,
-            ev: Evidence::default(),
-        }
+        let mut c = CellStats::default();
+        self.write_to(&mut c);
+        c
     }
 
-    /// Fuses one quantized measurement ([`CellStats::add`]).
+    /// Sets `c`'s elevation statistics to these, keeping its evidence.
+    #[inline]
+    pub fn write_to(&self, c: &mut CellStats) {
+        c.hits = self.hits;
+        c.below = self.below;
+        c.sw = self.sw;
+        c.swz = self.swz;
+        c.swzz = self.swzz;
+        c.zmin = self.zmin;
+        c.zmax = self.zmax;
+    }
+
+    /// Fuses one quantized measurement (the arithmetic behind [`CellStats::add`]).
     #[inline]
     pub fn add(&mut self, z_mm: i32, w: u32) {
         // |w·z| < 2^55 fits i64; the square needs one widening multiply.

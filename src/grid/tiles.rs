@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 #[path = "tiles_codec.rs"]
 mod codec;
 
+pub(crate) use codec::ByteReader;
 pub use codec::{TILESET_MAGIC, TILESET_VERSION};
 
 /// Cells per tile side.

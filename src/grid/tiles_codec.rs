@@ -97,23 +97,30 @@ fn write_cell(out: &mut Vec<u8>, index: usize, c: &CellStats) {
     }
 }
 
-/// A cursor over the input that never reads past its end.
-struct Reader<'a> {
-    bytes: &'a [u8],
-    pos: usize,
+/// A cursor over little-endian input that never reads past its end; its errors name the
+/// `format` the bytes were meant to be and the byte where they went wrong.
+pub(crate) struct ByteReader<'a> {
+    pub(crate) bytes: &'a [u8],
+    pub(crate) pos: usize,
+    /// What the bytes are meant to be ("tile set", "region map").
+    pub(crate) format: &'static str,
 }
 
 fn corrupt(pos: usize, message: impl std::fmt::Display) -> Error {
     Error::invalid("tile set", format!("at byte {pos}: {message}"))
 }
 
-impl<'a> Reader<'a> {
-    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
+impl<'a> ByteReader<'a> {
+    pub(crate) fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
         let end = self.pos.checked_add(N).filter(|&e| e <= self.bytes.len());
         let Some(end) = end else {
-            return Err(corrupt(
-                self.pos,
-                format!("{what}: {N} bytes needed, {} left", self.remaining()),
+            return Err(Error::invalid(
+                self.format,
+                format!(
+                    "at byte {}: {what}: {N} bytes needed, {} left",
+                    self.pos,
+                    self.remaining()
+                ),
             ));
         };
         let mut a = [0u8; N];
@@ -122,30 +129,36 @@ impl<'a> Reader<'a> {
         Ok(a)
     }
 
-    fn remaining(&self) -> usize {
+    pub(crate) fn remaining(&self) -> usize {
         self.bytes.len() - self.pos
     }
 
+    pub(crate) fn u8(&mut self, what: &str) -> Result<u8> {
+        self.take::<1>(what).map(|[b]| b)
+    }
     fn u16(&mut self, what: &str) -> Result<u16> {
         self.take(what).map(u16::from_le_bytes)
     }
-    fn u32(&mut self, what: &str) -> Result<u32> {
+    pub(crate) fn u32(&mut self, what: &str) -> Result<u32> {
         self.take(what).map(u32::from_le_bytes)
     }
     fn i32(&mut self, what: &str) -> Result<i32> {
         self.take(what).map(i32::from_le_bytes)
     }
-    fn u64(&mut self, what: &str) -> Result<u64> {
+    pub(crate) fn u64(&mut self, what: &str) -> Result<u64> {
         self.take(what).map(u64::from_le_bytes)
     }
-    fn i64(&mut self, what: &str) -> Result<i64> {
+    pub(crate) fn i64(&mut self, what: &str) -> Result<i64> {
         self.take(what).map(i64::from_le_bytes)
     }
     fn i128(&mut self, what: &str) -> Result<i128> {
         self.take(what).map(i128::from_le_bytes)
     }
-    fn f64(&mut self, what: &str) -> Result<f64> {
+    pub(crate) fn f64(&mut self, what: &str) -> Result<f64> {
         self.take(what).map(f64::from_le_bytes)
+    }
+    pub(crate) fn f32(&mut self, what: &str) -> Result<f32> {
+        self.take(what).map(f32::from_le_bytes)
     }
 
     fn cell(&mut self) -> Result<(u16, CellStats)> {
@@ -234,9 +247,10 @@ impl TileMap {
             return Err(corrupt(0, "not a tile set (magic is not TARNTILE)"));
         }
         let (body, crc) = bytes.split_at(bytes.len() - 4);
-        let mut r = Reader {
+        let mut r = ByteReader {
             bytes: body,
             pos: 8,
+            format: "tile set",
         };
         let version = r.u32("version")?;
         if version != TILESET_VERSION {

@@ -46,7 +46,7 @@ use rayon::prelude::*;
 
 use super::{cell_records, water_surface, Class, Hazard, HazardMap, MapCell};
 use crate::error::{Error, Result};
-use crate::grid::{CellKey, CellStats, TileMap, TILE_CELLS};
+use crate::grid::{ByteReader, CellKey, CellStats, TileMap, TILE_CELLS};
 use crate::water::{
     add, body_of, components_seeded, infos, refine_component, seeds_body, DepthStats, HazardConfig,
     ShoreSample, SurfaceModel, SurfaceSource, WaterBody, WithoutBottom, N8,
@@ -539,43 +539,7 @@ fn corrupt(at: usize, msg: impl std::fmt::Display) -> Error {
     Error::invalid("region map", format!("at byte {at}: {msg}"))
 }
 
-struct Reader<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-}
-
-impl Reader<'_> {
-    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
-        let end = self.pos.checked_add(N).filter(|&e| e <= self.bytes.len());
-        let Some(end) = end else {
-            return Err(corrupt(
-                self.pos,
-                format!("the bytes end inside the {what}"),
-            ));
-        };
-        let mut a = [0u8; N];
-        a.copy_from_slice(&self.bytes[self.pos..end]);
-        self.pos = end;
-        Ok(a)
-    }
-    fn u8(&mut self, what: &str) -> Result<u8> {
-        Ok(self.take::<1>(what)?[0])
-    }
-    fn u32(&mut self, what: &str) -> Result<u32> {
-        Ok(u32::from_le_bytes(self.take(what)?))
-    }
-    fn u64(&mut self, what: &str) -> Result<u64> {
-        Ok(u64::from_le_bytes(self.take(what)?))
-    }
-    fn i64(&mut self, what: &str) -> Result<i64> {
-        Ok(i64::from_le_bytes(self.take(what)?))
-    }
-    fn f64(&mut self, what: &str) -> Result<f64> {
-        Ok(f64::from_le_bytes(self.take(what)?))
-    }
-    fn f32(&mut self, what: &str) -> Result<f32> {
-        Ok(f32::from_le_bytes(self.take(what)?))
-    }
+impl ByteReader<'_> {
     fn opt(&mut self, what: &str) -> Result<Option<f64>> {
         let at = self.pos;
         match self.u8(what)? {
@@ -753,9 +717,10 @@ impl RegionMap {
             return Err(corrupt(0, "not a region map (magic is not TARNREGN)"));
         }
         let (body, crc) = bytes.split_at(bytes.len() - 4);
-        let mut r = Reader {
+        let mut r = ByteReader {
             bytes: body,
             pos: 8,
+            format: "region map",
         };
         let version = r.u32("version")?;
         if version != REGION_VERSION {

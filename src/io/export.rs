@@ -574,11 +574,12 @@ pub fn elevation_range(cells: &[MapCell]) -> Option<(f64, f64)> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::hazard::{Class, Hazard};
 
-    fn cell(x: i64, y: i64, z: f64) -> MapCell {
+    /// A dry ground cell `(x, y)` of a 10 cm map at elevation `z`.
+    pub(crate) fn cell(x: i64, y: i64, z: f64) -> MapCell {
         MapCell {
             key: CellKey::new(x, y),
             x: (x as f64 + 0.5) * 0.1,

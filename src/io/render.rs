@@ -469,17 +469,8 @@ mod tests {
 
     fn cell(x: i64, y: i64, z: f64, class: Class) -> MapCell {
         MapCell {
-            key: CellKey::new(x, y),
-            x: (x as f64 + 0.5) * 0.1,
-            y: (y as f64 + 0.5) * 0.1,
-            z,
-            elevation_std: 0.01,
-            water: 0.0,
-            depth: 0.0,
             class,
-            hazard: Hazard::Free,
-            hits: 1,
-            below: 0,
+            ..crate::io::export::tests::cell(x, y, z)
         }
     }
 

@@ -791,14 +791,21 @@ fn holes_beyond_the_lidars_dry_reach_take_no_vote() {
     assert!(votes[1].1 == 0 && votes[1].2 > 50, "{votes:?}");
 }
 
+/// A pale colour the paper's rule calls water, as concrete or a pale slab is.
+const PALE: [u8; 3] = [200, 200, 190];
+
+/// A `w × h` image pale on its left half and sky-coloured on its right.
+fn pale_left_half(w: usize, h: usize) -> Vec<[u8; 3]> {
+    (0..w * h)
+        .map(|i| if i % w < w / 2 { PALE } else { SKY })
+        .collect()
+}
+
 #[test]
 fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
     let (cam, pose) = camera();
     let (w, h) = (cam.width, cam.height);
-    const PALE: [u8; 3] = [200, 200, 190];
-    let px: Vec<[u8; 3]> = (0..w * h)
-        .map(|i| if i % w < w / 2 { PALE } else { SKY })
-        .collect();
+    let px = pale_left_half(w, h);
     let ground_at = |u: usize, v: usize| {
         let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
         let t = pose.translation.z / -r.z;
@@ -847,10 +854,7 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
 fn colour_check_counts_stereo_verdicts_at_their_pixels() {
     let (cam, pose) = camera();
     let (w, h) = (cam.width, cam.height);
-    const PALE: [u8; 3] = [200, 200, 190];
-    let px: Vec<[u8; 3]> = (0..w * h)
-        .map(|i| if i % w < w / 2 { PALE } else { SKY })
-        .collect();
+    let px = pale_left_half(w, h);
     let (rows, cols) = (h / 2, w / 2);
     let cloud = PointCloud::organized(rows, cols, vec![[f32::NAN; 3]; rows * cols]).unwrap();
     let run = |ground: usize, not_ground: usize| -> u64 {
