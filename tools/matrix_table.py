@@ -82,6 +82,9 @@ def accuracy():
     print("- **recall**: water cells the sensors could see (some lidar beam or camera pixel met")
     print("  the water there first) that the map calls water, counted from the truth, so water the")
     print("  map left out counts as missed;")
+    print("- **sky-reflection recall**: the same over the seen water cells the colour camera saw")
+    print("  reflecting the sky in some frame (what a colour classifier can call water); the rest")
+    print("  it saw only reflecting terrain or never;")
     print("- **false water**: dry cells off the shore (more than 0.5 m from any water) called")
     print("  water, over those the map observed;")
     print("- **precision**: map cells called water that are water;")
@@ -95,13 +98,14 @@ def accuracy():
     print()
     print("## 5–30 m")
     print()
-    print("| scene | rig | water seen | recall | dry off shore | false water | precision | surface RMS | depth RMS | terrain RMS |")
-    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print("| scene | rig | water seen | recall | sky-reflection seen | sky-reflection recall | dry off shore | false water | precision | surface RMS | depth RMS | terrain RMS |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for scene in scenes:
         for rig in rigs:
             b = band(load(rig, scene, "eval"), "5-30")
             print(
                 f"| {scene} | {rig} | {b['seen_water_cells']} | {pct(b['seen_recall'])} | "
+                f"{b.get('seen_sky_cells', 0)} | {pct(b.get('seen_sky_recall'))} | "
                 f"{b['dry_offshore_cells']} | {pct(b['false_rate_offshore'], 2)} | {pct(b['precision'])} | "
                 f"{num(b['surface_rms_m'])} | {num(b['depth_rms_m'])} | {num(b['terrain_rms_m'])} |"
             )

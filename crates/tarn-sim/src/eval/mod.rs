@@ -82,6 +82,14 @@ pub struct BinMetrics {
     pub seen_water_detected: usize,
     /// `seen_water_detected / seen_water_cells`.
     pub seen_recall: Option<f64>,
+    /// Of `seen_water_cells`, those the colour camera saw reflecting the sky in some frame
+    /// ([`ColourView::sky`]): what a colour classifier can call water. 0 when the truth
+    /// does not record the colour camera's view.
+    pub seen_sky_cells: usize,
+    /// Of `seen_sky_cells`, those called water.
+    pub seen_sky_detected: usize,
+    /// `seen_sky_detected / seen_sky_cells`.
+    pub seen_sky_recall: Option<f64>,
     /// Observed cells whose truth cell is off shore: not water, and farther than
     /// [`SHORE_MARGIN_M`] from the centre of every true water cell.
     pub dry_offshore_cells: usize,
@@ -182,10 +190,15 @@ impl Acc {
         }
     }
 
-    /// One seen true-water truth cell, called water by the map or not.
-    fn add_seen(&mut self, called: bool) {
+    /// One seen true-water truth cell, called water by the map or not, and whether the
+    /// colour camera saw it reflecting the sky.
+    fn add_seen(&mut self, called: bool, sky: bool) {
         self.m.seen_water_cells += 1;
         self.m.seen_water_detected += usize::from(called);
+        if sky {
+            self.m.seen_sky_cells += 1;
+            self.m.seen_sky_detected += usize::from(called);
+        }
     }
 
     /// The rates and errors; `seen_recorded` false (truth without `seen_water`) takes the
@@ -199,6 +212,7 @@ impl Acc {
         self.m.water_recall = ratio(self.m.water_detected, self.m.water_cells);
         self.m.false_positive_rate = ratio(self.m.false_water, self.m.dry_cells);
         self.m.seen_recall = ratio(self.m.seen_water_detected, self.m.seen_water_cells);
+        self.m.seen_sky_recall = ratio(self.m.seen_sky_detected, self.m.seen_sky_cells);
         self.m.false_rate_offshore = ratio(self.m.false_water_offshore, self.m.dry_offshore_cells);
         self.m.precision = ratio(self.m.called_true, self.m.called_water);
         self.m.obstacle_recall = ratio(self.m.obstacle_detected, self.m.obstacle_cells);
@@ -580,10 +594,10 @@ struct Scorer<'a> {
     /// Truth cells by key (at the truth's resolution).
     index: KeyMap<&'a MapCell>,
     cells: Vec<Scored<'a>>,
-    /// The seen true-water truth cells: distance of the centre to the path, and whether
-    /// the map calls the cell containing that centre water. `None` without
-    /// [`TruthInfo::seen_water`].
-    seen: Option<Vec<(f64, bool)>>,
+    /// The seen true-water truth cells: distance of the centre to the path, whether the
+    /// map calls the cell containing that centre water, and whether the colour camera saw
+    /// the cell reflecting the sky. `None` without [`TruthInfo::seen_water`].
+    seen: Option<Vec<(f64, bool, bool)>>,
 }
 
 impl<'a> Scorer<'a> {
@@ -631,6 +645,12 @@ impl<'a> Scorer<'a> {
                     *called.entry(c.key).or_default() |= c.class == Class::Water;
                 }
                 let keys: KeySet = keys.iter().map(|k| CellKey::new(k[0], k[1])).collect();
+                let sky: KeySet = info
+                    .colour_view
+                    .iter()
+                    .flat_map(|v| &v.sky)
+                    .map(|k| CellKey::new(k[0], k[1]))
+                    .collect();
                 Some(
                     keys.into_iter()
                         .filter(|k| index.get(k).is_some_and(|t| t.class == Class::Water))
@@ -641,6 +661,7 @@ impl<'a> Scorer<'a> {
                             (
                                 distance_to_path(&path, x, y),
                                 called.get(&mk).copied().unwrap_or(false),
+                                sky.contains(&k),
                             )
                         })
                         .collect(),
@@ -657,8 +678,8 @@ impl<'a> Scorer<'a> {
         for s in self.cells.iter().filter(|s| keep(s.d)) {
             acc.add(s.cell, s.truth, s.offshore, s.obstacle);
         }
-        for &(_, called) in self.seen.iter().flatten().filter(|(d, _)| keep(*d)) {
-            acc.add_seen(called);
+        for &(_, called, sky) in self.seen.iter().flatten().filter(|(d, ..)| keep(*d)) {
+            acc.add_seen(called, sky);
         }
         acc.finish(self.seen.is_some())
     }
@@ -948,6 +969,20 @@ mod tests {
             (0, None)
         );
         assert_eq!((r.bins[3].called_water, r.bins[3].precision), (0, None));
+        // Without the colour camera's view no seen cell is a sky reflection.
+        assert_eq!((b.seen_sky_cells, b.seen_sky_recall), (0, None));
+
+        // The camera saw 12 (called) and 14 (missing) reflecting the sky, 13 only terrain,
+        // and the dry cell 30 the sky: of the seen water, two reflected the sky, one found.
+        let mut info = info;
+        info.colour_view = Some(ColourView {
+            sky: vec![[12, 0], [14, 0], [30, 0]],
+            terrain: vec![[13, 0]],
+        });
+        let b = evaluate_band(&map, &truth, &info, 10.0, 20.0).unwrap();
+        assert_eq!((b.seen_sky_cells, b.seen_sky_detected), (2, 1));
+        assert_eq!(b.seen_sky_recall, Some(0.5));
+        assert_eq!((b.seen_water_cells, b.seen_water_detected), (4, 2));
     }
 
     #[test]
