@@ -421,14 +421,28 @@ const CHECK_BITS: u32 = 4;
 /// One-sided 5 % point of the standard normal: the [`ColourCheck`]'s sign test.
 const CHECK_Z: f64 = 1.645;
 
+/// Whether pixel `(u, v)` and the eight around it (those inside the image) are all colour
+/// water: only there does a lidar point projected into the image tell which side of the
+/// water's edge it lies on. Its projection is rounded to the nearest pixel and the label's
+/// edge is itself a pixel wide, so a return from the dry rim of a puddle lands on the
+/// puddle's edge pixels as often as on the rim's. (A stereo element is registered to its
+/// pixels and needs no such margin.)
+fn inside_water(labels: &LabelImage, u: usize, v: usize) -> bool {
+    let (w, h) = (labels.width, labels.height);
+    (v.saturating_sub(1)..(v + 2).min(h)).all(|y| {
+        (u.saturating_sub(1)..(u + 2).min(w)).all(|x| labels.data[y * w + x] == Label::Water)
+    })
+}
+
 /// The colour classifier checked by the lidar, over a log. The paper's rule calls whatever
 /// is bright and weakly saturated water, which pale concrete, a pale slab and snow are too:
 /// the cue's false-alarm rate is then not the few per cent the fusion rule assumes but a
 /// property of the scene. The lidar measures it. Each frame, the points where the scan
 /// found dry ground (returns water would not give) and water (missing beams inside the
 /// diagnostic interval, bottom and specular returns where their beams cross the water) are
-/// projected into the colour image; a water pixel there counts for its colour bin (4 bits
-/// a channel) as seen on dry ground or on water. A colour the lidar finds on dry ground
+/// projected into the colour image; a water pixel there, inside the water's edge
+/// ([`inside_water`]), counts for its colour bin (4 bits a channel) as seen on dry ground
+/// or on water. A colour the lidar finds on dry ground
 /// more often than on water, by a one-sided sign test at 5 % (`dry − wet ≥ 1.645
 /// √(dry + wet + 1)`, the normal form: four dry samples and none wet suffice), is not
 /// evidence of water in this log: its pixels become `Unknown` and place no vote, near or
@@ -513,11 +527,11 @@ impl ColourCheck {
                 if !(u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64) {
                     continue;
                 }
-                let i = v as usize * w + u as usize;
-                if labels.data[i] != Label::Water {
+                let (u, v) = (u as usize, v as usize);
+                if !inside_water(labels, u, v) {
                     continue;
                 }
-                self.count(px[i], dry);
+                self.count(px[v * w + u], dry);
             }
         }
         let mut vetoed = 0;

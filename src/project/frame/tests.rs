@@ -847,6 +847,39 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
     assert_eq!(run(6, 6).0, 0);
 }
 
+/// A lidar point counts only where the colour water around its pixel is unbroken: four dry
+/// returns on the edge column of a strip of colour water (a puddle's rim) say nothing;
+/// the same four a column inside it veto the colour.
+#[test]
+fn colour_check_ignores_lidar_points_on_the_waters_edge() {
+    let (cam, pose) = camera();
+    let (w, h) = (cam.width, cam.height);
+    assert!(w / 2 > 20);
+    let px = pale_left_half(w, h);
+    let ground_at = |u: usize, v: usize| {
+        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
+        let t = pose.translation.z / -r.z;
+        Point3::from(pose.translation.vector + r * t)
+    };
+    let strip = 10..20;
+    let run = |u: usize| -> u64 {
+        let mut labels = LabelImage::filled(w, h, Label::Other);
+        for (i, l) in labels.data.iter_mut().enumerate() {
+            if strip.contains(&(i % w)) {
+                *l = Label::Water;
+            }
+        }
+        let lidar = ScanSurface {
+            dry: (0..4).map(|k| ground_at(u, h - 5 - 3 * k)).collect(),
+            ..ScanSurface::default()
+        };
+        ColourCheck::default().run(&mut labels, &px, &cam, &pose, &lidar, None)
+    };
+    assert_eq!(run(strip.start), 0);
+    assert_eq!(run(strip.end - 1), 0);
+    assert_eq!(run(strip.start + 1) as usize, strip.len() * h);
+}
+
 /// A stereo cloud registered to the image at half its resolution: elements seen as ground
 /// under pale pixels count as dry samples of that colour, elements not seen as ground
 /// (reflections, missing matches short of the ground) as samples against it.
