@@ -124,16 +124,19 @@
 //!
 //! The level plane is the median of the kept samples, and its residual is their RMS about
 //! it. If that residual is at most `level_residual_m`, the shore agrees and the body is
-//! level (a pond). Otherwise (a stream down a slope) the surface interpolates the shore: a
+//! level (a pond). It is level too when the spread read robustly (1.4826 times the median
+//! absolute deviation, the RMS of normal noise) is that small and the shore's lower
+//! quarter (`shore_quantile`) stands within `occluder_height_m` of the median: a few raised
+//! samples the occluder test kept (the foot of a bush on the shore) do not make a pond a
+//! stream, while many low ones would hold the water below the median. Otherwise (a stream down a slope) the surface interpolates the shore: a
 //! constrained Delaunay triangulation (spade, bulk-loaded) of the samples, with a
 //! constraint edge between every two 8-adjacent shore samples so that triangles follow the
 //! shoreline instead of cutting across land; crossing diagonals are skipped. Water cells are
 //! given barycentric interpolation in their triangle; outside the triangulation, the
 //! surface at the nearest point of its hull, so that it is continuous across the hull and
-//! follows the shore along it. (Until 2026-11-24 it was the nearest sample: where a
-//! stream's near bank is hidden the hull runs down the middle of the channel, and the near
-//! half took one sample's height per stretch, with steps of up to 18 cm between stretches;
-//! the stream's surface RMS went from 6.6 to 5.4 cm, the other scenes did not move.)
+//! follows the shore along it (not the nearest sample: where a stream's near bank is
+//! hidden the hull runs down the middle of the channel, and the near half would take one
+//! sample's height per stretch, with steps between stretches).
 //! The vertices are not the samples as measured but each at the median of the kept samples
 //! within `vertex_median_radius_m` (1.5 m) of it ([`surface::local_medians`]; 0 keeps them
 //! as measured): a triangulation carries each vertex's own error to the water around it,
@@ -218,7 +221,9 @@ pub struct WaterConfig {
     pub shore_max_std_m: f64,
     /// Fewer kept shore samples than this: use the cues' water-level samples.
     pub min_shore_samples: usize,
-    /// Largest RMS of the shore about its median for a level surface (m).
+    /// Largest RMS of the shore about its median for a level surface (m); also the largest
+    /// robust spread (1.4826 × the median absolute deviation) of a shore with a few raised
+    /// samples (see the module documentation, section 3).
     pub level_residual_m: f64,
     /// Steepest bank (rise over run) whose slope moves a shore sample down to the water's
     /// edge; 0 turns the correction off.

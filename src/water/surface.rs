@@ -396,7 +396,15 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
         level_residual_m,
         delaunay_residual_m: None,
     };
-    if level_residual_m <= cfg.level_residual_m || samples.len() < 6 {
+    // Also level: a shore whose spread, read robustly (1.4826 × the median absolute
+    // deviation: the RMS of normal noise), is as small, and whose lower quarter
+    // (`shore_quantile`) stands within `occluder_height_m` of the level. Then what lifts
+    // the RMS is a few raised samples the occluder test kept (the foot of a bush), which
+    // do not make a pond a stream; many low ones would (water cannot stand above them).
+    let spread = 1.4826 * median(samples.iter().map(|s| (s.z - z).abs()).collect())?;
+    let low = quantile(samples.iter().map(|s| s.z).collect(), cfg.shore_quantile)?;
+    let few_raised = spread <= cfg.level_residual_m && z - low <= cfg.occluder_height_m;
+    if level_residual_m <= cfg.level_residual_m || few_raised || samples.len() < 6 {
         return Some(level);
     }
     // Hold-out: triangulate the even samples, predict the odd ones.
@@ -526,6 +534,32 @@ mod tests {
     /// per sample would put it 10 cm low. (Within the radius of the ends, the median of a
     /// one-sided neighbourhood stands up to slope × radius / 2 off: 2.25 cm here.) The
     /// residuals are the samples' own.
+    proptest! {
+        /// A level shore with one raised sample far from the others (the foot of a bush
+        /// the occluder test kept): the spread is read robustly, so the body stays level
+        /// at the shore's own height instead of tilting up to the raised sample, however
+        /// high it stands; the RMS it reports still counts that sample.
+        #[test]
+        fn one_raised_sample_does_not_tilt_a_level_shore(
+            level in -2.0f64..2.0,
+            n in 5usize..40,
+            rise in 0.1f64..2.0,
+            noise in proptest::collection::vec(-0.01f64..0.01, 40),
+        ) {
+            let cfg = WaterConfig::default();
+            let mut v: Vec<ShoreSample> = (0..n)
+                .map(|i| s(f64::from(i as u32) * 0.3, 6.0, level + noise[i]))
+                .collect();
+            v.push(s(1.0, 0.0, level + rise));
+            let f = fit(&v, &[], &cfg).unwrap();
+            let SurfaceModel::Level { z } = f.model else {
+                panic!("not level: {:?}", f.model.name());
+            };
+            prop_assert!((z - level).abs() <= 0.01);
+            prop_assert!(f.level_residual_m >= rise / ((n + 1) as f64).sqrt() - 0.011);
+        }
+    }
+
     #[test]
     fn a_stream_surface_is_not_pulled_down_by_single_low_samples() {
         let cfg = WaterConfig::default();
