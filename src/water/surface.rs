@@ -528,12 +528,6 @@ mod tests {
         assert!((e.at(1.0, 1.0) - 1.5).abs() < 1e-12);
     }
 
-    /// A stream 2 m wide falling 3 % along x, its banks sampled every 10 cm, with a few
-    /// shore cells 10 cm under the water (its bed, seen through it): the Delaunay surface
-    /// is chosen and stands within a centimetre of the water over them, where one vertex
-    /// per sample would put it 10 cm low. (Within the radius of the ends, the median of a
-    /// one-sided neighbourhood stands up to slope × radius / 2 off: 2.25 cm here.) The
-    /// residuals are the samples' own.
     proptest! {
         /// A level shore with one raised sample far from the others (the foot of a bush
         /// the occluder test kept): the spread is read robustly, so the body stays level
@@ -560,6 +554,12 @@ mod tests {
         }
     }
 
+    /// A stream 2 m wide falling 3 % along x, its banks sampled every 10 cm, with a few
+    /// shore cells 10 cm under the water (its bed, seen through it): the Delaunay surface
+    /// is chosen and stands within a centimetre of the water over them, where one vertex
+    /// per sample would put it 10 cm low. (Within the radius of the ends, the median of a
+    /// one-sided neighbourhood stands up to slope × radius / 2 off: 2.25 cm here.) The
+    /// residuals are the samples' own.
     #[test]
     fn a_stream_surface_is_not_pulled_down_by_single_low_samples() {
         let cfg = WaterConfig::default();
