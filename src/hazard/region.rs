@@ -507,6 +507,7 @@ fn put_body(o: &mut Vec<u8>, b: &WaterBody) {
         SurfaceSource::FarShore => 1,
         SurfaceSource::WaterLevels => 2,
         SurfaceSource::CellElevations => 3,
+        SurfaceSource::ShoreAndFarShore => 4,
     });
     match &b.surface {
         SurfaceModel::Level { z } => {
@@ -606,6 +607,7 @@ impl ByteReader<'_> {
             1 => SurfaceSource::FarShore,
             2 => SurfaceSource::WaterLevels,
             3 => SurfaceSource::CellElevations,
+            4 => SurfaceSource::ShoreAndFarShore,
             t => return Err(corrupt(at, format!("surface source {t}"))),
         };
         let at = self.pos;

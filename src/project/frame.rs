@@ -722,9 +722,6 @@ struct Hit {
     /// For water placed where its ray drops to a hole's rim level: the ray's height at the
     /// end of the hole. The water under the pixel lies between that and the hit.
     floor: Option<f64>,
-    /// The hole has no far rim within range or the window: the hit is only the nearest
-    /// place the water can be (see [`tighten_hole_levels`]).
-    open: bool,
 }
 
 impl Hit {
@@ -734,7 +731,6 @@ impl Hit {
             wet,
             level: p.z,
             floor: None,
-            open: false,
         }
     }
 }
@@ -791,13 +787,13 @@ const HOLE_LEVEL_WINDOW: usize = 8;
 /// sampled pixels of it in the image (what is near in the image is one water surface; a
 /// stream's level varies along it), but never below its own lower bound.
 ///
-/// A pixel whose hole has a far rim keeps its vote where it is: only the level it gives
-/// changes (moving those votes too took the default pond's surface from 1.5 to 7.2 cm: its
-/// near shore was no longer reached). A pixel whose hole is open (no far rim in reach, as
-/// on the simulated pond in the first frames) was placed where its ray drops to the near
-/// rim's height, the nearest place the water can be: up to 3.7 m short of a pond 0.35 m
-/// below its banks, on the near bank. It moves along its ray to where the ray meets the
-/// tightened level.
+/// The pixel's vote then moves along its ray to where the ray meets the tightened level.
+/// Where it was placed, at its own upper bound, is only the nearest place the water can be:
+/// up to 3.7 m short of a pond 0.35 m below its banks, on the near bank, where its votes
+/// made a band of water on dry ground and its shore cells lifted the pond's level to the
+/// bank top. A hole with no far rim in reach (as on the simulated pond in the first
+/// frames) has no lower bound but the ray's end, and its pixels move as far as their
+/// window's lowest upper bound.
 fn tighten_hole_levels(
     hits: &mut [Option<Hit>],
     nc: usize,
@@ -834,7 +830,6 @@ fn tighten_hole_levels(
             floor: Some(floor),
             level,
             p,
-            open,
             ..
         }) = h
         else {
@@ -845,7 +840,7 @@ fn tighten_hole_levels(
             .map(|rr| across[rr * nc + c])
             .fold(f64::INFINITY, f64::min);
         *level = low.max(*floor).min(*level);
-        if *open && *level < p.z && p.z < origin.z {
+        if *level < p.z && p.z < origin.z {
             *p = origin + (*p - origin) * ((origin.z - *level) / (origin.z - p.z));
         }
     }
@@ -1210,7 +1205,6 @@ impl FrameLabels {
                                 let floor = hole.map(|t| origin.z + d.z * t);
                                 Some(Hit {
                                     floor,
-                                    open: hole == Some(max_range),
                                     ..Hit::at(p, water)
                                 })
                             }

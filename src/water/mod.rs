@@ -120,15 +120,21 @@
 //! centre: upper bounds, 7–10 cm above the stream there. Without either, the body's own
 //! cell elevations.
 //!
+//! A shore with enough kept samples that is neither level nor a smooth surface (section 3:
+//! the fit falls back to its lowest samples) takes the far shore too, where there is one:
+//! such a shore can be one stretch of a sloping stream, seen where the labels reached its
+//! bank, and a level from that stretch is metres of stream off elsewhere
+//! (`SurfaceSource::ShoreAndFarShore`).
+//!
 //! ## 3. Surface: level plane, or constrained Delaunay where the shore is not level
 //!
 //! The level plane is the median of the kept samples, and its residual is their RMS about
 //! it. If that residual is at most `level_residual_m`, the shore agrees and the body is
 //! level (a pond). It is level too when the spread read robustly (1.4826 times the median
 //! absolute deviation, the RMS of normal noise) is that small and the shore's lower
-//! quarter (`shore_quantile`) stands within `occluder_height_m` of the median: a few raised
-//! samples the occluder test kept (the foot of a bush on the shore) do not make a pond a
-//! stream, while many low ones would hold the water below the median. Otherwise (a stream down a slope) the surface interpolates the shore: a
+//! quarter (`shore_quantile`) stands within it of the median too: a few raised samples the
+//! occluder test kept (the foot of a bush on the shore) do not make a pond a stream, while
+//! low ones would hold the water below the median. Otherwise (a stream down a slope) the surface interpolates the shore: a
 //! constrained Delaunay triangulation (spade, bulk-loaded) of the samples, with a
 //! constraint edge between every two 8-adjacent shore samples so that triangles follow the
 //! shoreline instead of cutting across land; crossing diagonals are skipped. Water cells are
@@ -457,6 +463,9 @@ pub enum SurfaceSource {
     Shore,
     /// Dry cells across unobserved water from the body (its own shore was poorly seen).
     FarShore,
+    /// Both: a shore that was neither level nor a smooth surface, with the far shore
+    /// added (a stretch of a sloping stream seen in one place).
+    ShoreAndFarShore,
     /// The cues' water-level samples (the shore was poorly seen).
     WaterLevels,
     /// The body's own cell elevations (nothing better).
@@ -1101,16 +1110,6 @@ pub(crate) fn body_of(
             )
         }
     };
-    // Constraint edges between 8-adjacent samples (each pair once).
-    let index: HashMap<CellKey, usize> = keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
-    let mut constraints = Vec::new();
-    for (i, &k) in keys.iter().enumerate() {
-        for d in [(1, 0), (0, 1), (1, 1), (1, -1)] {
-            if let Some(&j) = index.get(&add(k, d)) {
-                constraints.push([i, j]);
-            }
-        }
-    }
     // Too few reliable shore cells: every shore cell counts, weighted by the inverse of its
     // elevation variance, so that the reliable few still decide the level; samples of σ of
     // metres make no surface, so the model is level.
@@ -1121,7 +1120,27 @@ pub(crate) fn body_of(
             .collect();
         surface::weighted_level(&samples, &sigma)?
     } else {
-        surface::fit(&samples, &constraints, cfg)?
+        surface::fit(&samples, &shore_constraints(&keys), cfg)?
+    };
+    // A shore that is neither level nor a smooth surface (the fit fell back to its lowest
+    // samples) may be a stretch of a sloping stream seen in one place: the far shore, where
+    // there is one, adds the rest of its length.
+    let (fit, samples, source) = match far_shore(&set, info, res, cfg) {
+        Some((far, far_keys))
+            if !fit.decided && !few_reliable && source == SurfaceSource::Shore =>
+        {
+            let own: BTreeSet<CellKey> = keys.iter().copied().collect();
+            let (mut samples, mut keys) = (samples, keys);
+            for (s, k) in far.into_iter().zip(far_keys) {
+                if !own.contains(&k) {
+                    samples.push(s);
+                    keys.push(k);
+                }
+            }
+            let fit = surface::fit(&samples, &shore_constraints(&keys), cfg)?;
+            (fit, samples, SurfaceSource::ShoreAndFarShore)
+        }
+        _ => (fit, samples, source),
     };
     // Each cell's bottom returns, moved from the levels the cue corrected them against
     // onto this body's surface.
@@ -1169,6 +1188,21 @@ pub(crate) fn body_of(
         body.volume_m3 = Some(m.volume());
     }
     Some(body)
+}
+
+/// Constraint edges of a surface fit: between every two 8-adjacent sample cells, each
+/// pair once.
+fn shore_constraints(keys: &[CellKey]) -> Vec<[usize; 2]> {
+    let index: HashMap<CellKey, usize> = keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+    let mut constraints = Vec::new();
+    for (i, &k) in keys.iter().enumerate() {
+        for d in [(1, 0), (0, 1), (1, 1), (1, -1)] {
+            if let Some(&j) = index.get(&add(k, d)) {
+                constraints.push([i, j]);
+            }
+        }
+    }
+    constraints
 }
 
 /// The shore of a body seen across water no sensor measured (module documentation,

@@ -250,6 +250,7 @@ pub fn weighted_level(samples: &[ShoreSample], sigma: &[f64]) -> Option<Fit> {
         model: SurfaceModel::Level { z },
         level_residual_m,
         delaunay_residual_m: None,
+        decided: true,
     })
 }
 
@@ -367,6 +368,9 @@ pub struct Fit {
     /// Hold-out RMS of the Delaunay surface (every other sample predicted from the
     /// triangulation of the rest); `None` when it was not needed or not possible.
     pub delaunay_residual_m: Option<f64>,
+    /// False when the samples were neither level nor a surface a triangulation predicts
+    /// (or could be triangulated at all), and the level is the lowest samples' fallback.
+    pub decided: bool,
 }
 
 fn rms(it: impl Iterator<Item = f64>) -> f64 {
@@ -395,22 +399,26 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
         model: SurfaceModel::Level { z },
         level_residual_m,
         delaunay_residual_m: None,
+        decided: true,
     };
     // Also level: a shore whose spread, read robustly (1.4826 × the median absolute
     // deviation: the RMS of normal noise), is as small, and whose lower quarter
-    // (`shore_quantile`) stands within `occluder_height_m` of the level. Then what lifts
-    // the RMS is a few raised samples the occluder test kept (the foot of a bush), which
-    // do not make a pond a stream; many low ones would (water cannot stand above them).
+    // (`shore_quantile`) stands within that residual of the level too. Then what lifts the
+    // RMS is a few raised samples the occluder test kept (the foot of a bush), which do not
+    // make a pond a stream; low ones would (water cannot stand above its shore).
     let spread = 1.4826 * median(samples.iter().map(|s| (s.z - z).abs()).collect())?;
     let low = quantile(samples.iter().map(|s| s.z).collect(), cfg.shore_quantile)?;
-    let few_raised = spread <= cfg.level_residual_m && z - low <= cfg.occluder_height_m;
+    let few_raised = spread <= cfg.level_residual_m && z - low <= cfg.level_residual_m;
     if level_residual_m <= cfg.level_residual_m || few_raised || samples.len() < 6 {
         return Some(level);
     }
     // Hold-out: triangulate the even samples, predict the odd ones.
     let even: Vec<ShoreSample> = samples.iter().step_by(2).copied().collect();
     let Some(half) = Surface::tin(&even, &[]) else {
-        return Some(level);
+        return Some(Fit {
+            decided: false,
+            ..level
+        });
     };
     let held = rms(samples
         .iter()
@@ -436,6 +444,7 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
         return Some(Fit {
             model: SurfaceModel::Level { z },
             delaunay_residual_m: Some(held),
+            decided: false,
             ..level
         });
     }
@@ -446,6 +455,7 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
         },
         level_residual_m,
         delaunay_residual_m: Some(held),
+        decided: true,
     })
 }
 

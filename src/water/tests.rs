@@ -975,6 +975,46 @@ fn the_far_shore_across_unobserved_water_places_the_surface() {
     assert!(rms <= 0.03, "{rms}");
 }
 
+/// The stream above with its near shore also measured along one 4 m stretch, raggedly
+/// (±4 cm about the water) and in one row (no triangle): neither level nor a surface. A
+/// level from that stretch would be the stream's height there, up to 18 cm off at its ends;
+/// with the far shore added the surface follows the slope, within the stretch's own noise.
+#[test]
+fn a_ragged_stretch_of_shore_takes_the_far_shore_too() {
+    let water = |x: f64| 0.03 * x;
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    let mut truth = HashMap::new();
+    for ky in -60..60 {
+        for kx in -60..60 {
+            let k = CellKey::new(kx, ky);
+            let (x, y) = t.centre_of(k);
+            let edge = 1.5 + 0.3 * (x * 1.3).sin().abs();
+            if (-1.0..0.5).contains(&y) {
+                t.add(k, &wet(water(x) + 0.3, None));
+                truth.insert(k, water(x));
+            } else if (-1.2..-1.0).contains(&y) && x.abs() <= 2.0 {
+                let ragged = [0.04, -0.04, 0.0, 0.03, -0.03]
+                    [(kx.rem_euclid(5) + ky.rem_euclid(2)) as usize % 5];
+                t.add(k, &dry(water(x) + ragged));
+            } else if y >= edge {
+                t.add(k, &dry(water(x) + 0.3 * (y - edge)));
+            }
+        }
+    }
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    assert_eq!(b.surface_source, SurfaceSource::ShoreAndFarShore);
+    let (rms, n) = surface_rms(&map, &truth);
+    assert_eq!(n, truth.len());
+    // The stretch's own level, the stream's height at its middle.
+    let level = (truth.values().map(|z| z * z).sum::<f64>() / n as f64).sqrt();
+    eprintln!(
+        "ragged stretch of shore and the far shore: surface RMS {rms:.4} m (its level {level:.4} m)"
+    );
+    assert!(rms <= 0.045 && rms < level / 2.0, "{rms} {level}");
+}
+
 /// Flat dry ground at 0 with a 2 m square of cells whose lidar bottom returns were
 /// corrected against a level `level` m (the top of a kerb the scan line walked) and lie
 /// `bed_below_ground` m below the ground around them, with unit gain.

@@ -241,8 +241,8 @@ fn cached_horizon_equals_the_classifier_horizon() {
     assert_eq!(bits(&g1.lookahead), bits(&g2.lookahead));
 }
 
-/// Sampled pixels on an `nr` × `nc` grid: hole-placed water (upper bound `level`, lower
-/// bound `floor`; kind 0 a hole with a far rim, 3 an open one), other water, or no hit.
+/// Sampled pixels on an `nr` × `nc` grid: hole-placed water (kinds 0 and 3: upper bound
+/// `level`, lower bound `floor`), other water, or no hit.
 fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<Option<Hit>> {
     (0..nr * nc)
         .map(|i| {
@@ -252,7 +252,6 @@ fn hole_rows(nr: usize, nc: usize, cells: &[(u8, f64, f64)]) -> Vec<Option<Hit>>
             match kind {
                 0 | 3 => Some(Hit {
                     floor: Some(floor),
-                    open: kind == 3,
                     ..Hit::at(p, true)
                 }),
                 1 => Some(Hit::at(p, true)),
@@ -267,8 +266,8 @@ proptest::proptest! {
     /// own floor permitting, as a direct search of the window finds it: never higher than
     /// it was, never below its floor. Other pixels keep their level. When every pixel
     /// bounds one water level `l` (floor ≤ l ≤ upper), no level goes below `l`; otherwise
-    /// (another hole's water in the window) a floor may bind. Only the hits over open
-    /// holes move: along the ray from the camera, to the height of their new level.
+    /// (another hole's water in the window) a floor may bind. The hole-placed hits move
+    /// along the ray from the camera, to the height of their new level.
     #[test]
     fn hole_levels_tighten_towards_the_level_all_bounds_admit(
         nr in 1usize..24,
@@ -310,15 +309,11 @@ proptest::proptest! {
                 proptest::prop_assert_eq!(a.level, low.max(floor));
                 proptest::prop_assert!(a.level <= b.level && a.level >= floor);
                 proptest::prop_assert!(!one_level || a.level >= l);
-                if b.open {
-                    // On the ray through the old hit, at the new level.
-                    let (u, v) = (b.p - origin, a.p - origin);
-                    proptest::prop_assert!((a.p.z - a.level).abs() <= 1e-9);
-                    proptest::prop_assert!(u.cross(&v).norm() <= 1e-9 * (1.0 + u.norm() * v.norm()));
-                    proptest::prop_assert!(u.dot(&v) > 0.0 && v.norm() >= u.norm() - 1e-12);
-                } else {
-                    proptest::prop_assert_eq!(a.p, b.p);
-                }
+                // On the ray through the old hit, at the new level.
+                let (u, v) = (b.p - origin, a.p - origin);
+                proptest::prop_assert!((a.p.z - a.level).abs() <= 1e-9);
+                proptest::prop_assert!(u.cross(&v).norm() <= 1e-9 * (1.0 + u.norm() * v.norm()));
+                proptest::prop_assert!(u.dot(&v) > 0.0 && v.norm() >= u.norm() - 1e-12);
             }
         }
     }
