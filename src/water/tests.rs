@@ -936,13 +936,16 @@ proptest! {
     }
 }
 
-/// A stream falling 3 % along x whose near bank hides its near shore and whose far half is
-/// unobserved (no return, no label): the only measured shore is the far bank, winding 1–1.3 m
-/// beyond the water that was seen, with a few cells on it 20 cm under the water (returns
-/// placed wrongly). The far shore gives the surface within 3 cm; the water cells' own level
-/// samples, upper bounds 30 cm above the water, are not used.
-#[test]
-fn the_far_shore_across_unobserved_water_places_the_surface() {
+/// A stream falling 3 % along x (the water at 0.03 x) whose near bank hides its near shore
+/// and whose far half is unobserved (no return, no label): the far bank is measured winding
+/// 1–1.3 m beyond the water that was seen, with a few cells on it 20 cm under the water
+/// (returns placed wrongly); the water cells' own level samples are upper bounds 30 cm
+/// above the water. `near(key, x)` gives the elevation of the near-shore cells measured
+/// (1–1.2 m short of the water's centre line), if any. The map, and the truth's surface per
+/// water cell.
+fn stream_seen_from_one_bank(
+    near: impl Fn(CellKey, f64) -> Option<f64>,
+) -> (TileMap, HashMap<CellKey, f64>) {
     let water = |x: f64| 0.03 * x;
     let mut t = TileMap::new(RES, 0.0).unwrap();
     let mut truth = HashMap::new();
@@ -950,11 +953,11 @@ fn the_far_shore_across_unobserved_water_places_the_surface() {
         for kx in -60..60 {
             let k = CellKey::new(kx, ky);
             let (x, y) = t.centre_of(k);
+            let edge = 1.5 + 0.3 * (x * 1.3).sin().abs();
             if (-1.0..0.5).contains(&y) {
                 t.add(k, &wet(water(x) + 0.3, None));
                 truth.insert(k, water(x));
-            } else if y >= 1.5 + 0.3 * (x * 1.3).sin().abs() {
-                let edge = 1.5 + 0.3 * (x * 1.3).sin().abs();
+            } else if y >= edge {
                 let polluted = kx.rem_euclid(17) == 0 && y < edge + 0.2;
                 let z = if polluted {
                     water(x) - 0.2
@@ -962,9 +965,19 @@ fn the_far_shore_across_unobserved_water_places_the_surface() {
                     water(x) + 0.3 * (y - edge)
                 };
                 t.add(k, &dry(z));
+            } else if let Some(z) = (-1.2..-1.0).contains(&y).then(|| near(k, x)).flatten() {
+                t.add(k, &dry(z));
             }
         }
     }
+    (t, truth)
+}
+
+/// The stream above with no near shore: the far shore gives the surface within 3 cm; the
+/// water cells' own level samples are not used.
+#[test]
+fn the_far_shore_across_unobserved_water_places_the_surface() {
+    let (t, truth) = stream_seen_from_one_bank(|_, _| None);
     let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
     assert_eq!(map.bodies.len(), 1);
     let b = &map.bodies[0];
@@ -981,26 +994,11 @@ fn the_far_shore_across_unobserved_water_places_the_surface() {
 /// with the far shore added the surface follows the slope, within the stretch's own noise.
 #[test]
 fn a_ragged_stretch_of_shore_takes_the_far_shore_too() {
-    let water = |x: f64| 0.03 * x;
-    let mut t = TileMap::new(RES, 0.0).unwrap();
-    let mut truth = HashMap::new();
-    for ky in -60..60 {
-        for kx in -60..60 {
-            let k = CellKey::new(kx, ky);
-            let (x, y) = t.centre_of(k);
-            let edge = 1.5 + 0.3 * (x * 1.3).sin().abs();
-            if (-1.0..0.5).contains(&y) {
-                t.add(k, &wet(water(x) + 0.3, None));
-                truth.insert(k, water(x));
-            } else if (-1.2..-1.0).contains(&y) && x.abs() <= 2.0 {
-                let ragged = [0.04, -0.04, 0.0, 0.03, -0.03]
-                    [(kx.rem_euclid(5) + ky.rem_euclid(2)) as usize % 5];
-                t.add(k, &dry(water(x) + ragged));
-            } else if y >= edge {
-                t.add(k, &dry(water(x) + 0.3 * (y - edge)));
-            }
-        }
-    }
+    let (t, truth) = stream_seen_from_one_bank(|k, x| {
+        let ragged =
+            [0.04, -0.04, 0.0, 0.03, -0.03][(k.x.rem_euclid(5) + k.y.rem_euclid(2)) as usize % 5];
+        (x.abs() <= 2.0).then_some(0.03 * x + ragged)
+    });
     let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
     assert_eq!(map.bodies.len(), 1);
     let b = &map.bodies[0];
