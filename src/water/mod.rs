@@ -120,8 +120,8 @@
 //! centre: upper bounds, 7–10 cm above the stream there. Without either, the body's own
 //! cell elevations.
 //!
-//! A shore with enough kept samples that is neither level nor a smooth surface (section 3:
-//! the fit falls back to its lowest samples) takes the far shore too, where there is one:
+//! A shore with enough kept samples that is neither level nor a surface a triangulation
+//! predicts (section 3: the fit falls back to its lowest samples) takes the far shore too, where there is one:
 //! such a shore can be one stretch of a sloping stream, seen where the labels reached its
 //! bank, and a level from that stretch is metres of stream off elsewhere
 //! (`SurfaceSource::ShoreAndFarShore`).
@@ -134,10 +134,11 @@
 //! absolute deviation, the RMS of normal noise) is that small and the shore's lower
 //! quarter (`shore_quantile`) stands within it of the median too: a few raised samples the
 //! occluder test kept (the foot of a bush on the shore) do not make a pond a stream, while
-//! low ones would hold the water below the median. Otherwise (a stream down a slope) the surface interpolates the shore: a
-//! constrained Delaunay triangulation (spade, bulk-loaded) of the samples, with a
-//! constraint edge between every two 8-adjacent shore samples so that triangles follow the
-//! shoreline instead of cutting across land; crossing diagonals are skipped. Water cells are
+//! low ones would hold the water below the median. Otherwise (a stream down a slope) the
+//! surface interpolates the shore: a constrained Delaunay triangulation (spade,
+//! bulk-loaded) of the samples, with a constraint edge between every two 8-adjacent shore
+//! samples so that triangles follow the shoreline instead of cutting across land; crossing
+//! diagonals are skipped. Water cells are
 //! given barycentric interpolation in their triangle; outside the triangulation, the
 //! surface at the nearest point of its hull, so that it is continuous across the hull and
 //! follows the shore along it (not the nearest sample: where a stream's near bank is
@@ -1125,10 +1126,10 @@ pub(crate) fn body_of(
     // A shore that is neither level nor a smooth surface (the fit fell back to its lowest
     // samples) may be a stretch of a sloping stream seen in one place: the far shore, where
     // there is one, adds the rest of its length.
-    let (fit, samples, source) = match far_shore(&set, info, res, cfg) {
-        Some((far, far_keys))
-            if !fit.decided && !few_reliable && source == SurfaceSource::Shore =>
-        {
+    let undecided = !fit.decided && !few_reliable && source == SurfaceSource::Shore;
+    let far = undecided.then(|| far_shore(&set, info, res, cfg)).flatten();
+    let (fit, samples, source) = match far {
+        Some((far, far_keys)) => {
             let own: BTreeSet<CellKey> = keys.iter().copied().collect();
             let (mut samples, mut keys) = (samples, keys);
             for (s, k) in far.into_iter().zip(far_keys) {
@@ -1140,7 +1141,7 @@ pub(crate) fn body_of(
             let fit = surface::fit(&samples, &shore_constraints(&keys), cfg)?;
             (fit, samples, SurfaceSource::ShoreAndFarShore)
         }
-        _ => (fit, samples, source),
+        None => (fit, samples, source),
     };
     // Each cell's bottom returns, moved from the levels the cue corrected them against
     // onto this body's surface.
