@@ -31,9 +31,9 @@ pub struct FrameCueConfig {
     /// Collect what each stereo element says of the surface ([`ScanSurface::stereo`]) for
     /// the same check: on a rig without a lidar, whose reflectivity says directly that a
     /// return is not water, where the check would have no samples otherwise. Stereo says
-    /// less: a missing match only that ground with texture was not seen there, which dry
-    /// ground of little texture (snow, pale slabs) gives too; counted beside the lidar's
-    /// samples it would outweigh them.
+    /// less: a point at the level may be the bed of shallow clear water, and a missing
+    /// match says nothing at all (dry ground of little texture, snow and pale slabs, gives
+    /// none either); counted beside the lidar's samples it would outweigh them.
     pub stereo_surface: bool,
 }
 

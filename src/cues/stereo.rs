@@ -246,9 +246,9 @@ pub enum StereoSeen {
     /// level up a column with confirmed water (there a shallow reflection, of the bank
     /// just beyond the water, lies within the noise of the level).
     Ground,
-    /// A reflection, or no match short of the farthest ground the column matched (where
-    /// ground with texture would have matched; still water mirroring the sky gives none):
-    /// not seen to be dry ground.
+    /// A reflection: not seen to be dry ground. (No match at all says nothing: still water
+    /// mirroring the sky gives none, and neither does snow or pale concrete without
+    /// texture.)
     NotGround,
 }
 
@@ -732,7 +732,7 @@ pub fn stereo_reflections_with(
     }
     let seen = if surface_points {
         seen_of(
-            cloud,
+            cloud.cols,
             &pts,
             &at_level,
             &in_run,
@@ -764,7 +764,7 @@ pub fn stereo_reflections_with(
 /// (`at_level`, in any order), the points of candidate runs, the reflections, each
 /// column's first row of confirmed water and the frame's water level.
 fn seen_of(
-    cloud: &PointCloud,
+    cols: usize,
     pts: &[Point3<f64>],
     at_level: &[usize],
     in_run: &[bool],
@@ -772,24 +772,22 @@ fn seen_of(
     water_from: &[Option<usize>],
     level: Option<f64>,
 ) -> Vec<StereoSeen> {
-    let cols = cloud.cols;
-    let mut seen = vec![StereoSeen::Nothing; cloud.len()];
-    // Per column, the highest image row (the farthest ground) seen as ground.
-    let mut top: Vec<Option<usize>> = vec![None; cols];
+    let mut seen: Vec<StereoSeen> = reflected
+        .iter()
+        .map(|&r| {
+            if r {
+                StereoSeen::NotGround
+            } else {
+                StereoSeen::Nothing
+            }
+        })
+        .collect();
     for &s in at_level {
-        let (r, c) = (s / cols, s % cols);
-        let water_up = water_from[c].is_some_and(|r0| r <= r0);
+        let water_up = water_from[s % cols].is_some_and(|r0| s / cols <= r0);
         if in_run[s] || reflected[s] || (water_up && level.is_none_or(|l| pts[s].z < l)) {
             continue;
         }
         seen[s] = StereoSeen::Ground;
-        top[c] = Some(top[c].map_or(r, |t: usize| t.min(r)));
-    }
-    for (s, v) in seen.iter_mut().enumerate() {
-        let short_of_ground = top[s % cols].is_some_and(|t| s / cols > t);
-        if reflected[s] || (short_of_ground && !cloud.is_valid(s)) {
-            *v = StereoSeen::NotGround;
-        }
     }
     seen
 }

@@ -422,11 +422,11 @@ const CHECK_BITS: u32 = 4;
 const CHECK_Z: f64 = 1.645;
 
 /// Whether pixel `(u, v)` and the eight around it (those inside the image) are all colour
-/// water: only there does a lidar point projected into the image tell which side of the
-/// water's edge it lies on. Its projection is rounded to the nearest pixel and the label's
-/// edge is itself a pixel wide, so a return from the dry rim of a puddle lands on the
-/// puddle's edge pixels as often as on the rim's. (A stereo element is registered to its
-/// pixels and needs no such margin.)
+/// water: only there does a sample tell which side of the water's edge it lies on. A lidar
+/// point's projection is rounded to the nearest pixel, a stereo element's disparity is
+/// matched over a window of pixels, and the label's edge is itself a pixel wide: a return
+/// from the dry rim of a puddle lands on the puddle's edge pixels as often as on the rim's,
+/// and a stereo match there may be the rim's texture.
 fn inside_water(labels: &LabelImage, u: usize, v: usize) -> bool {
     let (w, h) = (labels.width, labels.height);
     (v.saturating_sub(1)..(v + 2).min(h)).all(|y| {
@@ -450,10 +450,11 @@ fn inside_water(labels: &LabelImage, u: usize, v: usize) -> bool {
 /// go on whether a colour is vetoed or not, so a verdict follows the log. On a rig with
 /// stereo and no lidar the stereo elements registered to the image are the samples
 /// ([`StereoSeen`]): a point at the local ground level within its own vertical noise is a
-/// dry one, a reflection or a missing match short of the ground its column matched one
-/// against (still water mirrors the sky and gives no match, or gives the mirror image well
-/// below its level). Without either nothing is counted and nothing vetoed: the check says
-/// nothing where it cannot tell.
+/// dry one, a reflection (the mirror image well below the level) one against. A missing
+/// match counts for neither: still water mirroring the sky gives none, and neither do snow
+/// and pale concrete without texture, the colours the check is for. Without either
+/// sensor nothing is counted and nothing vetoed: the check says nothing where it cannot
+/// tell.
 #[derive(Debug, Clone, Default)]
 struct ColourCheck {
     /// Per bin: lidar samples on dry ground and on water whose pixel is colour water.
@@ -510,11 +511,10 @@ impl ColourCheck {
                     StereoSeen::NotGround => false,
                 };
                 let (u, v) = (k * (e % cloud.cols) + half, k * (e / cloud.cols) + half);
-                let i = v * w + u;
-                if u >= w || v >= h || labels.data[i] != Label::Water {
+                if u >= w || v >= h || !inside_water(labels, u, v) {
                     continue;
                 }
-                self.count(px[i], dry);
+                self.count(px[v * w + u], dry);
             }
         }
         let to_cam = cam_to_map.inverse();

@@ -638,11 +638,11 @@ fn points_within_one_noise_gate_but_below_the_level_together_are_reflections() {
     assert!(!mean_below_level(&[0, 1, 2, 3, 4], &edge, o, 0.0, &cfg));
 }
 
-/// What each element says of the surface: ground at the level, reflections and missing
-/// matches short of the column's farthest ground not ground, the rest nothing; and nothing
-/// at all unless asked.
+/// What each element says of the surface: ground at the level, reflections not ground,
+/// the rest (missing matches too: water mirroring the sky and snow without texture alike
+/// give none) nothing; and nothing at all unless asked.
 #[test]
-fn stereo_elements_say_ground_at_the_level_and_not_ground_at_reflections_and_gaps() {
+fn stereo_elements_say_ground_at_the_level_and_not_ground_at_reflections() {
     let cfg = StereoCueConfig {
         min_far_shores: 1,
         ..StereoCueConfig::default()
@@ -682,9 +682,8 @@ fn stereo_elements_say_ground_at_the_level_and_not_ground_at_reflections_and_gap
     // ground beyond it is ground.
     assert_eq!((at(1, 6), at(1, 7)), (Nothing, Nothing));
     assert_eq!((at(1, 9), at(1, 10)), (Ground, Ground));
-    // Column C: the missing match amid the ground is not ground; beyond the farthest
-    // ground the column matched, a missing match says nothing.
-    assert_eq!(at(2, 3), NotGround);
+    // Column C: a missing match, amid the ground or beyond it, says nothing.
+    assert_eq!(at(2, 3), Nothing);
     assert_eq!((at(2, 2), at(2, 4)), (Ground, Ground));
     for i in 7..rows {
         assert_eq!(at(2, i), Nothing, "C {i}");

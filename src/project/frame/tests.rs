@@ -877,7 +877,7 @@ fn colour_check_ignores_lidar_points_on_the_waters_edge() {
 
 /// A stereo cloud registered to the image at half its resolution: elements seen as ground
 /// under pale pixels count as dry samples of that colour, elements not seen as ground
-/// (reflections, missing matches short of the ground) as samples against it.
+/// (reflections) as samples against it.
 #[test]
 fn colour_check_counts_stereo_verdicts_at_their_pixels() {
     let (cam, pose) = camera();
@@ -906,6 +906,18 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
     assert_eq!(run(3, 0), 0);
     assert_eq!(run(4, 0) as usize, w / 2 * h);
     assert_eq!(run(6, 6), 0);
+    // The same four ground verdicts on the water's edge (the pixel row below theirs is not
+    // colour water) say nothing.
+    let mut labels = LabelImage::filled(w, h, Label::Water);
+    labels.data[w..2 * w].fill(Label::Other);
+    let mut stereo = vec![StereoSeen::Nothing; rows * cols];
+    stereo[..4].fill(StereoSeen::Ground);
+    let surface = ScanSurface {
+        stereo,
+        ..ScanSurface::default()
+    };
+    let n = ColourCheck::default().run(&mut labels, &px, &cam, &pose, &surface, Some((&cloud, 2)));
+    assert_eq!(n, 0);
     // Verdicts for a cloud of another size are not read.
     let mut labels = LabelImage::filled(w, h, Label::Water);
     let surface = ScanSurface {
