@@ -829,7 +829,6 @@ impl Mapper {
             stereo: cfg.stereo.as_ref().filter(|s| s.reflections).map(|s| s.cue),
             mirror_check: cfg.stereo.as_ref().is_some_and(|s| s.mirror_check),
             surface_points: false,
-            stereo_surface: false,
         };
         let mut lidar_height = None;
         if let Some(l) = cfg.lidar.as_ref().filter(|l| l.cues) {
@@ -848,7 +847,6 @@ impl Mapper {
         fc.surface_points = models
             .as_ref()
             .is_some_and(|m| m.colour.is_some() && m.colour_check);
-        fc.stereo_surface = fc.surface_points && cfg.lidar.is_none();
         let labels = models.map(crate::project::FrameLabels::new).transpose()?;
         Ok(Mapper {
             cfg,
@@ -1005,10 +1003,15 @@ impl Mapper {
                 c.noise = noise;
             }
             if s.reflections {
-                // Stereo describes the surface only on a rig without a lidar
-                // (`FrameCueConfig::stereo_surface`), so it never replaces the lidar's.
+                // What stereo says of the surface joins what the lidar says.
                 if let Some(st) = self.cues.apply_stereo(frame, grid, &mut rep.cues)? {
-                    surface = Some(st);
+                    surface = Some(match surface {
+                        Some(mut s) => {
+                            s.stereo = st.stereo;
+                            s
+                        }
+                        None => st,
+                    });
                 }
             } else {
                 rep.stereo_ingest = Some(grid.ingest(cloud, &noise)?);

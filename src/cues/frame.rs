@@ -25,16 +25,12 @@ pub struct FrameCueConfig {
     pub stereo: Option<StereoCueConfig>,
     /// Confirm stereo reflections with the frame's camera image when it has one.
     pub mirror_check: bool,
-    /// Collect where the lidar found dry ground and water ([`ScanSurface`]) for the colour
-    /// labels' check; off when no label stage reads them.
+    /// Collect where the lidar found dry ground and water, and what each stereo element
+    /// says of the surface ([`ScanSurface`]), for the colour labels' check; off when no
+    /// label stage reads them. Stereo says less than the lidar: a point at the level may be
+    /// the bed of shallow clear water, and a missing match says nothing at all (dry ground
+    /// of little texture, snow and pale slabs, gives none either).
     pub surface_points: bool,
-    /// Collect what each stereo element says of the surface ([`ScanSurface::stereo`]) for
-    /// the same check: on a rig without a lidar, whose reflectivity says directly that a
-    /// return is not water, where the check would have no samples otherwise. Stereo says
-    /// less: a point at the level may be the bed of shallow clear water, and a missing
-    /// match says nothing at all (dry ground of little texture, snow and pale slabs, gives
-    /// none either); counted beside the lidar's samples it would outweigh them.
-    pub stereo_surface: bool,
 }
 
 /// What one frame contributed.
@@ -140,7 +136,7 @@ impl FrameCues {
                 _ => None,
             };
             let out =
-                stereo_reflections_with(cloud, res, z_ref, check, scfg, self.cfg.stereo_surface)?;
+                stereo_reflections_with(cloud, res, z_ref, check, scfg, self.cfg.surface_points)?;
             rep.stereo_ingest = Some(grid.ingest(&out.corrected, &scfg.noise)?);
             rep.stereo_runs = out.runs;
             rep.stereo_reflected_points = out.reflected_points;
@@ -149,7 +145,7 @@ impl FrameCues {
             let batch = out.evidence.into_batch();
             rep.evidence_cells += batch.len();
             rep.evidence_dropped += grid.apply_evidence(&batch);
-            if self.cfg.stereo_surface {
+            if self.cfg.surface_points {
                 return Ok(Some(ScanSurface {
                     stereo: out.seen,
                     ..ScanSurface::default()

@@ -285,8 +285,8 @@ pub struct LidarCues {
 
 /// What a frame's range sensor says of the surface, for the image labels
 /// ([`crate::project::FrameLabels`]): from a lidar scan, how far dry ground returned and
-/// points (map frame) where it found dry ground or water; from stereo on a rig without a
-/// lidar, what each element says of the surface under its pixel.
+/// points (map frame) where it found dry ground or water; from stereo, what each element
+/// says of the surface under its pixel.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ScanSurface {
     /// How far dry ground returned along each azimuth of this scan
