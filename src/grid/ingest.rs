@@ -193,6 +193,8 @@ impl Acc {
         self.hits == 0 && self.below == 0
     }
 
+    /// [`Elev::add`]'s arithmetic, repeated: an `Acc` holding an `Elev` would take two
+    /// cache lines, since `gate_fast` and `group` sit where `Elev` has its padding.
     #[inline]
     fn add(&mut self, z_mm: i32, w: u32) {
         // |w·z| < 2^55 fits i64; the square needs one widening multiply.

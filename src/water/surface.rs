@@ -401,6 +401,9 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
         delaunay_residual_m: None,
         decided: true,
     };
+    if level_residual_m <= cfg.level_residual_m || samples.len() < 6 {
+        return Some(level);
+    }
     // Also level: a shore whose spread, read robustly (1.4826 × the median absolute
     // deviation: the RMS of normal noise), is as small, and whose lower quarter
     // (`shore_quantile`) stands within that residual of the level too. Then what lifts the
@@ -408,8 +411,7 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
     // make a pond a stream; low ones would (water cannot stand above its shore).
     let spread = 1.4826 * median(samples.iter().map(|s| (s.z - z).abs()).collect())?;
     let low = quantile(samples.iter().map(|s| s.z).collect(), cfg.shore_quantile)?;
-    let few_raised = spread <= cfg.level_residual_m && z - low <= cfg.level_residual_m;
-    if level_residual_m <= cfg.level_residual_m || few_raised || samples.len() < 6 {
+    if spread <= cfg.level_residual_m && z - low <= cfg.level_residual_m {
         return Some(level);
     }
     // Hold-out: triangulate the even samples, predict the odd ones.
@@ -432,8 +434,7 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
         // occluder test could not see (a stretch of shore that is all bush, the top of a
         // bank where the water's edge was hidden). Water cannot stand above its lowest
         // shore, so the level is that of the lowest samples (paper 2.2): the median of
-        // those within `occluder_height_m` of the `shore_quantile` quantile.
-        let low = quantile(samples.iter().map(|s| s.z).collect(), cfg.shore_quantile)?;
+        // those within `occluder_height_m` of the `shore_quantile` quantile (`low`).
         let z = median(
             samples
                 .iter()
