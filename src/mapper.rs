@@ -874,6 +874,7 @@ impl Mapper {
             l.cue,
             l.reflectivity.then_some(l.reflectivity_cue),
         )
+        .map(|m| m.with_range_noise(l.noise))
     }
 
     /// The mapper's configuration.

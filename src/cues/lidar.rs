@@ -17,8 +17,10 @@
 //!   `min_depth_m` deep, for this sensor's height, wavelength and water clarity) the cell
 //!   it meets gets a no-return count; outside the interval a missing return says nothing;
 //! * a **ground** return inside the interval counts as a diagnostic beam that returned;
-//! * a return more than `below_gate_m` **below** the level is corrected for refraction and
-//!   the speed of light ([`crate::optics::LidarWaterModel::correct_bottom_return`]); if the
+//! * a return **below** the level (by three standard deviations of the line's ground: the
+//!   range noise and the spread its last ground returns showed, at most `below_gate_m`) is
+//!   corrected for refraction and the speed of light
+//!   ([`crate::optics::LidarWaterModel::correct_bottom_return`]); if the
 //!   corrected depth is one the optics say this sensor can see at that lookahead, it is a
 //!   bottom return (a depth sample for the corrected point's cell, with its gain
 //!   d(depth)/d(level), so that the water stage can move the depth onto the water surface
@@ -42,6 +44,7 @@ use super::reflectivity::{normalised_reflectivity, ReflectivityConfig, Reflectiv
 use super::EvidenceMap;
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
+use crate::grid::RangeNoise;
 use crate::optics::{LidarModelConfig, LidarWaterModel};
 
 /// Where the directions of missing beams come from.
@@ -167,7 +170,9 @@ pub struct LidarCueConfig {
     /// Shallowest water whose missing returns are to be diagnostic (m); 0 gives the
     /// interval from the zero-depth cutoff to the dry-ground limit.
     pub min_depth_m: f64,
-    /// A return more than this below the local ground level is a below-level return (m).
+    /// A return more than this below the local ground level is always a below-level
+    /// return (m); one less deep is when it lies more than three standard deviations of
+    /// the scan line's ground below the level ([`LidarCueModel::with_range_noise`]).
     pub below_gate_m: f64,
     /// A return more than this above the local ground level is not ground (vegetation,
     /// obstacles); it neither moves the level nor counts as a diagnostic return (m).
@@ -387,6 +392,7 @@ pub struct LidarCueModel {
     interval: Option<(f64, f64)>,
     table_step: f64,
     depth_table: Vec<f64>,
+    noise: RangeNoise,
 }
 
 impl LidarCueModel {
@@ -442,7 +448,15 @@ impl LidarCueModel {
             interval,
             table_step,
             depth_table,
+            noise: RangeNoise::LIDAR,
         })
+    }
+
+    /// The range noise of the scans' returns (default [`RangeNoise::LIDAR`]): it sets the
+    /// below-level gate's noise floor ([`LidarCueConfig::below_gate_m`]).
+    pub fn with_range_noise(mut self, noise: RangeNoise) -> Self {
+        self.noise = noise;
+        self
     }
 
     /// The water optics model the cue uses.
@@ -703,6 +717,9 @@ impl LidarCueModel {
         // water's losses.
         let channel = self.reflectivity.unwrap_or_default();
         let mut bright: VecDeque<f64> = VecDeque::with_capacity(BRIGHT_WINDOW);
+        // How far the line's last ground returns fell from the level they were judged by
+        // (`GATE_WINDOW`): the dry ground's own spread, for the below-level gate.
+        let mut drops: VecDeque<f64> = VecDeque::with_capacity(GATE_WINDOW);
         for &s in line {
             let s = s as usize;
             if cloud.is_valid(s) {
@@ -718,7 +735,12 @@ impl LidarCueModel {
                 let expected = level + slope.unwrap_or(0.0).min(0.0) * run;
                 let slack = if slope.is_some() { 0.0 } else { g_max * run };
                 let dz = p.z - expected;
-                let below = dz < -(cfg.below_gate_m + slack) && v.z < 0.0 && o.z > level;
+                let gate = below_gate(
+                    &drops,
+                    self.noise.sigma(range) * (-v.z / range.max(1e-9)).max(0.0),
+                    cfg.below_gate_m,
+                );
+                let below = dz < -(gate + slack) && v.z < 0.0 && o.z > level;
                 if below {
                     // Below the level: bottom or specular.
                     let u = v / range;
@@ -756,6 +778,10 @@ impl LidarCueModel {
                 } else if dz <= cfg.above_gate_m + slack {
                     // Ground. The slope of the recent ground, once it spans enough
                     // lookahead to measure one, clamped to what ground does.
+                    if drops.len() == GATE_WINDOW {
+                        drops.pop_front();
+                    }
+                    drops.push_back(dz.abs());
                     recent.push((d, p.z));
                     if let Some(g) = recent.slope() {
                         slope = Some(g.clamp(-g_max, g_max));
@@ -846,6 +872,43 @@ fn bright_reference(bright: &VecDeque<f64>) -> Option<f64> {
         [a, _, _] if a == f64::NEG_INFINITY => None,
         [a, _, c] if c == f64::NEG_INFINITY => Some(a),
         [_, _, c] => Some(c),
+    }
+}
+
+/// Ground returns along a scan line whose spread about the walked level sets the
+/// below-level gate ([`below_gate`]).
+const GATE_WINDOW: usize = 16;
+
+/// Fewest such returns for a measured spread.
+const GATE_MIN: usize = 5;
+
+/// The depth below the walked level (m) beyond which a return is a below-level return:
+/// three standard deviations of how far dry ground there falls from the level it is judged
+/// by, and never more than `ceiling` (`below_gate_m`). That spread is the larger of the
+/// range noise's vertical part `sigma_v` (times √2: the level is a return too) and the
+/// spread the line's last [`GATE_WINDOW`] ground returns showed (1.4826 × their median
+/// absolute fall `drops`: rough ground and noise together, measured on this scan). A line
+/// with fewer than [`GATE_MIN`] ground returns so far uses the ceiling. Bottom returns of a puddle 5 to
+/// 15 cm deep lie 1 to 4 cm below its surface at grazing incidence: a fixed 10 cm gate
+/// fused them as ground and no depth was ever found.
+fn below_gate(drops: &VecDeque<f64>, sigma_v: f64, ceiling: f64) -> f64 {
+    let n = drops.len();
+    if n < GATE_MIN {
+        return ceiling;
+    }
+    let mut d = [0.0; GATE_WINDOW];
+    for (a, b) in d.iter_mut().zip(drops) {
+        *a = *b;
+    }
+    let med = *d[..n]
+        .select_nth_unstable_by(n / 2, |a, b| a.total_cmp(b))
+        .1;
+    let spread = (1.4826 * med).max(std::f64::consts::SQRT_2 * sigma_v);
+    let g = 3.0 * spread;
+    if g.is_nan() {
+        ceiling
+    } else {
+        g.min(ceiling)
     }
 }
 

@@ -617,3 +617,88 @@ proptest::proptest! {
         }
     }
 }
+
+#[test]
+fn bottom_returns_of_shallow_water_are_found_and_dry_ground_gives_none() {
+    // Bottom returns of water 6 to 10 cm deep lie a few centimetres below its surface:
+    // inside the below-level gate's ceiling, outside three standard deviations of a scan
+    // line whose ground returns fall 5 mm from one to the next.
+    let base = LidarCueModel::new(
+        optics(1.0),
+        BeamModel::Directions(Vec::new()),
+        LidarCueConfig::default(),
+        None,
+    )
+    .unwrap()
+    .with_range_noise(RangeNoise::constant(0.005));
+    let (a, b) = shallow_pond_scene(base.optics());
+    for (depth, in_pond) in [(0.06, true), (0.10, true), (0.10, false)] {
+        let pond = move |x: f64, _y: f64| in_pond && x >= a && x <= b;
+        let scene = Scene {
+            model: base.optics().clone(),
+            depth,
+            in_pond: &pond,
+        };
+        let (cloud, dirs, shots) = vertical_scan(&scene, 600, 0.005, 11);
+        let cue = LidarCueModel {
+            beams: BeamModel::Directions(dirs),
+            ..base.clone()
+        };
+        let out = cue.run(&cloud, RES, 0.0).unwrap();
+        let apparent: Vec<f64> = shots
+            .iter()
+            .filter_map(|s| match s {
+                Shot::Bottom { apparent, .. } => Some(-apparent.z),
+                _ => None,
+            })
+            .collect();
+        if !in_pond {
+            assert!(apparent.is_empty());
+            assert!(out.stats.bottom <= 2, "dry ground: {:?}", out.stats);
+            continue;
+        }
+        // Most lie within the gate's ceiling, which alone would take them for ground.
+        let shallow = apparent
+            .iter()
+            .filter(|&&v| v < cue.config().below_gate_m)
+            .count();
+        assert!(
+            shallow > 20 && 2 * shallow > apparent.len(),
+            "{shallow} of {} bottom returns within the ceiling",
+            apparent.len()
+        );
+        assert!(
+            out.stats.bottom as usize >= apparent.len() * 8 / 10,
+            "{depth} m: {} bottom returns found of {}: {:?}",
+            out.stats.bottom,
+            apparent.len(),
+            out.stats
+        );
+    }
+}
+
+proptest::proptest! {
+    #[test]
+    fn below_gate_lies_between_the_noise_floor_and_the_ceiling(
+        drops in proptest::collection::vec(0.0f64..0.5, 0..40),
+        sigma_v in 0.0f64..0.05,
+        ceiling in 0.01f64..0.3,
+    ) {
+        let mut d = VecDeque::new();
+        for v in drops {
+            if d.len() == GATE_WINDOW {
+                d.pop_front();
+            }
+            d.push_back(v);
+        }
+        let g = below_gate(&d, sigma_v, ceiling);
+        proptest::prop_assert!(g <= ceiling);
+        if d.len() < GATE_MIN {
+            proptest::prop_assert_eq!(g, ceiling);
+        } else {
+            let floor = (3.0 * std::f64::consts::SQRT_2 * sigma_v).min(ceiling);
+            proptest::prop_assert!(g >= floor - 1e-12);
+        }
+        proptest::prop_assert!(below_gate(&d, f64::NAN, ceiling) <= ceiling);
+    }
+}
