@@ -888,9 +888,15 @@ const GATE_MIN: usize = 5;
 /// range noise's vertical part `sigma_v` (times √2: the level is a return too) and the
 /// spread the line's last [`GATE_WINDOW`] ground returns showed (1.4826 × their median
 /// absolute fall `drops`: rough ground and noise together, measured on this scan). A line
-/// with fewer than [`GATE_MIN`] ground returns so far uses the ceiling. Bottom returns of a puddle 5 to
-/// 15 cm deep lie 1 to 4 cm below its surface at grazing incidence: a fixed 10 cm gate
-/// fused them as ground and no depth was ever found.
+/// with fewer than [`GATE_MIN`] ground returns so far uses the ceiling. Bottom returns of
+/// a puddle 5 to 15 cm deep lie 1 to 4 cm below its surface at grazing incidence: a fixed
+/// 10 cm gate fused them as ground and no depth was ever found.
+///
+/// Only ground returns are counted: with the returns below the gate counted too, a line
+/// crossing a few metres of shallow water widened its gate to the ceiling after eight
+/// bottom returns and fused the rest as ground. Dips in rough ground that fall beyond three
+/// standard deviations become bottom returns here; the water stage keeps a cell's bottom
+/// evidence only where it lies below the surface its body's shore gives.
 fn below_gate(drops: &VecDeque<f64>, sigma_v: f64, ceiling: f64) -> f64 {
     let n = drops.len();
     if n < GATE_MIN {
