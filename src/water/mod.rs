@@ -1121,7 +1121,12 @@ pub(crate) fn body_of(
             .collect();
         surface::weighted_level(&samples, &sigma)?
     } else {
-        surface::fit(&samples, &shore_constraints(&keys), cfg)?
+        surface::fit(
+            &samples,
+            &shore_constraints(&keys),
+            cfg,
+            median_std(&keys, info),
+        )?
     };
     // A shore that is neither level nor a smooth surface (the fit fell back to its lowest
     // samples) may be a stretch of a sloping stream seen in one place: the far shore, where
@@ -1138,7 +1143,8 @@ pub(crate) fn body_of(
                     keys.push(k);
                 }
             }
-            let fit = surface::fit(&samples, &shore_constraints(&keys), cfg)?;
+            let noise = median_std(&keys, info);
+            let fit = surface::fit(&samples, &shore_constraints(&keys), cfg, noise)?;
             (fit, samples, SurfaceSource::ShoreAndFarShore)
         }
         None => (fit, samples, source),
@@ -1189,6 +1195,20 @@ pub(crate) fn body_of(
         body.volume_m3 = Some(m.volume());
     }
     Some(body)
+}
+
+/// The median elevation σ of the cells `keys` (0 when none has one).
+fn median_std(keys: &[CellKey], info: &impl CellInfos) -> f64 {
+    let mut sd: Vec<f64> = keys
+        .iter()
+        .filter_map(|&k| info.get(k).and_then(|i| i.std))
+        .filter(|s| s.is_finite())
+        .collect();
+    if sd.is_empty() {
+        return 0.0;
+    }
+    let m = sd.len() / 2;
+    *sd.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
 }
 
 /// Constraint edges of a surface fit: between every two 8-adjacent sample cells, each

@@ -391,8 +391,15 @@ fn rms(it: impl Iterator<Item = f64>) -> f64 {
 /// `cfg.level_residual_m`; otherwise the constrained Delaunay surface when its hold-out
 /// residual beats the level's, else still the level. The Delaunay surface's vertices are
 /// the samples at their [`local_medians`] within `cfg.vertex_median_radius_m`; the
-/// residuals are those of the samples as measured. `None` without finite samples.
-pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfig) -> Option<Fit> {
+/// residuals are those of the samples as measured. `noise_m` is the samples' typical
+/// elevation σ: the robust level test allows the spread that noise explains. `None`
+/// without finite samples.
+pub fn fit(
+    samples: &[ShoreSample],
+    constraints: &[[usize; 2]],
+    cfg: &WaterConfig,
+    noise_m: f64,
+) -> Option<Fit> {
     let z = median(samples.iter().map(|s| s.z).collect())?;
     let level_residual_m = rms(samples.iter().map(|s| s.z - z));
     let level = Fit {
@@ -409,10 +416,22 @@ pub fn fit(samples: &[ShoreSample], constraints: &[[usize; 2]], cfg: &WaterConfi
     // (`shore_quantile`) stands within that residual of the level too. Then what lifts the
     // RMS is a few raised samples the occluder test kept (the foot of a bush), which do not
     // make a pond a stream; low ones would (water cannot stand above its shore).
+    //
+    // The samples' own noise may exceed `level_residual_m` (lidar cells at 20 m on grass
+    // have σ of 3 cm): a spread within it is level too, but not decided, since a short
+    // stretch of a sloping stream is level within its noise as well. The caller then adds
+    // the far shore, whose length shows the slope if there is one.
     let spread = 1.4826 * median(samples.iter().map(|s| (s.z - z).abs()).collect())?;
     let low = quantile(samples.iter().map(|s| s.z).collect(), cfg.shore_quantile)?;
-    if spread <= cfg.level_residual_m && z - low <= cfg.level_residual_m {
+    let within = |t: f64| spread <= t && z - low <= t;
+    if within(cfg.level_residual_m) {
         return Some(level);
+    }
+    if within(noise_m) {
+        return Some(Fit {
+            decided: false,
+            ..level
+        });
     }
     // Hold-out: triangulate the even samples, predict the odd ones.
     let even: Vec<ShoreSample> = samples.iter().step_by(2).copied().collect();
@@ -474,7 +493,7 @@ mod tests {
         let cfg = WaterConfig::default();
         // Collinear, sloped: no triangle. The fit stays level at the median.
         let line: Vec<_> = (0..20).map(|i| s(i as f64, 0.0, 0.1 * i as f64)).collect();
-        let f = fit(&line, &[], &cfg).unwrap();
+        let f = fit(&line, &[], &cfg, 0.0).unwrap();
         assert_eq!(f.model, SurfaceModel::Level { z: 1.0 });
         // Duplicates and nearly coincident points with constraints that refer to them.
         let mut dup: Vec<_> = (0..10)
@@ -483,16 +502,16 @@ mod tests {
         dup.push(s(3.0, 0.0, 0.0));
         dup.push(s(3.0 + 1e-12, 1e-12, 0.0));
         let cons: Vec<[usize; 2]> = (0..dup.len() - 1).map(|i| [i, i + 1]).collect();
-        let f = fit(&dup, &cons, &cfg).unwrap();
+        let f = fit(&dup, &cons, &cfg, 0.0).unwrap();
         let e = f.model.evaluator();
         let z = e.at(4.5, 2.5);
         assert!(z.is_finite() && (-0.01..=1.01).contains(&z), "{z}");
         // Nothing finite: no fit.
-        assert!(fit(&[s(f64::NAN, 0.0, f64::NAN)], &[], &cfg).is_none());
-        assert!(fit(&[], &[], &cfg).is_none());
+        assert!(fit(&[s(f64::NAN, 0.0, f64::NAN)], &[], &cfg, 0.0).is_none());
+        assert!(fit(&[], &[], &cfg, 0.0).is_none());
         // One sample.
         assert_eq!(
-            fit(&[s(0.0, 0.0, 2.0)], &[], &cfg).unwrap().model,
+            fit(&[s(0.0, 0.0, 2.0)], &[], &cfg, 0.0).unwrap().model,
             SurfaceModel::Level { z: 2.0 }
         );
     }
@@ -556,12 +575,43 @@ mod tests {
                 .map(|i| s(f64::from(i as u32) * 0.3, 6.0, level + noise[i]))
                 .collect();
             v.push(s(1.0, 0.0, level + rise));
-            let f = fit(&v, &[], &cfg).unwrap();
+            let f = fit(&v, &[], &cfg, 0.0).unwrap();
             let SurfaceModel::Level { z } = f.model else {
                 panic!("not level: {:?}", f.model.name());
             };
             prop_assert!((z - level).abs() <= 0.01);
             prop_assert!(f.level_residual_m >= rise / ((n + 1) as f64).sqrt() - 0.011);
+        }
+    }
+
+    proptest! {
+        /// A level shore whose samples scatter evenly over ±4 cm (cells of σ 4 cm), with two
+        /// raised ones: beyond `level_residual_m` (2 cm) however read, so without the
+        /// samples' noise the fit is no decided level; with it, the level at the shore's
+        /// median, undecided (the caller adds the far shore).
+        #[test]
+        fn a_level_shore_within_its_noise_is_level_but_undecided(
+            level in -2.0f64..2.0,
+            shift in 0usize..24,
+        ) {
+            let cfg = WaterConfig::default();
+            let mut v: Vec<ShoreSample> = (0..24)
+                .map(|i| {
+                    let e = 0.08 * (((i * 7 + shift) % 24) as f64 / 23.0 - 0.5);
+                    s(f64::from(i as u32) * 0.3, 6.0 + f64::from((i % 3) as u32), level + e)
+                })
+                .collect();
+            v.push(s(1.0, 0.0, level + 0.35));
+            v.push(s(1.3, 0.0, level + 0.30));
+            let strict = fit(&v, &[], &cfg, 0.0).unwrap();
+            let decided_level = matches!(strict.model, SurfaceModel::Level { .. }) && strict.decided;
+            prop_assert!(!decided_level);
+            let f = fit(&v, &[], &cfg, 0.04).unwrap();
+            let SurfaceModel::Level { z } = f.model else {
+                panic!("not level: {:?}", f.model.name());
+            };
+            prop_assert!(!f.decided);
+            prop_assert!((z - level).abs() <= 0.01);
         }
     }
 
@@ -583,7 +633,7 @@ mod tests {
                 v.push(s(x, y, water(x) - low));
             }
         }
-        let f = fit(&v, &[], &cfg).unwrap();
+        let f = fit(&v, &[], &cfg, 0.0).unwrap();
         assert_eq!(f.model.name(), "delaunay");
         let raw = median(v.iter().map(|p| p.z).collect()).unwrap();
         let level_rms = rms(v.iter().map(|p| p.z - raw));

@@ -304,7 +304,7 @@ fn a_shore_neither_level_nor_smooth_takes_its_lowest_samples() {
         });
     }
     let cfg = WaterConfig::default();
-    let f = surface::fit(&samples, &[], &cfg).unwrap();
+    let f = surface::fit(&samples, &[], &cfg, 0.0).unwrap();
     assert!(f.level_residual_m > cfg.level_residual_m);
     let SurfaceModel::Level { z } = f.model else {
         panic!("{:?}", f.model.name())
