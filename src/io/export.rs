@@ -1,5 +1,6 @@
 //! The export contract (docs/design.md, "Map export"): `map.ply`, `terrain.ply`,
-//! `water.ply`, `map.png` (drawn by [`super::render`]), `report.json`. Every file is written to a temporary name beside its destination and
+//! `water.ply`, `map.png` (drawn by `io::render`, behind the `render` feature),
+//! `report.json`. Every file is written to a temporary name beside its destination and
 //! renamed into place only when complete, so a reader never sees a partial file.
 
 use std::collections::HashMap;
