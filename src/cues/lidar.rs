@@ -735,12 +735,13 @@ impl LidarCueModel {
                 let expected = level + slope.unwrap_or(0.0).min(0.0) * run;
                 let slack = if slope.is_some() { 0.0 } else { g_max * run };
                 let dz = p.z - expected;
-                let gate = below_gate(
-                    &drops,
-                    self.noise.sigma(range) * (-v.z / range.max(1e-9)).max(0.0),
-                    cfg.below_gate_m,
-                );
-                let below = dz < -(gate + slack) && v.z < 0.0 && o.z > level;
+                // The gate is never negative: only a return below the level and its slack
+                // needs it measured.
+                let gate = || {
+                    let sigma_v = self.noise.sigma(range) * (-v.z / range.max(1e-9)).max(0.0);
+                    below_gate(&drops, sigma_v, cfg.below_gate_m)
+                };
+                let below = v.z < 0.0 && o.z > level && dz < -slack && dz < -(gate() + slack);
                 if below {
                     // Below the level: bottom or specular.
                     let u = v / range;
@@ -909,13 +910,10 @@ fn below_gate(drops: &VecDeque<f64>, sigma_v: f64, ceiling: f64) -> f64 {
     let med = *d[..n]
         .select_nth_unstable_by(n / 2, |a, b| a.total_cmp(b))
         .1;
+    // `f64::max` and `min` take the other operand over a NaN: a NaN σ gives the measured
+    // spread, never a NaN gate.
     let spread = (1.4826 * med).max(std::f64::consts::SQRT_2 * sigma_v);
-    let g = 3.0 * spread;
-    if g.is_nan() {
-        ceiling
-    } else {
-        g.min(ceiling)
-    }
+    (3.0 * spread).min(ceiling)
 }
 
 /// What one slot of a scan line contributed.

@@ -448,8 +448,9 @@ fn inside_water(labels: &LabelImage, u: usize, v: usize) -> bool {
 /// evidence of water in this log: its pixels become `Unknown` and place no vote, near or
 /// beyond the lidar's reach. The counts
 /// go on whether a colour is vetoed or not, so a verdict follows the log. On a rig with
-/// stereo the stereo elements registered to the image are samples too ([`StereoSeen`]): a point at the local ground level within its own vertical noise is a
-/// dry one, a reflection (the mirror image well below the level) one against. A missing
+/// stereo the stereo elements registered to the image are samples too ([`StereoSeen`]): a
+/// point at the local ground level within its own vertical noise is a dry one, a
+/// reflection (the mirror image well below the level) one against. A missing
 /// match counts for neither: still water mirroring the sky gives none, and neither do snow
 /// and pale concrete without texture, the colours the check is for. Without either
 /// sensor nothing is counted and nothing vetoed: the check says nothing where it cannot

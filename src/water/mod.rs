@@ -121,10 +121,10 @@
 //! cell elevations.
 //!
 //! A shore with enough kept samples that is neither level nor a surface a triangulation
-//! predicts (section 3: the fit falls back to its lowest samples) takes the far shore too, where there is one:
-//! such a shore can be one stretch of a sloping stream, seen where the labels reached its
-//! bank, and a level from that stretch is metres of stream off elsewhere
-//! (`SurfaceSource::ShoreAndFarShore`).
+//! predicts (section 3: the fit falls back to its lowest samples), or level only within
+//! its cells' own noise, takes the far shore too, where there is one: such a shore can be
+//! one stretch of a sloping stream, seen where the labels reached its bank, and a level
+//! from that stretch is metres of stream off elsewhere (`SurfaceSource::ShoreAndFarShore`).
 //!
 //! ## 3. Surface: level plane, or constrained Delaunay where the shore is not level
 //!
@@ -1199,16 +1199,12 @@ pub(crate) fn body_of(
 
 /// The median elevation σ of the cells `keys` (0 when none has one).
 fn median_std(keys: &[CellKey], info: &impl CellInfos) -> f64 {
-    let mut sd: Vec<f64> = keys
-        .iter()
-        .filter_map(|&k| info.get(k).and_then(|i| i.std))
-        .filter(|s| s.is_finite())
-        .collect();
-    if sd.is_empty() {
-        return 0.0;
-    }
-    let m = sd.len() / 2;
-    *sd.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1
+    surface::median(
+        keys.iter()
+            .filter_map(|&k| info.get(k).and_then(|i| i.std))
+            .collect(),
+    )
+    .unwrap_or(0.0)
 }
 
 /// Constraint edges of a surface fit: between every two 8-adjacent sample cells, each

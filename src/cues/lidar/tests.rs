@@ -104,6 +104,30 @@ fn shallow_pond_scene(model: &LidarWaterModel) -> (f64, f64) {
     (0.5 * bottom_seen, 0.5 * (start + end))
 }
 
+/// `base` (its beams set to the scan's) run on a vertical scan of 600 beams, range noise
+/// `sigma`, of flat ground with water `depth` deep where `in_pond`: the scan, the cue's
+/// output and what each beam did.
+fn run_over_pond(
+    base: &LidarCueModel,
+    depth: f64,
+    in_pond: &dyn Fn(f64, f64) -> bool,
+    sigma: f64,
+    seed: u64,
+) -> (PointCloud, LidarCues, Vec<Shot>) {
+    let scene = Scene {
+        model: base.optics().clone(),
+        depth,
+        in_pond,
+    };
+    let (cloud, dirs, shots) = vertical_scan(&scene, 600, sigma, seed);
+    let cue = LidarCueModel {
+        beams: BeamModel::Directions(dirs),
+        ..base.clone()
+    };
+    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    (cloud, out, shots)
+}
+
 #[test]
 fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
     let cue = LidarCueModel::new(
@@ -116,17 +140,7 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
     let (start, end) = cue.interval().unwrap();
     let (a, b) = shallow_pond_scene(cue.optics());
     let pond = move |x: f64, _y: f64| x >= a && x <= b;
-    let scene = Scene {
-        model: cue.optics().clone(),
-        depth: 0.175,
-        in_pond: &pond,
-    };
-    let (cloud, dirs, shots) = vertical_scan(&scene, 600, 0.0, 1);
-    let cue = LidarCueModel {
-        beams: BeamModel::Directions(dirs),
-        ..cue
-    };
-    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    let (cloud, out, shots) = run_over_pond(&cue, 0.175, &pond, 0.0, 1);
     // Every missing beam over water inside the interval gives one no-return; nothing else.
     let expected: Vec<f64> = shots
         .iter()
@@ -215,17 +229,7 @@ fn bottom_returns_give_depth_within_five_centimetres() {
     let (a, b) = shallow_pond_scene(base.optics());
     let pond = move |x: f64, _y: f64| x >= a && x <= b;
     for depth in [0.15, 0.20] {
-        let scene = Scene {
-            model: base.optics().clone(),
-            depth,
-            in_pond: &pond,
-        };
-        let (cloud, dirs, shots) = vertical_scan(&scene, 600, 0.01, 7);
-        let cue = LidarCueModel {
-            beams: BeamModel::Directions(dirs),
-            ..base.clone()
-        };
-        let out = cue.run(&cloud, RES, 0.0).unwrap();
+        let (cloud, out, shots) = run_over_pond(&base, depth, &pond, 0.01, 7);
         let n_bottom = shots
             .iter()
             .filter(|s| matches!(s, Shot::Bottom { .. }))
@@ -634,17 +638,7 @@ fn bottom_returns_of_shallow_water_are_found_and_dry_ground_gives_none() {
     let (a, b) = shallow_pond_scene(base.optics());
     for (depth, in_pond) in [(0.06, true), (0.10, true), (0.10, false)] {
         let pond = move |x: f64, _y: f64| in_pond && x >= a && x <= b;
-        let scene = Scene {
-            model: base.optics().clone(),
-            depth,
-            in_pond: &pond,
-        };
-        let (cloud, dirs, shots) = vertical_scan(&scene, 600, 0.005, 11);
-        let cue = LidarCueModel {
-            beams: BeamModel::Directions(dirs),
-            ..base.clone()
-        };
-        let out = cue.run(&cloud, RES, 0.0).unwrap();
+        let (_, out, shots) = run_over_pond(&base, depth, &pond, 0.005, 11);
         let apparent: Vec<f64> = shots
             .iter()
             .filter_map(|s| match s {
@@ -660,7 +654,7 @@ fn bottom_returns_of_shallow_water_are_found_and_dry_ground_gives_none() {
         // Most lie within the gate's ceiling, which alone would take them for ground.
         let shallow = apparent
             .iter()
-            .filter(|&&v| v < cue.config().below_gate_m)
+            .filter(|&&v| v < base.config().below_gate_m)
             .count();
         assert!(
             shallow > 20 && 2 * shallow > apparent.len(),
