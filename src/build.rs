@@ -57,6 +57,10 @@ pub struct ExtraMaps {
     pub ros_map: Option<crate::io::ros_export::RosMapOptions>,
     /// `map.tif`: the layers as a GeoTIFF ([`crate::io::geotiff`]).
     pub geotiff: Option<crate::io::geotiff::GeoTiffOptions>,
+    /// `tiles.bin`: the map's cells before the water stage (elevation statistics and
+    /// water evidence) as a tile set ([`TileMap::to_bytes`]), which merges exactly with
+    /// other builds' and can be finished again under another fusion rule.
+    pub tiles: bool,
 }
 
 impl ExtraMaps {
@@ -71,12 +75,19 @@ impl ExtraMaps {
             geotiff: b
                 .geotiff
                 .then_some(crate::io::geotiff::GeoTiffOptions { epsg: b.epsg }),
+            tiles: b.tiles,
         }
     }
 
-    /// Writes the asked-for files into `dir` from `dir/map.ply`; their names.
-    fn write(&self, dir: &Path) -> Result<Vec<String>> {
+    /// Writes the asked-for files into `dir`, the map's from `dir/map.ply` and the tile
+    /// set from `tiles`; their names.
+    fn write(&self, dir: &Path, tiles: &TileMap) -> Result<Vec<String>> {
         let mut written = Vec::new();
+        if self.tiles {
+            let p = dir.join("tiles.bin");
+            std::fs::write(&p, tiles.to_bytes()).map_err(|e| Error::io(&p, e))?;
+            written.push("tiles.bin".to_string());
+        }
         if self.ros_map.is_none() && self.geotiff.is_none() {
             return Ok(written);
         }
@@ -510,7 +521,7 @@ pub fn build_file(
     let map = HazardMap::from_elevation(&built.tiles);
     let stage = export::Staging::new(out)?;
     export::write_map_files(stage.path(), &map)?;
-    let extra_outputs = cfg.extra.write(stage.path())?;
+    let extra_outputs = cfg.extra.write(stage.path(), &built.tiles)?;
     let t_export = t2.elapsed().as_secs_f64();
     let res = built.tiles.resolution();
     let report = BuildReport {
@@ -1115,7 +1126,7 @@ pub fn build_log(
         &log_cfg.map_frame,
         summary.end_ns.unwrap_or(0),
     )
-    .write(stage.path())?;
+    .write(stage.path(), &tiles)?;
     let t_export = t2.elapsed().as_secs_f64();
     let total = t0.elapsed().as_secs_f64();
     let report = LogBuildReport {

@@ -249,6 +249,9 @@ pub struct BuildOptions {
     pub ros_map: bool,
     /// Also write `map.tif`: the map's layers as a GeoTIFF ([`crate::io::geotiff`]).
     pub geotiff: bool,
+    /// Also write `tiles.bin`: the map's cells before the water stage, as a tile set
+    /// ([`crate::grid::TileMap::to_bytes`]).
+    pub tiles: bool,
     /// EPSG code of the projected CRS the map frame is in, written into `map.tif`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub epsg: Option<u16>,
@@ -266,6 +269,7 @@ impl Default for BuildOptions {
             max_window_cells: 2048,
             ros_map: false,
             geotiff: false,
+            tiles: false,
             epsg: None,
             frame_id: None,
         }

@@ -33,7 +33,7 @@ for rig in $RIGS; do
       "$TARN_BIN" simulate "maps/$scene.toml" --rig "maps/rigs/$rig.toml" --out "$dir/sim" --json \
         > "$dir.sim.json"
     fi
-    "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --out "$dir/map" --json \
+    "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --out "$dir/map" --tiles --json \
       > "$dir.build.json"
     "$TARN_BIN" eval "$dir/map" --truth "$dir/sim" --json > "$dir.eval.json"
   done

@@ -63,9 +63,10 @@ def header(title, took):
 
 rig_desc = {}
 for rig in rigs:
-    for line in open(f"maps/rigs/{rig}.toml"):
-        if line.startswith("description"):
-            rig_desc[rig] = line.split("=", 1)[1].strip().strip('"')
+    with open(f"maps/rigs/{rig}.toml") as f:
+        for line in f:
+            if line.startswith("description"):
+                rig_desc[rig] = line.split("=", 1)[1].strip().strip('"')
 
 
 def accuracy():
@@ -166,6 +167,116 @@ def cues():
             print(f"| {scene} | {rig} | " + " | ".join(cells) + " |")
 
 
-for path, write in [(accuracy_md, accuracy), (cues_md, cues)]:
+# Each cue's events in the tile sets of the matrix's builds (`cue_rates` of `tarn eval`):
+# (name, key, what an event is, what the other count is, the rule's likelihoods).
+RATE_CUES = [
+    ("colour labels", "colour", "frame votes water / not", "p_colour_detect", "p_colour_false"),
+    ("SWIR labels", "swir", "frame votes dark / lit", "p_swir_detect", "p_swir_false"),
+    ("lidar no-return", "noret", "diagnostic beams empty / returned", None, "p_dropout"),
+    ("reflectivity", "reflectivity", "cells dark / lit", "p_dark_wet", "p_dark_dry"),
+]
+COUNT_CUES = [
+    ("reflection rays", "reflect", "p_reflect_detect", "p_reflect_false"),
+    ("bottom returns", "bottom", "p_bottom_detect", "p_bottom_false"),
+]
+
+
+def rates_of(rig, scene):
+    """The 5-30 m cue counts and the default rule of one build; None without a tile set."""
+    e = load(rig, scene, "eval")
+    if "cue_rates" not in e:
+        return None
+    r = next(b for b in e["cue_rates"] if b["range"] == "5-30")
+    return r, e["fusion_default"]
+
+
+def ratio(a, b):
+    return None if b == 0 else a / b
+
+
+def rates():
+    runs = {(rig, scene): rates_of(rig, scene) for rig in rigs for scene in scenes}
+    runs = {k: v for k, v in runs.items() if v is not None}
+    if not runs:
+        return
+    rule = next(iter(runs.values()))[1]
+    print()
+    print("## Each cue's events on water and on dry ground")
+    print()
+    print("The fusion rule ([`grid::Fusion`](../src/grid/evidence.rs)) gives each event of a cue")
+    print("the log-likelihood ratio ln P(event | water) / P(event | dry). Here those probabilities")
+    print("are counted on the matrix's builds (`tarn build --tiles` writes each cell's evidence;")
+    print("`tarn eval` scores it, `cue_rates` in its JSON): cells of the tile set 5–30 m from the")
+    print("path, on true water or on dry ground farther than 0.5 m from water, every scene and")
+    print("rig summed (one row per rig below). P(for | ·) is the share of a cue's events that")
+    print("speak for water. LR is the likelihood ratio of an event for water, then of one")
+    print("against; the rule's are beside it.")
+    print()
+    print("| cue (event for / against) | rig | on water: for / against | P(for \\| water) | on dry: for / against | P(for \\| dry) | P(for \\| dry), the worst scene | LR for / against | rule: P(for \\| water), P(for \\| dry) | rule: LR for / against |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: |")
+
+    def tot(key, keep):
+        w, d = [0, 0], [0, 0]
+        for (rig, _), (r, _) in runs.items():
+            if keep(rig):
+                for i in range(2):
+                    w[i] += r[key]["water"][i]
+                    d[i] += r[key]["dry"][i]
+        return w, d
+
+    def lr(pw, pd):
+        if pw is None or pd is None:
+            return "–"
+        f = "–" if pd == 0 else f"{pw / pd:.1f}"
+        a = "–" if pd == 1 else f"{(1 - pw) / (1 - pd):.2f}"
+        return f"{f} / {a}"
+
+    for name, key, what, pw_name, pd_name in RATE_CUES:
+        rpw = 1 - rule["p_water_return"] if pw_name is None else rule[pw_name]
+        rpd = rule[pd_name]
+        for rig in rigs + ["all"]:
+            w, d = tot(key, lambda r: rig == "all" or r == rig)
+            if sum(w) + sum(d) == 0:
+                continue
+            pw, pd = ratio(w[0], sum(w)), ratio(d[0], sum(d))
+            # The scene (and rig, in the "all" row) whose dry ground fooled the cue most,
+            # among those with at least 1,000 events on dry ground.
+            worst = max(
+                ((r[key]["dry"][0] / sum(r[key]["dry"]), k) for k, (r, _) in runs.items()
+                 if (rig == "all" or k[0] == rig) and sum(r[key]["dry"]) >= 1000),
+                default=None,
+            )
+            ws = "–" if worst is None else f"{pct(worst[0], 2)} ({worst[1][1]}" + (f" × {worst[1][0]})" if rig == "all" else ")")
+            print(f"| {name} ({what}) | {rig} | {w[0]:,} / {w[1]:,} | {pct(pw)} | {d[0]:,} / {d[1]:,} | {pct(pd, 2)} | {ws} | {lr(pw, pd)} | {rpw:.2f}, {rpd:.2f} | {lr(rpw, rpd)} |")
+    print()
+    print("Reflection rays and bottom returns have no event against (a ray that found no")
+    print("reflection is not recorded), so their rates per ray cannot be counted. What can be:")
+    print("the share of cells with at least one, and the events in them.")
+    print()
+    print("| cue | rig | water cells with one | events a water cell | dry cells with one | events a dry cell | cells-with-one ratio | rule: LR an event |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for name, key, pw_name, pd_name in COUNT_CUES:
+        for rig in rigs + ["all"]:
+            w, d = tot(key, lambda r: rig == "all" or r == rig)
+            nw = sum(runs[k][0]["cells"][0] for k in runs if rig == "all" or k[0] == rig)
+            nd = sum(runs[k][0]["cells"][1] for k in runs if rig == "all" or k[0] == rig)
+            if w[0] + d[0] == 0:
+                continue
+            fw, fd = ratio(w[1], nw), ratio(d[1], nd)
+            rr = "–" if not fd else f"{fw / fd:.1f}"
+            print(f"| {name} | {rig} | {pct(fw, 2)} | {num(ratio(w[0], w[1]), 1)} | {pct(fd, 3)} | {num(ratio(d[0], d[1]), 1)} | {rr} | {rule[pw_name] / rule[pd_name]:.1f} |")
+    print()
+    nw = sum(v[0]["cells"][0] for v in runs.values())
+    nd = sum(v[0]["cells"][1] for v in runs.values())
+    print(f"The cells scored: {nw:,} on water and {nd:,} on dry ground off the shore; water is")
+    print(f"{pct(nw / (nw + nd))} of them, against the rule's prior of {pct(rule['prior'])}.")
+
+
+def cues_and_rates():
+    cues()
+    rates()
+
+
+for path, write in [(accuracy_md, accuracy), (cues_md, cues_and_rates)]:
     with open(path, "w") as f, contextlib.redirect_stdout(f):
         write()

@@ -1,6 +1,6 @@
-//! The options of `tarn build` for its ROS and GIS outputs: `map.mcap` (`--ros-map`) and
-//! `map.tif` (`--geotiff`), over the config's `[build]` `ros_map`, `geotiff`, `epsg` and
-//! `frame_id`. The library writes them with the contract's files
+//! The options of `tarn build` for its outputs beside the contract's: `map.mcap`
+//! (`--ros-map`), `map.tif` (`--geotiff`) and `tiles.bin` (`--tiles`), over the config's
+//! `[build]` `ros_map`, `geotiff`, `tiles`, `epsg` and `frame_id`. The library writes them with the contract's files
 //! (`tarn::build::ExtraMaps`).
 
 use clap::Args;
@@ -16,6 +16,11 @@ pub struct MapsOutArgs {
     /// water_probability, class, hazard, depth), NaN as nodata.
     #[arg(long)]
     pub geotiff: bool,
+    /// Also write tiles.bin: the map's cells before the water stage (elevation statistics
+    /// and water evidence) as a tile set, the format tarn's Python package merges and
+    /// finishes (docs/distributed.md).
+    #[arg(long)]
+    pub tiles: bool,
     /// Frame the map's coordinates are in, named in map.mcap's headers [default: the log
     /// config's map_frame, "map"].
     #[arg(long)]
@@ -30,6 +35,7 @@ pub struct MapsOutArgs {
 pub fn apply(a: &MapsOutArgs, cfg: &mut MapperConfig) {
     cfg.build.ros_map |= a.ros_map;
     cfg.build.geotiff |= a.geotiff;
+    cfg.build.tiles |= a.tiles;
     if a.epsg.is_some() {
         cfg.build.epsg = a.epsg;
     }

@@ -56,7 +56,9 @@ pub struct EvalArgs {
     #[arg(long)]
     pub truth: PathBuf,
     /// Print one JSON object instead of a table; it also holds "matrix_bands", the bands
-    /// 5-10, 10-20, 20-30 and 5-30 m of the evaluation matrix.
+    /// 5-10, 10-20, 20-30 and 5-30 m of the evaluation matrix, and, when the map directory
+    /// holds a tile set (`tarn build --tiles`), "cue_rates": each water cue's events on true
+    /// water and on dry ground in those bands, beside "fusion_default", the default rule.
     #[arg(long)]
     pub json: bool,
     /// Also score this range band from the path, `LO,HI` metres (e.g. 5,25): a row
@@ -92,6 +94,12 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
         // The bands of the evaluation matrix (every scene by every rig), compared across runs.
         v["matrix_bands"] =
             serde_json::to_value(tarn_sim::eval::evaluate_matrix_bands(&map, &truth, &info)?)?;
+        // With the build's tile set: how often each cue fired on water and on dry ground.
+        if let Some(r) = tarn_sim::eval::rates::cue_rates_of_dir(&a.map_dir, &truth, &info)? {
+            v["cue_rates"] = serde_json::to_value(r)?;
+            // The likelihoods these counts are set beside.
+            v["fusion_default"] = serde_json::to_value(tarn::grid::Fusion::default())?;
+        }
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(

@@ -318,11 +318,16 @@ fn tiles_of_a_log_finish_to_the_built_map() {
         ..Default::default()
     };
     let out = dir.path().join("map");
-    build_log(&log, &out, &cfg, &mut |_, _| {}).unwrap();
+    let mut with_tiles = cfg.clone();
+    with_tiles.mapper.build.tiles = true;
+    let report = build_log(&log, &out, &with_tiles, &mut |_, _| {}).unwrap();
+    assert_eq!(report.extra_outputs, ["tiles.bin"]);
     let built = std::fs::read(out.join("map.ply")).unwrap();
 
     let whole = build_tiles(&log, &cfg, None).unwrap();
     assert_eq!(whole.frames_fused, 59);
+    // The build's tile set is the log's.
+    assert!(std::fs::read(out.join("tiles.bin")).unwrap() == whole.tiles.to_bytes());
     let moved = TileMap::from_bytes(&whole.tiles.to_bytes()).unwrap();
     let map = finish_tiles(&moved, &cfg.mapper).unwrap();
     let out2 = dir.path().join("map2");

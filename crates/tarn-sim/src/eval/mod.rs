@@ -43,6 +43,8 @@ use crate::grid::CellKey;
 use crate::hazard::{terrain_hazard, Class, Hazard, HazardMap, MapCell};
 use crate::sim::{ColourView, TruthInfo};
 
+pub mod rates;
+
 /// Hash maps and sets of cell keys with a fast hasher (truth rasters run to millions of
 /// cells).
 type KeyMap<V> = HashMap<CellKey, V, BuildKeyHasher>;
@@ -750,12 +752,16 @@ pub fn evaluate_matrix_bands(
     info: &TruthInfo,
 ) -> Result<Vec<BinMetrics>> {
     let s = Scorer::new(map, truth, info)?;
-    let all = (MATRIX_BANDS[0].0, MATRIX_BANDS[MATRIX_BANDS.len() - 1].1);
-    Ok(MATRIX_BANDS
-        .iter()
-        .chain(std::iter::once(&all))
-        .map(|&(lo, hi)| s.band(lo, hi))
+    Ok(matrix_bands_and_union()
+        .into_iter()
+        .map(|(lo, hi)| s.band(lo, hi))
         .collect())
+}
+
+/// The bands of the evaluation matrix, [`MATRIX_BANDS`] and then their union.
+fn matrix_bands_and_union() -> Vec<(f64, f64)> {
+    let all = (MATRIX_BANDS[0].0, MATRIX_BANDS[MATRIX_BANDS.len() - 1].1);
+    MATRIX_BANDS.iter().copied().chain([all]).collect()
 }
 
 /// Reads `MAPDIR/map.ply`, `TRUTHDIR/truth.ply` and `TRUTHDIR/truth.json`.
@@ -883,7 +889,12 @@ mod tests {
     }
 
     /// A raster of `nx` × `ny` cells of `res` m from key (0, 0); `water` says which are.
-    fn raster(res: f64, nx: i64, ny: i64, water: impl Fn(i64, i64) -> bool) -> HazardMap {
+    pub(super) fn raster(
+        res: f64,
+        nx: i64,
+        ny: i64,
+        water: impl Fn(i64, i64) -> bool,
+    ) -> HazardMap {
         let cells = (0..ny)
             .flat_map(|ky| (0..nx).map(move |kx| (kx, ky)))
             .map(|(kx, ky)| {
@@ -899,7 +910,7 @@ mod tests {
     }
 
     /// Truth with a trajectory through `path` and the given seen water.
-    fn info(res: f64, path: &[[f64; 2]], seen: Option<Vec<[i64; 2]>>) -> TruthInfo {
+    pub(super) fn info(res: f64, path: &[[f64; 2]], seen: Option<Vec<[i64; 2]>>) -> TruthInfo {
         TruthInfo {
             scene: "t".into(),
             description: String::new(),
