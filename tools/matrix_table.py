@@ -253,8 +253,8 @@ def rates():
     print("reflection is not recorded), so their rates per ray cannot be counted. What can be:")
     print("the share of cells with at least one, and the events in them.")
     print()
-    print("| cue | rig | water cells with one | events a water cell | dry cells with one | events a dry cell | cells-with-one ratio | rule: LR an event |")
-    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print("| cue | rig | water cells with one | the best scene | events a water cell | dry cells with one | the worst scene | events a dry cell | cells-with-one ratio | rule: LR an event |")
+    print("| --- | --- | ---: | --- | ---: | ---: | --- | ---: | ---: | ---: |")
     for name, key, pw_name, pd_name in COUNT_CUES:
         for rig in rigs + ["all"]:
             w, d = tot(key, lambda r: rig == "all" or r == rig)
@@ -264,7 +264,20 @@ def rates():
                 continue
             fw, fd = ratio(w[1], nw), ratio(d[1], nd)
             rr = "–" if not fd else f"{fw / fd:.1f}"
-            print(f"| {name} | {rig} | {pct(fw, 2)} | {num(ratio(w[0], w[1]), 1)} | {pct(fd, 3)} | {num(ratio(d[0], d[1]), 1)} | {rr} | {rule[pw_name] / rule[pd_name]:.1f} |")
+
+            def extreme(side):
+                # The scene (× rig in the "all" row) with the largest share of its water
+                # (side 0) or dry (side 1) cells with an event, among those with 500 cells.
+                best = max(
+                    ((r[key][("water", "dry")[side]][1] / r["cells"][side], k) for k, (r, _) in runs.items()
+                     if (rig == "all" or k[0] == rig) and r["cells"][side] >= 500),
+                    default=None,
+                )
+                if best is None or best[0] == 0:
+                    return "–"
+                return f"{pct(best[0], 2)} ({best[1][1]}" + (f" × {best[1][0]})" if rig == "all" else ")")
+
+            print(f"| {name} | {rig} | {pct(fw, 2)} | {extreme(0)} | {num(ratio(w[0], w[1]), 1)} | {pct(fd, 3)} | {extreme(1)} | {num(ratio(d[0], d[1]), 1)} | {rr} | {rule[pw_name] / rule[pd_name]:.1f} |")
     print()
     nw = sum(v[0]["cells"][0] for v in runs.values())
     nd = sum(v[0]["cells"][1] for v in runs.values())

@@ -349,6 +349,10 @@ pub struct CueLogOdds {
 ///   snow/ice only when a bright visible image says so); MWIR 0.7 against 0.05 (the
 ///   contrast test at 3 σ of the local terrain band);
 /// * `prior = 0.05`, `cue_cap = ln 100`, `image_cap = ln 1000` (see the module documentation).
+///
+/// `docs/cues.md` counts each cue's events on true water and on dry ground over the
+/// evaluation matrix beside these (`tarn build --tiles`, `tarn eval`), and `docs/limits.md`
+/// says where and why the defaults differ from those counts.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Fusion {
