@@ -12,6 +12,7 @@ maps/default.toml with drives along parallel lines past the pond.
 import argparse
 import os
 import pathlib
+import resource
 import subprocess
 import sys
 import tempfile
@@ -21,6 +22,12 @@ import tarn
 import tarn.dask
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+def cpu_s() -> float:
+    """CPU time of this process, every thread, user and system (s)."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
 
 
 def tarn_bin() -> str:
@@ -59,11 +66,25 @@ def main() -> int:
         logs = simulate(pathlib.Path(tmp), a.logs, a.frames)
         best = None
         for _ in range(a.repeat):
-            t = time.perf_counter()
+            t, c = time.perf_counter(), cpu_s()
             ref = tarn.build_many(logs)
             dt = time.perf_counter() - t
-            best = dt if best is None else min(best, dt)
+            if best is None or dt < best:
+                best, best_cpu = dt, cpu_s() - c
         ref_bytes = ref.ply_bytes()
+        # The one-process build's phases: what a worker does in parallel (a log's build)
+        # and what is left after it (merge, water stage), with the CPU time of each.
+        phases = []
+        t, c = time.perf_counter(), cpu_s()
+        sets = [tarn.build_tiles(p) for p in logs]
+        phases.append(("build_tiles of each log", time.perf_counter() - t, cpu_s() - c))
+        t, c = time.perf_counter(), cpu_s()
+        merged = tarn.merge(sets)
+        phases.append(("merge", time.perf_counter() - t, cpu_s() - c))
+        t, c = time.perf_counter(), cpu_s()
+        tarn.finish(merged)
+        phases.append(("finish (water stage)", time.perf_counter() - t, cpu_s() - c))
+        del sets, merged
         rows = []
         for w in [int(x) for x in a.workers.split(",")]:
             cluster = LocalCluster(n_workers=w, threads_per_worker=1, processes=True, dashboard_address=None)
@@ -86,7 +107,13 @@ def main() -> int:
             rows.append((w, min(times), stats))
         pts = rows[0][2]["points"]
         print(f"{a.logs} logs, {a.frames} frames each, {pts:,} points in their cells; "
-              f"one-process `tarn.build_many`: {best:.2f} s ({pts / best:,.0f} points/s)\n")
+              f"one-process `tarn.build_many`: {best:.2f} s ({pts / best:,.0f} points/s), "
+              f"{best_cpu:.2f} s of CPU ({best_cpu / best:.2f} cores busy)\n")
+        print("| one-process phase | wall time | CPU time | cores busy |")
+        print("| --- | --- | --- | --- |")
+        for name, w, c in phases:
+            print(f"| {name} | {w:.2f} s | {c:.2f} s | {c / w:.2f} |")
+        print()
         print("| workers | wall time / one-process time | speed-up over 1 worker | map identical |")
         print("| --- | --- | --- | --- |")
         for w, t, _ in rows:
