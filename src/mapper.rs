@@ -1092,6 +1092,17 @@ impl Mapper {
         self.snapshots.clone()
     }
 
+    /// Hands over the cells that have left the window so far, and forgets them: the mapper
+    /// only ever adds to them (a cell that comes back into the window starts empty there
+    /// and is added again when it leaves), so they are final, and what a mapper holds
+    /// stays bounded by the window and the area driven since the last take. The merge of
+    /// every take and [`Mapper::finish`] is, byte for byte, what `finish` alone would
+    /// have given: a long drive can hand its map on in pieces while the vehicle drives,
+    /// and a long log be built in exact time chunks, one after another.
+    pub fn take_left_tiles(&mut self) -> TileMap {
+        self.global.take()
+    }
+
     /// Everything the mapper saw: the cells that left the window and the window itself.
     pub fn finish(mut self) -> TileMap {
         if let Some(g) = self.grid.as_mut() {

@@ -763,6 +763,18 @@ impl Mapper {
         })
     }
 
+    /// The cells that have left the window so far, as a `TileSet`, which the mapper then
+    /// forgets: they are final, and the merge of every take and `finish_tiles()` is what
+    /// `finish_tiles()` alone would have given, byte for byte.
+    fn take_left_tiles(&mut self, py: Python<'_>) -> PyResult<TileSet> {
+        let m = self
+            .mapper
+            .as_mut()
+            .ok_or_else(|| TarnError::new_err("the mapper was finished"))?;
+        let tiles = py.detach(|| m.take_left_tiles());
+        Ok(TileSet { tiles })
+    }
+
     /// Ends the run: the map of everything the mapper saw. The mapper cannot be used after.
     fn finish(&mut self, py: Python<'_>) -> PyResult<Map> {
         let m = self.take()?;

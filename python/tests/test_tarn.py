@@ -116,6 +116,20 @@ def test_mapper_online_is_the_offline_build(logs):
         mp.finish()
 
 
+def test_cells_taken_while_driving_merge_to_the_log(logs):
+    mp = tarn.Mapper()
+    taken = []
+    for f in tarn.read_frames(logs[1]):
+        mp.update(f)
+        taken.append(mp.take_left_tiles())
+    assert sum(len(t) for t in taken) > 0
+    held = mp.finish_tiles()
+    assert len(held) < len(tarn.build_tiles(logs[1]))
+    assert tarn.merge(taken + [held]).to_bytes() == tarn.build_tiles(logs[1]).to_bytes()
+    with pytest.raises(tarn.TarnError, match="finished"):
+        mp.take_left_tiles()
+
+
 def test_tile_sets_merge_exactly(logs, one_process):
     a, b = (tarn.build_tiles(p) for p in logs)
     ab, ba = tarn.merge([a, b]), tarn.merge([b, a])

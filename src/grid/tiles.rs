@@ -141,6 +141,15 @@ impl TileMap {
         })
     }
 
+    /// Its cells, leaving this map empty with the same resolution and reference height.
+    pub fn take(&mut self) -> TileMap {
+        TileMap {
+            resolution: self.resolution,
+            z_ref: self.z_ref,
+            tiles: std::mem::take(&mut self.tiles),
+        }
+    }
+
     /// An empty map matching a grid's resolution and reference height.
     pub fn for_grid(grid: &RollingGrid) -> Self {
         TileMap {

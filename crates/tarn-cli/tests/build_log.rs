@@ -375,3 +375,49 @@ fn tiles_of_a_log_finish_to_the_built_map() {
     assert_eq!(differ, 0);
     assert_eq!(b.len(), a.len());
 }
+
+/// A mapper that hands over the cells that left its window every few frames: the pieces
+/// and what it holds at the end merge to the map of one that kept everything, byte for
+/// byte, and what it holds at the end is less than all of it.
+#[test]
+fn cells_taken_while_driving_merge_to_the_whole_map() {
+    use tarn::build::{build_tiles, frame_log_config};
+    use tarn::grid::TileMap;
+    use tarn::io::frames::FrameStream;
+    use tarn::mapper::Mapper;
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("drive.mcap");
+    write_log(&log, 60);
+    let cfg = LogBuildConfig {
+        mapper: MapperConfig {
+            grid: GridConfig {
+                size_cells: 60,
+                ..GridConfig::default()
+            },
+            ..MapperConfig::default()
+        },
+        ..Default::default()
+    };
+    let whole = build_tiles(&log, &cfg, None).unwrap().tiles;
+
+    let summary = tarn::io::log::summarize_quick(&log).unwrap();
+    let log_cfg = frame_log_config(&cfg, &summary, &log).unwrap();
+    let mut mapper = Mapper::new(cfg.mapper.clone()).unwrap();
+    mapper.set_publish(false);
+    let mut merged = TileMap::new(whole.resolution(), whole.z_ref()).unwrap();
+    let mut pieces = 0;
+    for (i, frame) in FrameStream::open(&log, &log_cfg).unwrap().enumerate() {
+        mapper.update(&frame.unwrap()).unwrap();
+        if i % 5 == 4 {
+            let piece = mapper.take_left_tiles();
+            pieces += usize::from(piece.observed_count() > 0);
+            merged.merge(&piece).unwrap();
+            assert_eq!(mapper.take_left_tiles().observed_count(), 0);
+        }
+    }
+    let rest = mapper.finish();
+    assert!(pieces >= 3, "{pieces} pieces with cells");
+    assert!(rest.observed_count() < whole.observed_count());
+    merged.merge(&rest).unwrap();
+    assert!(merged.to_bytes() == whole.to_bytes());
+}
