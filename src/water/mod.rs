@@ -122,9 +122,14 @@
 //!
 //! A shore with enough kept samples that is neither level nor a surface a triangulation
 //! predicts (section 3: the fit falls back to its lowest samples), or level only within
-//! its cells' own noise, takes the far shore too, where there is one: such a shore can be
-//! one stretch of a sloping stream, seen where the labels reached its bank, and a level
-//! from that stretch is metres of stream off elsewhere (`SurfaceSource::ShoreAndFarShore`).
+//! its cells' own noise, or a triangulated surface that some of the body's cells lie more
+//! than `shore_radius_m` outside of (beyond its samples' hull the surface is the hull's
+//! edge carried on level, a guess), takes the far shore too, where there is one: such a
+//! shore can be one stretch of a sloping stream, seen where the labels reached its bank,
+//! and a level from that stretch is metres of stream off elsewhere
+//! (`SurfaceSource::ShoreAndFarShore`). On `stream_slope` the shore of the largest body
+//! seen from the `small` rig was 10 kept samples at one end of a 20 m stretch, and the
+//! surface was carried on level up to 8 m past them.
 //!
 //! ## 3. Surface: level plane, or constrained Delaunay where the shore is not level
 //!
@@ -1129,9 +1134,21 @@ pub(crate) fn body_of(
         )?
     };
     // A shore that is neither level nor a smooth surface (the fit fell back to its lowest
-    // samples) may be a stretch of a sloping stream seen in one place: the far shore, where
-    // there is one, adds the rest of its length.
-    let undecided = !fit.decided && !few_reliable && source == SurfaceSource::Shore;
+    // samples), or a surface that does not reach over the body, may be a stretch of a
+    // sloping stream seen in one place: the far shore, where there is one, adds the rest
+    // of its length.
+    // A triangulated surface is carried on level beyond its samples' hull: where the
+    // body's cells reach more than `shore_radius_m` past it (a stretch of a sloping stream
+    // whose shore was measured along part of its length), the surface there is a guess.
+    let extrapolated = {
+        let ev = fit.model.evaluator();
+        cells.iter().any(|&k| {
+            let (x, y) = centre_of(res, k);
+            ev.outside_hull_m(x, y) > cfg.shore_radius_m
+        })
+    };
+    let undecided =
+        (!fit.decided || extrapolated) && !few_reliable && source == SurfaceSource::Shore;
     let far = undecided.then(|| far_shore(&set, info, res, cfg)).flatten();
     let (fit, samples, source) = match far {
         Some((far, far_keys)) => {

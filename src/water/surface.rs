@@ -177,6 +177,25 @@ impl Surface {
     }
 }
 
+impl Surface {
+    /// How far `(x, y)` lies outside the samples' convex hull, metres: 0 inside it, and
+    /// for a level plane (which holds everywhere). Beyond the hull a triangulated surface
+    /// is the hull's edge carried on level: a guess, not a fit.
+    pub fn outside_hull_m(&self, x: f64, y: f64) -> f64 {
+        match self {
+            Surface::Level(_) => 0.0,
+            Surface::Tin { cdt, hull } => match cdt.locate(Point2::new(x, y)) {
+                PositionInTriangulation::OutsideOfConvexHull(_) => hull
+                    .iter()
+                    .map(|&e| on_segment(e, x, y).0)
+                    .fold(f64::INFINITY, f64::min)
+                    .sqrt(),
+                _ => 0.0,
+            },
+        }
+    }
+}
+
 /// The squared distance from `(x, y)` to the segment `[a, b]` and the linear interpolation
 /// of the ends' elevations at the segment's point nearest to it.
 fn on_segment([a, b]: [V; 2], x: f64, y: f64) -> (f64, f64) {
@@ -556,6 +575,30 @@ mod tests {
         assert!((e.at(0.5, -1.0) - 0.5).abs() < 1e-12);
         assert!((e.at(-1.0, 0.5) - 1.0).abs() < 1e-12);
         assert!((e.at(1.0, 1.0) - 1.5).abs() < 1e-12);
+    }
+
+    proptest! {
+        /// How far a point lies outside a triangulated surface's hull: 0 inside and on it,
+        /// the distance to the nearest edge or corner outside, whatever the offset of the
+        /// coordinates; a level plane reaches everywhere.
+        #[test]
+        fn outside_the_hull_is_the_distance_to_it(
+            off in prop_oneof![Just(0.0), 1e5f64..1e6],
+            u in 0.0f64..1.0, v in 0.0f64..1.0, d in 0.01f64..20.0, a in 0.0f64..std::f64::consts::TAU,
+        ) {
+            let samples = vec![s(off, off, 0.0), s(off + 2.0, off, 0.0), s(off + 2.0, off + 2.0, 0.0), s(off, off + 2.0, 0.0)];
+            let e = SurfaceModel::Delaunay { samples, constraints: vec![] }.evaluator();
+            let (x, y) = (off + 2.0 * u, off + 2.0 * v);
+            prop_assert_eq!(e.outside_hull_m(x, y), 0.0);
+            // Straight out from the square's bottom edge, or from a corner along any
+            // direction that leaves it.
+            let below = e.outside_hull_m(off + 2.0 * u, off - d);
+            prop_assert!((below - d).abs() < 1e-6, "{} {}", below, d);
+            let (dx, dy) = (a.cos().abs(), -a.sin().abs());
+            let corner = e.outside_hull_m(off + 2.0 + d * dx, off + d * dy);
+            prop_assert!((corner - d).abs() < 1e-6, "{} {}", corner, d);
+            prop_assert_eq!(SurfaceModel::Level { z: 1.0 }.evaluator().outside_hull_m(x - 50.0, y), 0.0);
+        }
     }
 
     proptest! {

@@ -1110,3 +1110,39 @@ fn min_bottom_depth_is_validated_and_follows_the_lidar() {
         2.0 * crate::grid::RangeNoise::LIDAR.sigma0
     );
 }
+
+/// A stream falling 3 % along x, 12 m long (its near edge notched every other cell),
+/// whose banks were measured down to the water only along its middle 4 m; elsewhere a
+/// strip 0.4 m wide along each bank is unobserved and the gentle banks beyond it are
+/// measured. The shore is a surface a triangulation predicts, but the body runs 4 m past
+/// it at either end, where that surface would be carried on level, up to 12 cm off. The
+/// far shore is added, and the surface follows the slope.
+#[test]
+fn a_surface_that_does_not_reach_over_the_body_takes_the_far_shore() {
+    let water = |x: f64| 0.03 * x;
+    let mut t = TileMap::new(RES, 0.0).unwrap();
+    let mut truth = HashMap::new();
+    for ky in -30..30 {
+        for kx in -60..60 {
+            let k = CellKey::new(kx, ky);
+            let (x, y) = t.centre_of(k);
+            let near = if kx.rem_euclid(2) == 0 { -1.0 } else { -1.1 };
+            // Distance from the water's edge, on either bank.
+            let d = if y < near { near - y } else { y - 0.5 };
+            if (near..0.5).contains(&y) {
+                t.add(k, &wet(water(x) + 0.3, None));
+                truth.insert(k, water(x));
+            } else if x.abs() <= 2.0 || d > 0.4 {
+                t.add(k, &dry(water(x) + 0.05 * d));
+            }
+        }
+    }
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    let b = &map.bodies[0];
+    assert_eq!(b.surface_source, SurfaceSource::ShoreAndFarShore);
+    let (rms, n) = surface_rms(&map, &truth);
+    assert_eq!(n, truth.len());
+    eprintln!("a stream whose shore was measured along a third of it: surface RMS {rms:.4} m");
+    assert!(rms <= 0.03, "{rms}");
+}
