@@ -84,6 +84,17 @@ fn surface_rms(map: &HazardMap, truth: &HashMap<CellKey, f64>) -> (f64, usize) {
     ((s / n.max(1) as f64).sqrt(), n)
 }
 
+/// The map of `t` with default settings: one body, with its surface from `source`; the
+/// surface's RMS over every true water cell, all of which it must call water.
+fn one_body_surface_rms(t: &TileMap, truth: &HashMap<CellKey, f64>, source: SurfaceSource) -> f64 {
+    let map = HazardMap::from_tiles(t, &HazardConfig::default()).unwrap();
+    assert_eq!(map.bodies.len(), 1);
+    assert_eq!(map.bodies[0].surface_source, source);
+    let (rms, n) = surface_rms(&map, truth);
+    assert_eq!(n, truth.len());
+    rms
+}
+
 #[test]
 fn a_level_pond_is_level() {
     let (t, truth) = scene(50, pond(3.0, Some(0.25)));
@@ -978,12 +989,7 @@ fn stream_seen_from_one_bank(
 #[test]
 fn the_far_shore_across_unobserved_water_places_the_surface() {
     let (t, truth) = stream_seen_from_one_bank(|_, _| None);
-    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
-    assert_eq!(map.bodies.len(), 1);
-    let b = &map.bodies[0];
-    assert_eq!(b.surface_source, SurfaceSource::FarShore);
-    let (rms, n) = surface_rms(&map, &truth);
-    assert_eq!(n, truth.len());
+    let rms = one_body_surface_rms(&t, &truth, SurfaceSource::FarShore);
     eprintln!("stream seen across unobserved water: surface RMS {rms:.4} m from the far shore");
     assert!(rms <= 0.03, "{rms}");
 }
@@ -999,14 +1005,9 @@ fn a_ragged_stretch_of_shore_takes_the_far_shore_too() {
             [0.04, -0.04, 0.0, 0.03, -0.03][(k.x.rem_euclid(5) + k.y.rem_euclid(2)) as usize % 5];
         (x.abs() <= 2.0).then_some(0.03 * x + ragged)
     });
-    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
-    assert_eq!(map.bodies.len(), 1);
-    let b = &map.bodies[0];
-    assert_eq!(b.surface_source, SurfaceSource::ShoreAndFarShore);
-    let (rms, n) = surface_rms(&map, &truth);
-    assert_eq!(n, truth.len());
+    let rms = one_body_surface_rms(&t, &truth, SurfaceSource::ShoreAndFarShore);
     // The stretch's own level, the stream's height at its middle.
-    let level = (truth.values().map(|z| z * z).sum::<f64>() / n as f64).sqrt();
+    let level = (truth.values().map(|z| z * z).sum::<f64>() / truth.len() as f64).sqrt();
     eprintln!(
         "ragged stretch of shore and the far shore: surface RMS {rms:.4} m (its level {level:.4} m)"
     );
@@ -1137,12 +1138,7 @@ fn a_surface_that_does_not_reach_over_the_body_takes_the_far_shore() {
             }
         }
     }
-    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
-    assert_eq!(map.bodies.len(), 1);
-    let b = &map.bodies[0];
-    assert_eq!(b.surface_source, SurfaceSource::ShoreAndFarShore);
-    let (rms, n) = surface_rms(&map, &truth);
-    assert_eq!(n, truth.len());
+    let rms = one_body_surface_rms(&t, &truth, SurfaceSource::ShoreAndFarShore);
     eprintln!("a stream whose shore was measured along a third of it: surface RMS {rms:.4} m");
     assert!(rms <= 0.03, "{rms}");
 }

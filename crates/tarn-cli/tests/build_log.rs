@@ -101,21 +101,27 @@ fn write_log_with(path: &Path, frames: u64, opts: &WriteOptions) {
     w.finish().unwrap();
 }
 
-#[test]
-fn map_of_a_drive_matches_the_terrain() {
-    let dir = tempfile::tempdir().unwrap();
-    let log = dir.path().join("drive.mcap");
-    write_log(&log, 100);
-    let cfg = LogBuildConfig {
+/// Default settings with a rolling window of `cells` a side.
+fn window_of(cells: usize) -> LogBuildConfig {
+    LogBuildConfig {
         mapper: MapperConfig {
             grid: GridConfig {
-                size_cells: 200, // a 20 m window: the drive (20 m) makes it roll
+                size_cells: cells,
                 ..GridConfig::default()
             },
             ..MapperConfig::default()
         },
         ..Default::default()
-    };
+    }
+}
+
+#[test]
+fn map_of_a_drive_matches_the_terrain() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("drive.mcap");
+    write_log(&log, 100);
+    // A 20 m window: the drive (20 m) makes it roll.
+    let cfg = window_of(200);
     let out = dir.path().join("map");
     let r = build_log(&log, &out, &cfg, &mut |_, _| {}).unwrap();
     assert_eq!(r.frames_fused, 99);
@@ -307,16 +313,7 @@ fn tiles_of_a_log_finish_to_the_built_map() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("drive.mcap");
     write_log(&log, 60);
-    let cfg = LogBuildConfig {
-        mapper: MapperConfig {
-            grid: GridConfig {
-                size_cells: 200,
-                ..GridConfig::default()
-            },
-            ..MapperConfig::default()
-        },
-        ..Default::default()
-    };
+    let cfg = window_of(200);
     let out = dir.path().join("map");
     let mut with_tiles = cfg.clone();
     with_tiles.mapper.build.tiles = true;
@@ -388,16 +385,7 @@ fn cells_taken_while_driving_merge_to_the_whole_map() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("drive.mcap");
     write_log(&log, 60);
-    let cfg = LogBuildConfig {
-        mapper: MapperConfig {
-            grid: GridConfig {
-                size_cells: 60,
-                ..GridConfig::default()
-            },
-            ..MapperConfig::default()
-        },
-        ..Default::default()
-    };
+    let cfg = window_of(60);
     let whole = build_tiles(&log, &cfg, None).unwrap().tiles;
 
     let summary = tarn::io::log::summarize_quick(&log).unwrap();
