@@ -127,9 +127,9 @@
 //! edge carried on level, a guess), takes the far shore too, where there is one: such a
 //! shore can be one stretch of a sloping stream, seen where the labels reached its bank,
 //! and a level from that stretch is metres of stream off elsewhere
-//! (`SurfaceSource::ShoreAndFarShore`). On `stream_slope` the shore of the largest body
-//! seen from the `small` rig was 10 kept samples at one end of a 20 m stretch, and the
-//! surface was carried on level up to 8 m past them.
+//! (`SurfaceSource::ShoreAndFarShore`). On `stream_slope` the largest bodies seen from the
+//! `small` and `wide` rigs had their shore measured along one end of them only
+//! (`docs/limits.md`).
 //!
 //! ## 3. Surface: level plane, or constrained Delaunay where the shore is not level
 //!
@@ -1134,13 +1134,11 @@ pub(crate) fn body_of(
         )?
     };
     // A shore that is neither level nor a smooth surface (the fit fell back to its lowest
-    // samples), or a surface that does not reach over the body, may be a stretch of a
-    // sloping stream seen in one place: the far shore, where there is one, adds the rest
-    // of its length.
-    // A triangulated surface is carried on level beyond its samples' hull: where the
-    // body's cells reach more than `shore_radius_m` past it (a stretch of a sloping stream
-    // whose shore was measured along part of its length), the surface there is a guess.
-    let extrapolated = {
+    // samples), or a triangulated surface that some body cells lie more than
+    // `shore_radius_m` outside of (beyond its samples' hull it is carried on level, a
+    // guess), may be a stretch of a sloping stream seen in one place: the far shore, where
+    // there is one, adds the rest of its length.
+    let extrapolated = || {
         let ev = fit.model.evaluator();
         cells.iter().any(|&k| {
             let (x, y) = centre_of(res, k);
@@ -1148,7 +1146,7 @@ pub(crate) fn body_of(
         })
     };
     let undecided =
-        (!fit.decided || extrapolated) && !few_reliable && source == SurfaceSource::Shore;
+        !few_reliable && source == SurfaceSource::Shore && (!fit.decided || extrapolated());
     let far = undecided.then(|| far_shore(&set, info, res, cfg)).flatten();
     let (fit, samples, source) = match far {
         Some((far, far_keys)) => {
