@@ -215,14 +215,28 @@ def rates():
     print("| cue (event for / against) | rig | on water: for / against | P(for \\| water) | on dry: for / against | P(for \\| dry) | P(for \\| dry), the worst scene | LR for / against | rule: P(for \\| water), P(for \\| dry) | rule: LR for / against |")
     print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: |")
 
-    def tot(key, keep):
+    def in_row(rig, k):
+        """Whether the run `k` = (rig, scene) counts in the row of `rig` ("all": every run)."""
+        return rig == "all" or k[0] == rig
+
+    def tot(rig, key):
         w, d = [0, 0], [0, 0]
-        for (rig, _), (r, _) in runs.items():
-            if keep(rig):
+        for k, (r, _) in runs.items():
+            if in_row(rig, k):
                 for i in range(2):
                     w[i] += r[key]["water"][i]
                     d[i] += r[key]["dry"][i]
         return w, d
+
+    def top(rig, share):
+        """The largest `share(counts)` of one scene (× rig in the "all" row) in the row,
+        over the runs for which it is not None, with where; "–" without one above 0."""
+        best = max(((v, k) for k, (r, _) in runs.items() if in_row(rig, k)
+                    for v in [share(r)] if v is not None), default=None)
+        if best is None or best[0] == 0:
+            return "–"
+        (v, (r, scene)) = best
+        return f"{pct(v, 2)} ({scene}" + (f" × {r})" if rig == "all" else ")")
 
     def lr(pw, pd):
         if pw is None or pd is None:
@@ -235,18 +249,13 @@ def rates():
         rpw = 1 - rule["p_water_return"] if pw_name is None else rule[pw_name]
         rpd = rule[pd_name]
         for rig in rigs + ["all"]:
-            w, d = tot(key, lambda r: rig == "all" or r == rig)
+            w, d = tot(rig, key)
             if sum(w) + sum(d) == 0:
                 continue
             pw, pd = ratio(w[0], sum(w)), ratio(d[0], sum(d))
-            # The scene (and rig, in the "all" row) whose dry ground fooled the cue most,
-            # among those with at least 1,000 events on dry ground.
-            worst = max(
-                ((r[key]["dry"][0] / sum(r[key]["dry"]), k) for k, (r, _) in runs.items()
-                 if (rig == "all" or k[0] == rig) and sum(r[key]["dry"]) >= 1000),
-                default=None,
-            )
-            ws = "–" if worst is None else f"{pct(worst[0], 2)} ({worst[1][1]}" + (f" × {worst[1][0]})" if rig == "all" else ")")
+            # The scene whose dry ground fooled the cue most, among those with at least
+            # 1,000 events on dry ground.
+            ws = top(rig, lambda r: r[key]["dry"][0] / sum(r[key]["dry"]) if sum(r[key]["dry"]) >= 1000 else None)
             print(f"| {name} ({what}) | {rig} | {w[0]:,} / {w[1]:,} | {pct(pw)} | {d[0]:,} / {d[1]:,} | {pct(pd, 2)} | {ws} | {lr(pw, pd)} | {rpw:.2f}, {rpd:.2f} | {lr(rpw, rpd)} |")
     print()
     print("Reflection rays and bottom returns have no event against (a ray that found no")
@@ -255,32 +264,25 @@ def rates():
     print()
     print("| cue | rig | water cells with one | the best scene | events a water cell | dry cells with one | the worst scene | events a dry cell | cells-with-one ratio | rule: LR an event |")
     print("| --- | --- | ---: | --- | ---: | ---: | --- | ---: | ---: | ---: |")
+
+    def cells(rig, side):
+        return sum(r["cells"][side] for k, (r, _) in runs.items() if in_row(rig, k))
+
     for name, key, pw_name, pd_name in COUNT_CUES:
         for rig in rigs + ["all"]:
-            w, d = tot(key, lambda r: rig == "all" or r == rig)
-            nw = sum(runs[k][0]["cells"][0] for k in runs if rig == "all" or k[0] == rig)
-            nd = sum(runs[k][0]["cells"][1] for k in runs if rig == "all" or k[0] == rig)
+            w, d = tot(rig, key)
             if w[0] + d[0] == 0:
                 continue
-            fw, fd = ratio(w[1], nw), ratio(d[1], nd)
+            fw, fd = ratio(w[1], cells(rig, 0)), ratio(d[1], cells(rig, 1))
             rr = "–" if not fd else f"{fw / fd:.1f}"
-
-            def extreme(side):
-                # The scene (× rig in the "all" row) with the largest share of its water
-                # (side 0) or dry (side 1) cells with an event, among those with 500 cells.
-                best = max(
-                    ((r[key][("water", "dry")[side]][1] / r["cells"][side], k) for k, (r, _) in runs.items()
-                     if (rig == "all" or k[0] == rig) and r["cells"][side] >= 500),
-                    default=None,
-                )
-                if best is None or best[0] == 0:
-                    return "–"
-                return f"{pct(best[0], 2)} ({best[1][1]}" + (f" × {best[1][0]})" if rig == "all" else ")")
-
-            print(f"| {name} | {rig} | {pct(fw, 2)} | {extreme(0)} | {num(ratio(w[0], w[1]), 1)} | {pct(fd, 3)} | {extreme(1)} | {num(ratio(d[0], d[1]), 1)} | {rr} | {rule[pw_name] / rule[pd_name]:.1f} |")
+            # The scene with the largest share of its water (side 0) or dry (side 1) cells
+            # with an event, among those with 500 such cells.
+            best = [top(rig, lambda r, side=side, on=on: r[key][on][1] / r["cells"][side]
+                        if r["cells"][side] >= 500 else None)
+                    for side, on in enumerate(("water", "dry"))]
+            print(f"| {name} | {rig} | {pct(fw, 2)} | {best[0]} | {num(ratio(w[0], w[1]), 1)} | {pct(fd, 3)} | {best[1]} | {num(ratio(d[0], d[1]), 1)} | {rr} | {rule[pw_name] / rule[pd_name]:.1f} |")
     print()
-    nw = sum(v[0]["cells"][0] for v in runs.values())
-    nd = sum(v[0]["cells"][1] for v in runs.values())
+    nw, nd = cells("all", 0), cells("all", 1)
     print(f"The cells scored: {nw:,} on water and {nd:,} on dry ground off the shore; water is")
     print(f"{pct(nw / (nw + nd))} of them, against the rule's prior of {pct(rule['prior'])}.")
 
