@@ -175,9 +175,7 @@ impl Surface {
             }
         }
     }
-}
 
-impl Surface {
     /// How far `(x, y)` lies outside the samples' convex hull, metres: 0 inside it, and
     /// for a level plane (which holds everywhere). Beyond the hull a triangulated surface
     /// is the hull's edge carried on level: a guess, not a fit.

@@ -128,15 +128,21 @@ fn run_over_pond(
     (cloud, out, shots)
 }
 
-#[test]
-fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
-    let cue = LidarCueModel::new(
+/// The cue at its defaults, a 905 nm sensor 1 m over pure water, with no beam directions of
+/// its own.
+fn default_cue() -> LidarCueModel {
+    LidarCueModel::new(
         optics(1.0),
         BeamModel::Directions(Vec::new()),
         LidarCueConfig::default(),
         None,
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
+    let cue = default_cue();
     let (start, end) = cue.interval().unwrap();
     let (a, b) = shallow_pond_scene(cue.optics());
     let pond = move |x: f64, _y: f64| x >= a && x <= b;
@@ -219,13 +225,7 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
 
 #[test]
 fn bottom_returns_give_depth_within_five_centimetres() {
-    let base = LidarCueModel::new(
-        optics(1.0),
-        BeamModel::Directions(Vec::new()),
-        LidarCueConfig::default(),
-        None,
-    )
-    .unwrap();
+    let base = default_cue();
     let (a, b) = shallow_pond_scene(base.optics());
     let pond = move |x: f64, _y: f64| x >= a && x <= b;
     for depth in [0.15, 0.20] {
@@ -627,14 +627,7 @@ fn bottom_returns_of_shallow_water_are_found_and_dry_ground_gives_none() {
     // Bottom returns of water 6 to 10 cm deep lie a few centimetres below its surface:
     // inside the below-level gate's ceiling, outside three standard deviations of a scan
     // line whose ground returns fall 5 mm from one to the next.
-    let base = LidarCueModel::new(
-        optics(1.0),
-        BeamModel::Directions(Vec::new()),
-        LidarCueConfig::default(),
-        None,
-    )
-    .unwrap()
-    .with_range_noise(RangeNoise::constant(0.005));
+    let base = default_cue().with_range_noise(RangeNoise::constant(0.005));
     let (a, b) = shallow_pond_scene(base.optics());
     for (depth, in_pond) in [(0.06, true), (0.10, true), (0.10, false)] {
         let pond = move |x: f64, _y: f64| in_pond && x >= a && x <= b;
