@@ -30,6 +30,13 @@ def cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
+def timed(f):
+    """`f()`, its wall time and the CPU time it took (s)."""
+    t, c = time.perf_counter(), cpu_s()
+    r = f()
+    return r, time.perf_counter() - t, cpu_s() - c
+
+
 def tarn_bin() -> str:
     return os.environ.get("TARN_BIN") or str(ROOT / "target" / "debug" / "tarn")
 
@@ -66,24 +73,16 @@ def main() -> int:
         logs = simulate(pathlib.Path(tmp), a.logs, a.frames)
         best = None
         for _ in range(a.repeat):
-            t, c = time.perf_counter(), cpu_s()
-            ref = tarn.build_many(logs)
-            dt = time.perf_counter() - t
+            ref, dt, cpu = timed(lambda: tarn.build_many(logs))
             if best is None or dt < best:
-                best, best_cpu = dt, cpu_s() - c
+                best, best_cpu = dt, cpu
         ref_bytes = ref.ply_bytes()
         # The one-process build's phases: what a worker does in parallel (a log's build)
         # and what is left after it (merge, water stage), with the CPU time of each.
-        phases = []
-        t, c = time.perf_counter(), cpu_s()
-        sets = [tarn.build_tiles(p) for p in logs]
-        phases.append(("build_tiles of each log", time.perf_counter() - t, cpu_s() - c))
-        t, c = time.perf_counter(), cpu_s()
-        merged = tarn.merge(sets)
-        phases.append(("merge", time.perf_counter() - t, cpu_s() - c))
-        t, c = time.perf_counter(), cpu_s()
-        tarn.finish(merged)
-        phases.append(("finish (water stage)", time.perf_counter() - t, cpu_s() - c))
+        sets, *build = timed(lambda: [tarn.build_tiles(p) for p in logs])
+        merged, *merge = timed(lambda: tarn.merge(sets))
+        _, *finish = timed(lambda: tarn.finish(merged))
+        phases = [("build_tiles of each log", *build), ("merge", *merge), ("finish (water stage)", *finish)]
         del sets, merged
         rows = []
         for w in [int(x) for x in a.workers.split(",")]:
