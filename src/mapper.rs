@@ -14,6 +14,13 @@
 //!    projected onto the map as votes ([`crate::project::FrameLabels`]);
 //! 5. **water** — the hazard map of the window, published as the new snapshot.
 //!
+//! With `[lidar.cue] prior_every_frames = N` the window's water bodies become, after every
+//! N-th frame, the prior the lidar cue reads in the frames that follow
+//! ([`crate::cues::prior::WaterPrior`], [`Mapper::water_prior`]): the map just published,
+//! or, when the mapper does not publish (an offline build), the same map built for it. An
+//! offline build with a prior is therefore the online run's map, at the cost of one water
+//! stage every N frames.
+//!
 //! The cue work is [`crate::cues::FrameCues`]'s; the mapper only decides what runs. A sensor
 //! the config leaves out (`lidar`/`stereo` absent) runs no code at all, not even ingest.
 //!
@@ -39,6 +46,7 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use crate::cues::prior::WaterPrior;
 use crate::cues::{
     estimate_sensor_height, BeamModel, FrameCueConfig, FrameCues, FrameCuesReport, LidarCueConfig,
     LidarCueModel, ReflectivityConfig, StereoCueConfig,
@@ -923,6 +931,12 @@ impl Mapper {
         ]
     }
 
+    /// The water the lidar cue reads as a prior in the next frame ([`WaterPrior`]): `None`
+    /// before the first refresh or without one ([`LidarCueConfig::prior_every_frames`]).
+    pub fn water_prior(&self) -> Option<&WaterPrior> {
+        self.cues.prior.as_ref()
+    }
+
     /// The rolling window (after the first frame).
     pub fn grid(&self) -> Option<&RollingGrid> {
         self.grid.as_ref()
@@ -1041,6 +1055,21 @@ impl Mapper {
         }
 
         self.frames += 1;
+        // 6. the prior of the frames that follow: the window's water bodies, every
+        // `prior_every_frames` frames (the map just published, or the same map built now).
+        let cue = self.cfg.lidar.as_ref().map(|l| l.cue);
+        if let Some(cue) = cue.filter(|c| c.prior_every_frames > 0) {
+            if self.frames % u64::from(cue.prior_every_frames) == 0 {
+                let t = Instant::now();
+                let map = if self.publish {
+                    self.snapshots.latest()
+                } else {
+                    Arc::new(self.window_map()?)
+                };
+                self.cues.prior = Some(WaterPrior::from_map(&map, cue.prior_reach_m));
+                times.water += t.elapsed().as_secs_f64();
+            }
+        }
         rep.frame_index = self.frames;
         times.total = t0.elapsed().as_secs_f64();
         rep.times_s = times;

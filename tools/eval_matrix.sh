@@ -12,6 +12,7 @@
 #   OUT=out/matrix DOC=docs/accuracy.md       # where runs and the table go (defaults)
 #   REUSE_SIMS=1 tools/eval_matrix.sh         # keep logs already simulated in OUT (the
 #                                             # simulator unchanged): builds and scores only
+#   BUILD_ARGS="--water-prior 1" ...          # options added to every `tarn build`
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ -z "${TARN_BIN:-}" ]; then
@@ -33,7 +34,7 @@ for rig in $RIGS; do
       "$TARN_BIN" simulate "maps/$scene.toml" --rig "maps/rigs/$rig.toml" --out "$dir/sim" --json \
         > "$dir.sim.json"
     fi
-    "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --out "$dir/map" --tiles --json \
+    "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --out "$dir/map" --tiles --json ${BUILD_ARGS:-} \
       > "$dir.build.json"
     "$TARN_BIN" eval "$dir/map" --truth "$dir/sim" --json > "$dir.eval.json"
   done
@@ -46,7 +47,7 @@ for rig in $RIGS; do
     for set in "lidar:lidar:none" "stereo:stereo,mirror:none" "labels:none:colour,swir"; do
       name=${set%%:*}; rest=${set#*:}; cues=${rest%%:*}; labels=${rest#*:}
       if ! "$TARN_BIN" build "$dir/sim/log.mcap" --rig "$dir/sim/rig.toml" --cues "$cues" \
-          --labels "$labels" --out "$dir/$name" --json > "$dir.$name.build.json" 2> "$dir.$name.err"; then
+          --labels "$labels" --out "$dir/$name" --json ${BUILD_ARGS:-} > "$dir.$name.build.json" 2> "$dir.$name.err"; then
         rm -f "$dir.$name.build.json" "$dir.$name.eval.json"
         continue
       fi

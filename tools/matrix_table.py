@@ -56,7 +56,8 @@ def header(title, took):
     print("Regenerate with:")
     print()
     print("```bash")
-    print("tools/eval_matrix.sh")
+    args = os.environ.get("BUILD_ARGS", "").strip()
+    print(f'BUILD_ARGS="{args}" tools/eval_matrix.sh' if args else "tools/eval_matrix.sh")
     print("```")
     print()
 

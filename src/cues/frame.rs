@@ -8,6 +8,7 @@
 use serde::Serialize;
 
 use super::lidar::{LidarCueModel, LidarCueStats, ScanSurface};
+use super::prior::WaterPrior;
 use super::stereo::{stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig};
 use crate::error::Result;
 use crate::grid::{IngestStats, RangeNoise, RollingGrid};
@@ -61,6 +62,9 @@ pub struct FrameCuesReport {
 pub struct FrameCues {
     /// Which cues run, and how.
     pub cfg: FrameCueConfig,
+    /// The water an earlier map found, read by the lidar cue ([`WaterPrior`]); `None`:
+    /// the cues see this frame alone.
+    pub prior: Option<WaterPrior>,
 }
 
 /// Intensity of a camera image as a [`GrayImage`] (mean of R, G, B for colour).
@@ -79,7 +83,7 @@ pub fn gray_of(image: &Image) -> Result<GrayImage> {
 impl FrameCues {
     /// A runner of the cues `cfg` names.
     pub fn new(cfg: FrameCueConfig) -> Self {
-        FrameCues { cfg }
+        FrameCues { cfg, prior: None }
     }
 
     /// Runs the configured cues on `frame`, ingests the corrected clouds into `grid` and
@@ -102,7 +106,13 @@ impl FrameCues {
     ) -> Result<Option<ScanSurface>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(model), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
-            let out = model.run_with(cloud, res, z_ref, self.cfg.surface_points)?;
+            let out = model.run_with(
+                cloud,
+                res,
+                z_ref,
+                self.cfg.surface_points,
+                self.prior.as_ref(),
+            )?;
             rep.lidar_ingest = Some(grid.ingest(&out.corrected, &self.cfg.lidar_noise)?);
             rep.lidar = Some(out.stats);
             let batch = out.evidence.into_batch();

@@ -40,6 +40,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::prior::WaterPrior;
 use super::reflectivity::{normalised_reflectivity, ReflectivityConfig, ReflectivitySample};
 use super::EvidenceMap;
 use crate::error::{Error, Result};
@@ -195,6 +196,11 @@ pub struct LidarCueConfig {
     /// sensitivity says (pavement at grazing incidence), and there a missing return says
     /// nothing about water. Off: the optics' interval alone.
     pub scan_dry_limit: bool,
+    /// Read by the mapper: every this many frames, the window's water bodies become the
+    /// prior the lidar cue reads in the frames that follow ([`WaterPrior`]); 0: no prior.
+    pub prior_every_frames: u32,
+    /// How far beyond its bodies' cells the prior carries their level (m).
+    pub prior_reach_m: f64,
 }
 
 impl Default for LidarCueConfig {
@@ -207,6 +213,8 @@ impl Default for LidarCueConfig {
             specular_min_depth_m: 0.5,
             max_ground_slope: 0.08,
             scan_dry_limit: true,
+            prior_every_frames: 0,
+            prior_reach_m: 1.0,
         }
     }
 }
@@ -222,6 +230,7 @@ impl LidarCueConfig {
             ("depth_tolerance_m", self.depth_tolerance_m),
             ("specular_min_depth_m", self.specular_min_depth_m),
             ("max_ground_slope", self.max_ground_slope),
+            ("prior_reach_m", self.prior_reach_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(Error::invalid(
@@ -257,6 +266,8 @@ pub struct LidarCueStats {
     pub noret_beyond_dry: u64,
     /// Returns from under the water surface, refraction-corrected into bottom evidence.
     pub bottom: u64,
+    /// Of `bottom`, those found under the water level of the prior ([`WaterPrior`]).
+    pub bottom_under_prior: u64,
     /// Returns mirrored by the water surface, put back where the object is.
     pub specular: u64,
     /// Below-level returns neither bottom nor deep enough to be specular.
@@ -497,17 +508,20 @@ impl LidarCueModel {
 
     /// Runs the cues on one organized scan. `resolution` and `z_ref` are the grid's.
     pub fn run(&self, cloud: &PointCloud, resolution: f64, z_ref: f64) -> Result<LidarCues> {
-        self.run_with(cloud, resolution, z_ref, true)
+        self.run_with(cloud, resolution, z_ref, true, None)
     }
 
     /// [`Self::run`], collecting the dry and wet points of [`ScanSurface`] only when
-    /// `surface_points` (the image labels' colour check reads them; nothing else does).
+    /// `surface_points` (the image labels' colour check reads them; nothing else does), and
+    /// reading the water level an earlier map found where `prior` has one: a return under
+    /// it by more than the noise of both is a bottom return.
     pub fn run_with(
         &self,
         cloud: &PointCloud,
         resolution: f64,
         z_ref: f64,
         surface_points: bool,
+        prior: Option<&WaterPrior>,
     ) -> Result<LidarCues> {
         cloud.validate()?;
         let n = cloud.len();
@@ -537,7 +551,7 @@ impl LidarCueModel {
         let level0 = o.z - self.optics.config().height_m;
         let walked: Vec<(Vec<Event>, f64)> = lines
             .par_iter()
-            .map(|line| self.walk(cloud, &dirs, line, o, level0))
+            .map(|line| self.walk(cloud, &dirs, line, o, level0, prior))
             .collect();
         // The scan's own dry limit per line: the farthest lookahead its dry ground returned
         // from (a vertical scanner's one line likewise).
@@ -624,8 +638,10 @@ impl LidarCueModel {
                     level,
                     depth,
                     gain,
+                    prior,
                 } => {
                     stats.bottom += 1;
+                    stats.bottom_under_prior += prior as u64;
                     let mm = ev.level_mm(level);
                     ev.add_with_level(x, y, level, |e| match mm {
                         Some(mm) => e.add_bottom_return(depth, mm, gain),
@@ -678,6 +694,39 @@ impl LidarCueModel {
         })
     }
 
+    /// A return under the water surface `prior` knows at its cell, by more than the
+    /// line's below-level `gate` and three standard deviations of the surface together, at
+    /// a depth the optics say this sensor can see there: a bottom return at that level.
+    fn under_prior(
+        &self,
+        prior: &WaterPrior,
+        slot: usize,
+        o: Point3<f64>,
+        p: Point3<f64>,
+        gate: impl FnOnce() -> f64,
+    ) -> Option<Event> {
+        let l = prior.level_at(p.x, p.y)?;
+        let v = p - o;
+        if v.z >= 0.0 || o.z <= l.z || p.z >= l.z - gate().hypot(3.0 * l.sigma) {
+            return None;
+        }
+        let q = self.optics.correct_bottom_return(o, p, l.z).ok()?;
+        let depth = l.z - q.z;
+        let u = v.normalize();
+        let c = o + u * ((o.z - l.z) / -u.z);
+        let d_c = crate::geom::hypot(c.x - o.x, c.y - o.y);
+        (depth <= self.max_visible_depth(d_c) + self.cfg.depth_tolerance_m).then(|| Event::Bottom {
+            slot,
+            x: q.x,
+            y: q.y,
+            level: l.z,
+            depth,
+            gain: crate::optics::bottom_depth_gain(o, p, self.optics.config().n_water)
+                .unwrap_or(0.0),
+            prior: true,
+        })
+    }
+
     /// The optics' loss through the shallowest water at lookahead `d`:
     /// [`LidarWaterModel::return_ratio`] at zero depth over
     /// [`LidarWaterModel::dry_ratio`] (Fresnel transmission in and out, and the steeper
@@ -696,6 +745,7 @@ impl LidarCueModel {
         line: &[u32],
         o: Point3<f64>,
         level0: f64,
+        prior: Option<&WaterPrior>,
     ) -> (Vec<Event>, f64) {
         let cfg = &self.cfg;
         let g_max = cfg.max_ground_slope;
@@ -741,6 +791,10 @@ impl LidarCueModel {
                     let sigma_v = self.noise.sigma(range) * (-v.z / range.max(1e-9)).max(0.0);
                     below_gate(&drops, sigma_v, cfg.below_gate_m)
                 };
+                if let Some(e) = prior.and_then(|w| self.under_prior(w, s, o, p, gate)) {
+                    out.push(e);
+                    continue;
+                }
                 let below = v.z < 0.0 && o.z > level && dz < -slack && dz < -(gate() + slack);
                 if below {
                     // Below the level: bottom or specular.
@@ -765,6 +819,7 @@ impl LidarCueModel {
                                 self.optics.config().n_water,
                             )
                             .unwrap_or(0.0),
+                            prior: false,
                         });
                     } else if level - p.z < cfg.specular_min_depth_m {
                         out.push(Event::Unexplained);
@@ -947,6 +1002,8 @@ enum Event {
         depth: f64,
         /// d(depth)/d(level): how the depth would move against another level.
         gain: f64,
+        /// Found under the prior's water level, not the walked level.
+        prior: bool,
     },
     Specular {
         slot: usize,

@@ -31,6 +31,7 @@
 
 pub mod frame;
 pub mod lidar;
+pub mod prior;
 pub mod reflectivity;
 pub mod stereo;
 

@@ -99,6 +99,11 @@ pub struct BuildArgs {
     /// map is the same.
     #[arg(long)]
     pub per_frame_maps: bool,
+    /// (log) Every this many frames, the window's water bodies become a prior the lidar
+    /// cue reads in the frames that follow: a return under a known water level is the
+    /// bottom [default: 0, none; the config's `[lidar.cue] prior_every_frames`].
+    #[arg(long, value_name = "FRAMES")]
+    pub water_prior: Option<u32>,
     /// Print the report as JSON instead of a summary.
     #[arg(long)]
     pub json: bool,
@@ -133,6 +138,7 @@ impl BuildArgs {
             label_max_range: None,
             label_surface_max_std: None,
             per_frame_maps: false,
+            water_prior: None,
             json: false,
             maps_out: Default::default(),
         }
@@ -298,6 +304,13 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
     }
     if a.per_frame_maps {
         cfg.build.per_frame_maps = true;
+    }
+    if let Some(n) = a.water_prior {
+        let l = cfg
+            .lidar
+            .as_mut()
+            .context("--water-prior: the lidar cue reads the prior, and there is no lidar")?;
+        l.cue.prior_every_frames = n;
     }
     if let Some(p) = &a.log_config {
         cfg.log = load_log_config(p)?;

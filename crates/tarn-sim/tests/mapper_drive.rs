@@ -259,6 +259,34 @@ fn a_map_published_on_demand_is_the_map_published_every_frame() {
 }
 
 #[test]
+fn a_water_prior_is_the_same_whether_the_mapper_publishes_or_not() {
+    // The prior is the window's map every few frames: the one just published, or the same
+    // map built for it when the mapper does not publish (an offline build). The result is
+    // the same, byte for byte.
+    let frames = &sim().frames;
+    for every in [1, 2] {
+        let mut cfg = MapperConfig::every_sensor();
+        cfg.lidar.as_mut().unwrap().cue.prior_every_frames = every;
+        let mut online = Mapper::new(cfg.clone()).unwrap();
+        let mut offline = Mapper::new(cfg).unwrap();
+        offline.set_publish(false);
+        for (k, f) in frames.iter().enumerate() {
+            let a = online.update(f).unwrap();
+            let b = offline.update(f).unwrap();
+            let stats = |r: &FrameReport| r.cues.lidar.unwrap();
+            assert_eq!(stats(&a), stats(&b));
+            let prior = |m: &Mapper| m.water_prior().map(|p| p.len());
+            assert_eq!(prior(&online), prior(&offline));
+            // Refreshed after every `every` frames.
+            assert_eq!(prior(&online).is_some(), k + 1 >= every as usize);
+        }
+        // The pond is a body by the end of the drive.
+        assert!(online.water_prior().unwrap().len() > 1000);
+        assert!(online.finish() == offline.finish());
+    }
+}
+
+#[test]
 fn snapshots_are_readable_while_updating() {
     let frames = &sim().frames;
     let mut m = Mapper::new(MapperConfig::default()).unwrap();

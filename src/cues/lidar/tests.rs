@@ -1,6 +1,7 @@
 use super::*;
+use crate::cues::prior::{PriorLevel, WaterPrior};
 use crate::cues::testutil::TestRng;
-use crate::grid::{key_of, GridConfig, RollingGrid};
+use crate::grid::{key_of, CellKey, GridConfig, RollingGrid};
 use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig};
 
 const RES: f64 = 0.1;
@@ -688,4 +689,74 @@ proptest::proptest! {
         }
         proptest::prop_assert!(below_gate(&d, f64::NAN, ceiling) <= ceiling);
     }
+}
+
+#[test]
+fn returns_under_a_prior_water_level_are_bottom_returns_and_dry_ground_beside_it_is_not() {
+    // The flat bed of clear water 5 cm deep, seen by a vertical scanner: level with the
+    // ground before it, the walk takes it for ground. With the water the previous map found
+    // over a stretch where the optics see 0.2 m deep, the returns there are bottom returns
+    // at that level, with depth; a prior level within the line's gate of the ground says
+    // nothing.
+    let base = default_cue().with_range_noise(RangeNoise::constant(0.005));
+    let dry = |_: f64, _: f64| false;
+    let (cloud, plain, _) = run_over_pond(&base, 0.0, &dry, 0.005, 5);
+    assert_eq!(plain.stats.bottom, 0, "{:?}", plain.stats);
+    let b = 0.5 * base.optics().max_lookahead_for_depth(0.2).unwrap().unwrap();
+    let patch = (0.5 * b / RES).ceil() as i64..(b / RES).floor() as i64;
+    let in_patch = |x: f64| patch.contains(&((x / RES).floor() as i64));
+    let prior_at = |z: f64, sigma: f64| {
+        WaterPrior::from_levels(
+            RES,
+            patch
+                .clone()
+                .map(|x| (CellKey::new(x, 0), PriorLevel { z, sigma })),
+            0.0,
+        )
+    };
+    let cue = LidarCueModel {
+        beams: BeamModel::Directions(
+            (0..cloud.len())
+                .map(|k| {
+                    let p = cloud.point_in_map(k) - cloud.sensor_origin;
+                    let u = p / p.norm();
+                    [u.x as f32, u.y as f32, u.z as f32]
+                })
+                .collect(),
+        ),
+        ..base.clone()
+    };
+    let run = |prior: &WaterPrior| cue.run_with(&cloud, RES, 0.0, false, Some(prior)).unwrap();
+    let wet = run(&prior_at(0.05, 0.005));
+    let seen = (0..cloud.len())
+        .filter(|&k| cloud.is_valid(k) && in_patch(cloud.point_in_map(k).x))
+        .count() as u64;
+    assert!(seen > 20);
+    assert_eq!(wet.stats.bottom_under_prior, wet.stats.bottom);
+    assert_eq!(wet.stats.bottom, seen, "{:?}", wet.stats);
+    // The returns are out of the terrain. The beam's time in water reads as n times its
+    // path, so the bed appears deeper than it lies (by the index at normal incidence, less
+    // towards grazing): corrected, 5 cm of apparent depth is 3.8 to 5 cm of water.
+    for k in 0..cloud.len() {
+        let x = cloud.point_in_map(k).x;
+        assert_eq!(wet.corrected.is_valid(k), cloud.is_valid(k) && !in_patch(x));
+    }
+    let depths: Vec<f64> = wet
+        .evidence
+        .into_batch()
+        .iter()
+        .filter_map(|(_, e)| e.depth_m())
+        .collect();
+    assert!(!depths.is_empty());
+    assert!(
+        depths.iter().all(|&d| d > 0.05 / 1.34 && d < 0.05),
+        "{depths:?}"
+    );
+    // A level 1 cm over the ground, known exactly: within the line's gate but for the
+    // noise's tail. Known to 1 cm, a level 2 cm over it is within three of its σ; known
+    // exactly, it is not.
+    let few = |z, sigma| run(&prior_at(z, sigma)).stats.bottom <= seen / 20;
+    assert!(few(0.01, 0.0));
+    assert!(few(0.02, 0.01));
+    assert!(!few(0.02, 0.0));
 }
