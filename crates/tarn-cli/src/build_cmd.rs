@@ -306,11 +306,10 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
         cfg.build.per_frame_maps = true;
     }
     if let Some(n) = a.water_prior {
-        let l = cfg
-            .lidar
-            .as_mut()
-            .context("--water-prior: the lidar cue reads the prior, and there is no lidar")?;
-        l.cue.prior_every_frames = n;
+        match cfg.lidar.as_mut() {
+            Some(l) => l.cue.prior_every_frames = n,
+            None => eprintln!("warning: --water-prior: no lidar is configured to read it"),
+        }
     }
     if let Some(p) = &a.log_config {
         cfg.log = load_log_config(p)?;
