@@ -441,6 +441,18 @@ impl MapperConfig {
             }
             named("lidar.noise", l.noise.validate())?;
             named("lidar.cue", l.cue.validate())?;
+            // The prior holds the window's bodies and their reach: bounded by the window.
+            let side = self.grid.resolution * self.grid.size_cells as f64;
+            if l.cue.prior_reach_m > side {
+                return Err(Error::invalid(
+                    "mapper config lidar.cue.prior_reach_m",
+                    format!(
+                        "{} m is more than the window's side ({side} m: grid.size_cells × \
+                         grid.resolution)",
+                        l.cue.prior_reach_m
+                    ),
+                ));
+            }
             named("lidar.reflectivity_cue", l.reflectivity_cue.validate())?;
         }
         if let Some(s) = &self.stereo {

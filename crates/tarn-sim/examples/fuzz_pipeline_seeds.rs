@@ -84,6 +84,7 @@ fn main() -> anyhow::Result<()> {
     // mapper_update: a config byte, then frames (stamp step, pose, which clouds, clouds).
     for (name, head, frames) in [
         ("lidar-cues", 0x07u8, 3usize),
+        ("lidar-cues-prior", 0x27, 3),
         ("stereo-publish", 0x18, 2),
         ("raw", 0x00, 4),
     ] {

@@ -335,7 +335,8 @@ pub fn cloud_build(data: &[u8]) -> bool {
     true
 }
 
-/// `Mapper::update` over frames decoded from the bytes: a config byte (which cues run),
+/// `Mapper::update` over frames decoded from the bytes: a config byte (which cues run,
+/// whether the map is published every frame, how often the water prior is refreshed),
 /// then per frame a stamp step, the vehicle pose (translation and a raw quaternion, which
 /// need not be a rotation), and an organized lidar scan and stereo cloud of up to 16 × 48
 /// points (`f32` x y z, NaN where the bytes run out). Every frame is offered; then the
@@ -358,6 +359,8 @@ pub fn mapper_update(data: &[u8]) -> bool {
         if head & 4 != 0 {
             l.height_m = Some(1.8);
         }
+        // The water prior, refreshed every frame or every other one.
+        l.cue.prior_every_frames = u32::from(head >> 5 & 3);
     }
     if let Some(s) = cfg.stereo.as_mut() {
         s.reflections = head & 8 != 0;
