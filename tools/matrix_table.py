@@ -94,7 +94,9 @@ def accuracy():
     print("  water, over those the map observed;")
     print("- **precision**: map cells called water that are water;")
     print("- **surface, depth, terrain**: RMS error (m) of the water surface where water is found,")
-    print("  of depth where the map gives one, and of dry ground not called water.")
+    print("  of depth where the map gives one, and of dry ground not called water; **terrain")
+    print("  (lidar)** over the dry ground a lidar return of the log fell on (`tarn eval` reads")
+    print("  the log beside the truth), where a rig has a lidar.")
     print()
     print("Rigs:")
     print()
@@ -103,8 +105,8 @@ def accuracy():
     print()
     print("## 5–30 m")
     print()
-    print("| scene | rig | water seen | recall | sky-reflection seen | sky-reflection recall | dry off shore | false water | precision | surface RMS | depth RMS | terrain RMS |")
-    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print("| scene | rig | water seen | recall | sky-reflection seen | sky-reflection recall | dry off shore | false water | precision | surface RMS | depth RMS | terrain RMS | terrain RMS (lidar) |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for scene in scenes:
         for rig in rigs:
             b = band(load(rig, scene, "eval"), "5-30")
@@ -112,21 +114,23 @@ def accuracy():
                 f"| {scene} | {rig} | {b['seen_water_cells']} | {pct(b['seen_recall'])} | "
                 f"{b.get('seen_sky_cells', 0)} | {pct(b.get('seen_sky_recall'))} | "
                 f"{b['dry_offshore_cells']} | {pct(b['false_rate_offshore'], 2)} | {pct(b['precision'])} | "
-                f"{num(b['surface_rms_m'])} | {num(b['depth_rms_m'])} | {num(b['terrain_rms_m'])} |"
+                f"{num(b['surface_rms_m'])} | {num(b['depth_rms_m'])} | {num(b['terrain_rms_m'])} | "
+                f"{num(b.get('terrain_lidar_rms_m'))} |"
             )
     print()
     for rig in rigs:
         print(f"## By range band: `{rig}`")
         print()
-        print("| scene | recall 5–10 | 10–20 | 20–30 | false water 5–10 | 10–20 | 20–30 | terrain RMS 5–10 | 10–20 | 20–30 |")
-        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+        print("| scene | recall 5–10 | 10–20 | 20–30 | false water 5–10 | 10–20 | 20–30 | terrain RMS 5–10 | 10–20 | 20–30 | terrain RMS (lidar) 5–10 | 10–20 | 20–30 |")
+        print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
         for scene in scenes:
             e = load(rig, scene, "eval")
             bs = [band(e, n) for n in ("5-10", "10-20", "20-30")]
             rec = " | ".join(pct(b["seen_recall"]) for b in bs)
             fw = " | ".join(pct(b["false_rate_offshore"], 2) for b in bs)
             ter = " | ".join(num(b["terrain_rms_m"]) for b in bs)
-            print(f"| {scene} | {rec} | {fw} | {ter} |")
+            tl = " | ".join(num(b.get("terrain_lidar_rms_m")) for b in bs)
+            print(f"| {scene} | {rec} | {fw} | {ter} | {tl} |")
         print()
     print("## What each build used")
     print()

@@ -91,9 +91,19 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
         if let Some(b) = &band {
             v["band"] = serde_json::to_value(b)?;
         }
-        // The bands of the evaluation matrix (every scene by every rig), compared across runs.
-        v["matrix_bands"] =
-            serde_json::to_value(tarn_sim::eval::evaluate_matrix_bands(&map, &truth, &info)?)?;
+        // The bands of the evaluation matrix (every scene by every rig), compared across runs;
+        // with the simulated log beside the truth, the terrain where its lidar saw the ground.
+        let log = a.truth.join("log.mcap");
+        let lidar = log
+            .is_file()
+            .then(|| tarn_sim::eval::lidar_cells(&log, map.resolution))
+            .transpose()?;
+        v["matrix_bands"] = serde_json::to_value(tarn_sim::eval::evaluate_matrix_bands(
+            &map,
+            &truth,
+            &info,
+            lidar.as_ref(),
+        )?)?;
         // With the build's tile set: how often each cue fired on water and on dry ground.
         if let Some(r) = tarn_sim::eval::rates::cue_rates_of_dir(&a.map_dir, &truth, &info)? {
             v["cue_rates"] = serde_json::to_value(r)?;

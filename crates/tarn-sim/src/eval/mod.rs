@@ -73,6 +73,13 @@ pub struct BinMetrics {
     pub depth_rms_m: Option<f64>,
     pub terrain_cells: usize,
     pub terrain_rms_m: Option<f64>,
+    /// Of `terrain_cells`, those where a lidar return of the log fell ([`lidar_cells`]),
+    /// off the edges of objects (no truth obstacle within one map cell: a cell astride a
+    /// wall holds the wall's returns): the dry ground the lidar saw. 0 without the log's
+    /// lidar.
+    pub terrain_lidar_cells: usize,
+    /// RMS error of the map's elevation over `terrain_lidar_cells`.
+    pub terrain_lidar_rms_m: Option<f64>,
     /// Dry truth cells whose map z is more than [`SUNK_M`] below the true terrain.
     pub sunk_cells: usize,
     /// True water cells of the truth that some sensor saw ([`TruthInfo::seen_water`]), in
@@ -138,12 +145,14 @@ struct Acc {
     surface2: f64,
     depth2: f64,
     terrain2: f64,
+    terrain_lidar2: f64,
 }
 
 impl Acc {
     /// One observed map cell, its truth cell, whether that is off shore and whether its
     /// truth is an obstacle.
-    fn add(&mut self, cell: &MapCell, truth: Option<&MapCell>, offshore: bool, obstacle: bool) {
+    fn add(&mut self, s: &Scored) {
+        let (cell, truth, offshore, obstacle) = (s.cell, s.truth, s.offshore, s.obstacle);
         self.m.observed_cells += 1;
         let Some(t) = truth else {
             self.m.outside_truth += 1;
@@ -188,6 +197,10 @@ impl Acc {
             } else if matches!(t.class, Class::Ground | Class::SnowIce) {
                 self.m.terrain_cells += 1;
                 self.terrain2 += (cell.z - t.z).powi(2);
+                if s.lidar && !s.near_object {
+                    self.m.terrain_lidar_cells += 1;
+                    self.terrain_lidar2 += (cell.z - t.z).powi(2);
+                }
             }
         }
     }
@@ -225,6 +238,7 @@ impl Acc {
         self.m.surface_rms_m = rms(self.surface2, self.m.surface_cells);
         self.m.depth_rms_m = rms(self.depth2, self.m.depth_cells);
         self.m.terrain_rms_m = rms(self.terrain2, self.m.terrain_cells);
+        self.m.terrain_lidar_rms_m = rms(self.terrain_lidar2, self.m.terrain_lidar_cells);
         self.m
     }
 }
@@ -589,6 +603,10 @@ struct Scored<'a> {
     d: f64,
     /// The true terrain makes the cell an obstacle ([`ObstacleLimits`]).
     obstacle: bool,
+    /// A lidar return of the log fell in the cell ([`lidar_cells`]).
+    lidar: bool,
+    /// A truth cell within one map cell of the cell's centre is an obstacle.
+    near_object: bool,
 }
 
 /// What every bin and band is scored from, computed once per map and truth.
@@ -628,6 +646,13 @@ impl<'a> Scorer<'a> {
                     offshore: t.is_some_and(|t| t.class != Class::Water && !shore.near(key)),
                     d: distance_to_path(&path, c.x, c.y),
                     obstacle: limits.truth_obstacle(&index, res, mres, c.x, c.y),
+                    lidar: false,
+                    near_object: (0..9).any(|j| {
+                        let (dx, dy) = ((j % 3) as f64 - 1.0, (j / 3) as f64 - 1.0);
+                        let (x, y) = (c.x + dx * mres, c.y + dy * mres);
+                        let k = CellKey::new((x / res).floor() as i64, (y / res).floor() as i64);
+                        index.get(&k).is_some_and(|t| t.hazard == Hazard::Obstacle)
+                    }),
                 }
             })
             .collect();
@@ -678,12 +703,22 @@ impl<'a> Scorer<'a> {
     fn score(&self, keep: impl Fn(f64) -> bool) -> BinMetrics {
         let mut acc = Acc::default();
         for s in self.cells.iter().filter(|s| keep(s.d)) {
-            acc.add(s.cell, s.truth, s.offshore, s.obstacle);
+            acc.add(s);
         }
         for &(_, called, sky) in self.seen.iter().flatten().filter(|(d, ..)| keep(*d)) {
             acc.add_seen(called, sky);
         }
         acc.finish(self.seen.is_some())
+    }
+
+    /// Marks the map cells (keys at the map's resolution) where the lidar returned.
+    fn with_lidar(mut self, lidar: Option<&KeySet>) -> Self {
+        if let Some(keys) = lidar {
+            for s in &mut self.cells {
+                s.lidar = keys.contains(&s.cell.key);
+            }
+        }
+        self
     }
 
     /// The metrics of the band `[lo, hi)` m, named "lo-hi".
@@ -745,13 +780,16 @@ pub fn evaluate_band(
 }
 
 /// Scores the bands of the evaluation matrix: the three [`MATRIX_BANDS`] ("5-10",
-/// "10-20", "20-30") and then their union ("5-30"), each like [`evaluate_band`].
+/// "10-20", "20-30") and then their union ("5-30"), each like [`evaluate_band`]; with
+/// `lidar` (the map cells the log's lidar returned from, [`lidar_cells`]) the terrain
+/// error where the lidar saw the ground too.
 pub fn evaluate_matrix_bands(
     map: &HazardMap,
     truth: &HazardMap,
     info: &TruthInfo,
+    lidar: Option<&KeySet>,
 ) -> Result<Vec<BinMetrics>> {
-    let s = Scorer::new(map, truth, info)?;
+    let s = Scorer::new(map, truth, info)?.with_lidar(lidar);
     Ok(matrix_bands_and_union()
         .into_iter()
         .map(|(lo, hi)| s.band(lo, hi))
@@ -762,6 +800,28 @@ pub fn evaluate_matrix_bands(
 fn matrix_bands_and_union() -> Vec<(f64, f64)> {
     let all = (MATRIX_BANDS[0].0, MATRIX_BANDS[MATRIX_BANDS.len() - 1].1);
     MATRIX_BANDS.iter().copied().chain([all]).collect()
+}
+
+/// The cells (keys at `resolution` m) where a lidar return of the log at `log` fell, in
+/// the map frame: every valid point of every frame's lidar cloud. Empty when the log has
+/// no lidar topic (the default [`LogConfig`](tarn::io::frames::LogConfig)'s).
+pub fn lidar_cells(log: &Path, resolution: f64) -> Result<KeySet> {
+    use tarn::io::frames::{FrameStream, LogConfig};
+    if !(resolution > 0.0 && resolution.is_finite()) {
+        return Err(Error::invalid(
+            "map",
+            format!("resolution {resolution} must be > 0"),
+        ));
+    }
+    let mut keys = KeySet::default();
+    for f in FrameStream::open(log, &LogConfig::default())? {
+        let Some(c) = f?.lidar else { continue };
+        for i in (0..c.len()).filter(|&i| c.is_valid(i)) {
+            let p = c.point_in_map(i);
+            keys.insert(tarn::grid::key_of(resolution, p.x, p.y));
+        }
+    }
+    Ok(keys)
 }
 
 /// Reads `MAPDIR/map.ply`, `TRUTHDIR/truth.ply` and `TRUTHDIR/truth.json`.
@@ -1081,7 +1141,7 @@ mod tests {
         let r = evaluate(&map, &truth, &info).unwrap();
         let mut bins = r.bins.clone();
         bins.push(r.all.clone());
-        bins.extend(evaluate_matrix_bands(&map, &truth, &info).unwrap());
+        bins.extend(evaluate_matrix_bands(&map, &truth, &info, None).unwrap());
         for b in &bins {
             assert_eq!(b.seen_water_cells, b.water_cells, "{}", b.range);
             assert_eq!(b.seen_water_detected, b.water_detected, "{}", b.range);
@@ -1093,7 +1153,7 @@ mod tests {
     #[test]
     fn matrix_bands_are_the_three_bands_and_their_union() {
         let (map, truth, info) = two_resolutions(true);
-        let m = evaluate_matrix_bands(&map, &truth, &info).unwrap();
+        let m = evaluate_matrix_bands(&map, &truth, &info, None).unwrap();
         let names: Vec<_> = m.iter().map(|b| b.range.as_str()).collect();
         assert_eq!(names, ["5-10", "10-20", "20-30", "5-30"]);
         for (b, &(lo, hi)) in m.iter().zip(&MATRIX_BANDS) {
@@ -1157,7 +1217,7 @@ mod tests {
         #[test]
         fn new_rates_are_rates_and_ignore_the_map_order((truth, info, map, shuffled) in case()) {
             let r = evaluate(&map, &truth, &info).unwrap();
-            let m = evaluate_matrix_bands(&map, &truth, &info).unwrap();
+            let m = evaluate_matrix_bands(&map, &truth, &info, None).unwrap();
             for b in r.bins.iter().chain([&r.all]).chain(&m) {
                 for v in [b.seen_recall, b.false_rate_offshore, b.precision].into_iter().flatten() {
                     prop_assert!((0.0..=1.0).contains(&v), "{b:?}");
@@ -1178,7 +1238,7 @@ mod tests {
             });
             prop_assert_eq!(r.all.dry_offshore_cells, offshore.count());
             prop_assert_eq!(&evaluate(&shuffled, &truth, &info).unwrap(), &r);
-            prop_assert_eq!(&evaluate_matrix_bands(&shuffled, &truth, &info).unwrap(), &m);
+            prop_assert_eq!(&evaluate_matrix_bands(&shuffled, &truth, &info, None).unwrap(), &m);
         }
     }
 

@@ -571,15 +571,17 @@ fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
         r.all.observed_cells
     );
 
-    // Wrong: the pond's far half called ground, a dry strip called water, terrain 5 cm high.
+    // Wrong: the pond's far half called ground, a dry strip called water, terrain 5 cm high
+    // where the lidar returned and 20 cm high where it did not.
     let mut m = crate::io::mapfile::read_map_ply(&truth_dir.join("truth.ply")).unwrap();
+    let lidar = crate::eval::lidar_cells(&truth_dir.join("log.mcap"), m.resolution).unwrap();
     for c in &mut m.cells {
         if c.class == Class::Water && c.x > 12.0 {
             c.class = Class::Ground;
         } else if c.class == Class::Ground && c.y > 10.0 {
             c.class = Class::Water;
         } else if c.class == Class::Ground {
-            c.z += 0.05;
+            c.z += if lidar.contains(&c.key) { 0.05 } else { 0.20 };
         }
     }
     crate::io::export::write_map_ply(&map_dir.path().join("map.ply"), &m).unwrap();
@@ -588,7 +590,17 @@ fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
     let recall = r.all.water_recall.unwrap();
     assert!(recall > 0.3 && recall < 0.7, "{recall}");
     assert!(r.all.false_positive_rate.unwrap() > 0.0);
-    assert!((r.all.terrain_rms_m.unwrap() - 0.05).abs() < 1e-5);
+    let rms = r.all.terrain_rms_m.unwrap();
+    assert!(rms > 0.05 + 1e-3 && rms < 0.20, "{rms}");
+    let (map, truth, info) = crate::eval::read_dirs(map_dir.path(), truth_dir).unwrap();
+    let bands = crate::eval::evaluate_matrix_bands(&map, &truth, &info, Some(&lidar)).unwrap();
+    assert!(bands.iter().any(|b| b.terrain_lidar_cells > 0));
+    for b in &bands {
+        assert!(b.terrain_lidar_cells <= b.terrain_cells);
+        if let Some(e) = b.terrain_lidar_rms_m {
+            assert!((e - 0.05).abs() < 1e-5, "{}: {e}", b.range);
+        }
+    }
 }
 
 #[test]
