@@ -12,7 +12,10 @@
 //! water, the floor of a hole) must not drag the elevation down, and must not be lost: it
 //! is counted in the cell's `below` layer. The surface it is judged against is
 //! * the cell's fused estimate from earlier batches, when it has at least `min_support`
-//!   points: the gate is `max(gate_min, k·sqrt(spread² + σ_point²))` below its mean;
+//!   points: the gate is `max(gate_min, k·sqrt(spread² + σ_fused² + σ_point²))` below its
+//!   mean, σ_fused² the fused points' mean variance (harmonic, from their weights): the
+//!   difference of two noisy heights, so that far stereo points with σ of metres that
+//!   happen to agree do not gate the lidar's ground a metre below them;
 //! * otherwise the batch's own points: when they span more than `gate_min`, they are sorted
 //!   by height and split into clusters at gaps wider than the gate; the surface is the
 //!   highest cluster holding at least a quarter of the cell's weight, and lower clusters are
@@ -231,7 +234,11 @@ fn prior_gate(prior: &ElevMut, i: usize, support: u32) -> Option<(f32, f32)> {
         let sw = e.sw as f64;
         let mean = i128_to_f64(e.swz) / sw;
         let var = (i128_to_f64(e.swzz) / sw - mean * mean).max(0.0);
-        (mean as f32, var as f32)
+        // The fused points' own noise too (their weights' harmonic mean variance, mm²):
+        // a surface of a few far stereo points that happen to agree is not known to
+        // their spread, and must not gate the lidar's ground below it.
+        let noise = (SIGMA_REF_M * 1000.0).powi(2) * W_UNIT * f64::from(e.hits) / sw;
+        (mean as f32, (var + noise) as f32)
     })
 }
 

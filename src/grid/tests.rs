@@ -146,6 +146,27 @@ fn points_far_below_a_known_surface_are_counted_not_fused() {
 }
 
 #[test]
+fn a_surface_of_noisy_points_that_agree_does_not_gate_a_precise_one_below() {
+    // Five far stereo points (σ 0.8 m) that happen to agree at 1.2 m, then the lidar's
+    // ground (σ 2 cm) at 0: the difference is within three σ of the two heights together,
+    // so the ground is fused, and, weighed by its precision, sets the elevation.
+    let mut g = grid(50);
+    let stereo = PointCloud::unorganized(vec![[0.05, 0.05, 1.2]; 5]);
+    g.ingest(&stereo, &RangeNoise::constant(0.8)).unwrap();
+    let lidar = PointCloud::unorganized(vec![[0.05, 0.05, 0.0]; 3]);
+    let st = g.ingest(&lidar, &RangeNoise::constant(0.02)).unwrap();
+    assert_eq!((st.fused, st.below), (3, 0));
+    let z = g.cell_at(0.05, 0.05).unwrap().mean_mm().unwrap();
+    assert!(z.abs() < 2.0, "{z} mm");
+    // A precise surface still gates what lies far below it, precise or not.
+    for sigma in [0.02, 0.3] {
+        let below = PointCloud::unorganized(vec![[0.05, 0.05, -1.5]; 2]);
+        let st = g.ingest(&below, &RangeNoise::constant(sigma)).unwrap();
+        assert_eq!((st.fused, st.below), (0, 2), "σ {sigma}");
+    }
+}
+
+#[test]
 fn points_below_the_surface_in_the_same_batch_are_split_off() {
     let mut g = grid(50);
     let mut pts = vec![[0.05f32, 0.05, 0.30]; 30];
