@@ -31,7 +31,10 @@ fn bad_configs_name_the_field() {
         ),
         ("[lidar]\nwavelength = 905.0\n", "wavelength"),
         ("[lidar.cue]\nbelow_gate_m = -1.0\n", "below_gate_m"),
-        ("[lidar.cue]\nprior_reach_m = 1e9\n", "lidar.cue.prior_reach_m"),
+        (
+            "[lidar.cue]\nprior_reach_m = 1e9\n",
+            "lidar.cue.prior_reach_m",
+        ),
         ("[lidar.cue]\nprior_reach_m = nan\n", "prior_reach_m"),
         ("[stereo]\nreflections = false\n", "stereo.mirror_check"),
         ("\n\n[sterio]\n", "sterio"),
