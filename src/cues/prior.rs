@@ -39,12 +39,7 @@ impl WaterPrior {
         let sigma: HashMap<CellKey, f64, BuildKeyHasher> = map
             .bodies
             .iter()
-            .flat_map(|b| {
-                let s = b.level_residual_m;
-                b.cells
-                    .iter()
-                    .map(move |&k| (k, if s.is_finite() { s } else { 0.0 }))
-            })
+            .flat_map(|b| b.cells.iter().map(|&k| (k, b.level_residual_m)))
             .collect();
         let levels = map.cells.iter().filter_map(|c| {
             let &sigma = sigma.get(&c.key)?;
