@@ -50,7 +50,16 @@ fn config_of(config: Option<PathBuf>) -> PyResult<MapperConfig> {
 const MAX_LAYER_CELLS: usize = 500_000_000;
 
 /// The names of [`Map::layer`], in order.
-const LAYERS: [&str; 6] = ["elevation", "sigma", "water", "class", "hazard", "depth"];
+const LAYERS: [&str; 8] = [
+    "elevation",
+    "sigma",
+    "water",
+    "class",
+    "hazard",
+    "depth",
+    "hits",
+    "below",
+];
 
 /// A hazard map: one record per observed cell, and the water bodies.
 #[pyclass(module = "tarn", frozen)]
@@ -134,7 +143,9 @@ impl Map {
 
     /// One layer as a 2-D array, rows along +y, columns along +x (see `origin`).
     /// Unobserved cells: NaN in `elevation`, `sigma`, `water`, `depth`; 0 (unknown) in
-    /// `class`; 255 in `hazard`.
+    /// `class`; 255 in `hazard`; 0 in `hits` (points fused into the elevation) and `below`
+    /// (points far below the cell's surface, not averaged in). A map read from `map.ply`
+    /// has no point counts: `hits` and `below` are 0 there.
     fn layer<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
         Ok(match name {
             "elevation" => self.grid(f64::NAN, |c| c.z)?.into_pyarray(py).into_any(),
@@ -158,6 +169,8 @@ impl Map {
                 .grid(255u8, |c| c.hazard as u8)?
                 .into_pyarray(py)
                 .into_any(),
+            "hits" => self.grid(0u32, |c| c.hits)?.into_pyarray(py).into_any(),
+            "below" => self.grid(0u32, |c| c.below)?.into_pyarray(py).into_any(),
             _ => {
                 return Err(PyValueError::new_err(format!(
                     "no layer {name:?}; the layers are {}",

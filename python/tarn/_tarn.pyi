@@ -32,9 +32,10 @@ class Map:
     def __len__(self) -> int: ...
     @staticmethod
     def layer_names() -> list[str]:
-        """elevation, sigma, water, class, hazard, depth."""
+        """elevation, sigma, water, class, hazard, depth, hits, below."""
     def layer(self, name: str) -> npt.NDArray[np.generic]:
-        """A 2-D layer; unobserved cells NaN (float layers), 0 (class), 255 (hazard)."""
+        """A 2-D layer; unobserved cells NaN (float layers), 0 (class, hits, below), 255
+        (hazard). ``hits`` and ``below`` are 0 in a map read from map.ply."""
     def keys(self) -> npt.NDArray[np.int64]: ...
     def write(self, dir: _Path) -> None:
         """map.ply, terrain.ply, water.ply and map.png into ``dir``."""

@@ -77,11 +77,15 @@ def test_build_is_what_tarn_build_writes(logs, tmp_path):
     back = tarn.read_map(tmp_path / "cli")
     assert len(back) == len(m)
     np.testing.assert_allclose(back.layer("elevation"), m.layer("elevation"), equal_nan=True, atol=1e-6)
+    # map.ply keeps no point counts.
+    assert (back.layer("hits") == 0).all() and (m.layer("hits") > 0).any()
 
 
 def test_layers(one_process):
     m = one_process
-    assert m.layer_names() == ["elevation", "sigma", "water", "class", "hazard", "depth"]
+    assert m.layer_names() == [
+        "elevation", "sigma", "water", "class", "hazard", "depth", "hits", "below",
+    ]
     rows, cols = m.shape
     for name in m.layer_names():
         a = m.layer(name)
@@ -89,6 +93,10 @@ def test_layers(one_process):
     z = m.layer("elevation")
     assert z.dtype == np.float64 and m.layer("class").dtype == np.uint8
     assert np.isfinite(z).sum() == len(m)
+    # Points fused into every ground cell; none where nothing was observed.
+    hits = m.layer("hits")
+    assert hits.dtype == np.uint32 and (hits[m.layer("class") == 1] > 0).all()
+    assert (hits[~np.isfinite(z)] == 0).all() and m.layer("below").dtype == np.uint32
     # Every observed cell at its key.
     keys = m.keys()
     kx, ky = m.key_origin
