@@ -96,7 +96,14 @@ pub fn run_eval(a: &EvalArgs) -> anyhow::Result<()> {
         let log = a.truth.join("log.mcap");
         let lidar = log
             .is_file()
-            .then(|| tarn_sim::eval::lidar_cells(&log, map.resolution))
+            .then(|| {
+                // The window of a default build at the map's resolution.
+                let grid = tarn::grid::GridConfig {
+                    resolution: map.resolution,
+                    ..Default::default()
+                };
+                tarn_sim::eval::lidar_cells(&log, &grid)
+            })
             .transpose()?;
         v["matrix_bands"] = serde_json::to_value(tarn_sim::eval::evaluate_matrix_bands(
             &map,

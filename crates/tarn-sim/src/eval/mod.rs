@@ -73,7 +73,7 @@ pub struct BinMetrics {
     pub depth_rms_m: Option<f64>,
     pub terrain_cells: usize,
     pub terrain_rms_m: Option<f64>,
-    /// Of `terrain_cells`, those where a lidar return of the log fell ([`lidar_cells`]),
+    /// Of `terrain_cells`, those where a lidar return the mapper fused fell ([`lidar_cells`]),
     /// off the edges of objects (no truth obstacle within one map cell: a cell astride a
     /// wall holds the wall's returns): the dry ground the lidar saw. 0 without the log's
     /// lidar.
@@ -802,23 +802,29 @@ fn matrix_bands_and_union() -> Vec<(f64, f64)> {
     MATRIX_BANDS.iter().copied().chain([all]).collect()
 }
 
-/// The cells (keys at `resolution` m) where a lidar return of the log at `log` fell, in
-/// the map frame: every valid point of every frame's lidar cloud. Empty when the log has
-/// no lidar topic (the default [`LogConfig`](tarn::io::frames::LogConfig)'s).
-pub fn lidar_cells(log: &Path, resolution: f64) -> Result<KeySet> {
+/// The cells (keys at `grid.resolution` m) where a lidar return of the log at `log` fell
+/// inside that frame's rolling window (`grid`'s, placed as the mapper places it,
+/// [`tarn::mapper::window_centre`]): the returns a mapper with that window fused. A return
+/// outside the window is dropped by the mapper, so the cell it fell in is not ground the
+/// lidar saw. Empty when the log has no lidar topic (the default
+/// [`LogConfig`](tarn::io::frames::LogConfig)'s).
+pub fn lidar_cells(log: &Path, grid: &tarn::grid::GridConfig) -> Result<KeySet> {
     use tarn::io::frames::{FrameStream, LogConfig};
-    if !(resolution > 0.0 && resolution.is_finite()) {
-        return Err(Error::invalid(
-            "map",
-            format!("resolution {resolution} must be > 0"),
-        ));
-    }
+    grid.validate()?;
+    let (res, n) = (grid.resolution, grid.size_cells as i64);
     let mut keys = KeySet::default();
     for f in FrameStream::open(log, &LogConfig::default())? {
-        let Some(c) = f?.lidar else { continue };
+        let f = f?;
+        let Some(c) = &f.lidar else { continue };
+        let (cx, cy) = tarn::mapper::window_centre(grid, &f.base_to_map);
+        let centre = tarn::grid::key_of(res, cx, cy);
+        let (x0, y0) = (centre.x - n / 2, centre.y - n / 2);
         for i in (0..c.len()).filter(|&i| c.is_valid(i)) {
             let p = c.point_in_map(i);
-            keys.insert(tarn::grid::key_of(resolution, p.x, p.y));
+            let k = tarn::grid::key_of(res, p.x, p.y);
+            if (x0..x0 + n).contains(&k.x) && (y0..y0 + n).contains(&k.y) {
+                keys.insert(k);
+            }
         }
     }
     Ok(keys)

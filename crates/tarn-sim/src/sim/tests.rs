@@ -574,7 +574,11 @@ fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
     // Wrong: the pond's far half called ground, a dry strip called water, terrain 5 cm high
     // where the lidar returned and 20 cm high where it did not.
     let mut m = crate::io::mapfile::read_map_ply(&truth_dir.join("truth.ply")).unwrap();
-    let lidar = crate::eval::lidar_cells(&truth_dir.join("log.mcap"), m.resolution).unwrap();
+    let grid = crate::grid::GridConfig {
+        resolution: m.resolution,
+        ..Default::default()
+    };
+    let lidar = crate::eval::lidar_cells(&truth_dir.join("log.mcap"), &grid).unwrap();
     for c in &mut m.cells {
         if c.class == Class::Water && c.x > 12.0 {
             c.class = Class::Ground;
