@@ -706,25 +706,42 @@ impl LidarCueModel {
         gate: impl FnOnce() -> f64,
     ) -> Option<Event> {
         let l = prior.level_at(p.x, p.y)?;
-        let v = p - o;
-        if v.z >= 0.0 || o.z <= l.z || p.z >= l.z - gate().hypot(3.0 * l.sigma) {
+        if p.z >= o.z || o.z <= l.z || p.z >= l.z - gate().hypot(3.0 * l.sigma) {
             return None;
         }
-        let q = self.optics.correct_bottom_return(o, p, l.z).ok()?;
-        let depth = l.z - q.z;
-        let u = v.normalize();
-        let c = o + u * ((o.z - l.z) / -u.z);
+        self.against_level(slot, o, p, l.z, true)?.1
+    }
+
+    /// A return `p` below the water level `level`, read through it: where its beam crosses
+    /// the level and, when its refraction-corrected depth is one the optics say this
+    /// sensor can see there, the bottom return (`prior`: the level is the prior's). `None`
+    /// when the return cannot be corrected.
+    fn against_level(
+        &self,
+        slot: usize,
+        o: Point3<f64>,
+        p: Point3<f64>,
+        level: f64,
+        prior: bool,
+    ) -> Option<(Point3<f64>, Option<Event>)> {
+        let v = p - o;
+        let u = v / v.norm();
+        let c = o + u * ((o.z - level) / -u.z);
         let d_c = crate::geom::hypot(c.x - o.x, c.y - o.y);
-        (depth <= self.max_visible_depth(d_c) + self.cfg.depth_tolerance_m).then(|| Event::Bottom {
+        let q = self.optics.correct_bottom_return(o, p, level).ok()?;
+        let depth = level - q.z;
+        let visible = depth <= self.max_visible_depth(d_c) + self.cfg.depth_tolerance_m;
+        let bottom = visible.then(|| Event::Bottom {
             slot,
             x: q.x,
             y: q.y,
-            level: l.z,
+            level,
             depth,
             gain: crate::optics::bottom_depth_gain(o, p, self.optics.config().n_water)
                 .unwrap_or(0.0),
-            prior: true,
-        })
+            prior,
+        });
+        Some((c, bottom))
     }
 
     /// The optics' loss through the shallowest water at lookahead `d`:
@@ -798,29 +815,11 @@ impl LidarCueModel {
                 let below = v.z < 0.0 && o.z > level && dz < -slack && dz < -(gate() + slack);
                 if below {
                     // Below the level: bottom or specular.
-                    let u = v / range;
-                    let t = (o.z - level) / -u.z;
-                    let c = o + u * t;
-                    let d_c = crate::geom::hypot(c.x - o.x, c.y - o.y);
-                    let Ok(q) = self.optics.correct_bottom_return(o, p, level) else {
+                    let Some((c, bottom)) = self.against_level(s, o, p, level, false) else {
                         continue;
                     };
-                    let depth = level - q.z;
-                    if depth <= self.max_visible_depth(d_c) + cfg.depth_tolerance_m {
-                        out.push(Event::Bottom {
-                            slot: s,
-                            x: q.x,
-                            y: q.y,
-                            level,
-                            depth,
-                            gain: crate::optics::bottom_depth_gain(
-                                o,
-                                p,
-                                self.optics.config().n_water,
-                            )
-                            .unwrap_or(0.0),
-                            prior: false,
-                        });
+                    if let Some(e) = bottom {
+                        out.push(e);
                     } else if level - p.z < cfg.specular_min_depth_m {
                         out.push(Event::Unexplained);
                     } else {

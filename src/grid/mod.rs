@@ -594,9 +594,7 @@ impl RollingGrid {
     }
 
     fn origin_for_centre(&self, cx: f64, cy: f64) -> CellKey {
-        let c = self.key_of(cx, cy);
-        let h = (self.n / 2) as i64;
-        CellKey::new(c.x - h, c.y - h)
+        window_origin(&self.cfg, cx, cy)
     }
 
     /// Moves the window so that it is centred on `(cx, cy)`. Cells that leave go to `sink`
@@ -737,6 +735,14 @@ fn check_centre(cx: f64, cy: f64) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+/// The lower-left cell of a rolling window of `cfg` centred on `(cx, cy)` (map frame): its
+/// cells are the `cfg.size_cells` columns and rows from there.
+pub fn window_origin(cfg: &GridConfig, cx: f64, cy: f64) -> CellKey {
+    let c = key_of(cfg.resolution, cx, cy);
+    let h = (cfg.size_cells / 2) as i64;
+    CellKey::new(c.x - h, c.y - h)
 }
 
 /// The key of the cell containing `(x, y)` at `resolution`.

@@ -817,8 +817,7 @@ pub fn lidar_cells(log: &Path, grid: &tarn::grid::GridConfig) -> Result<KeySet> 
         let f = f?;
         let Some(c) = &f.lidar else { continue };
         let (cx, cy) = tarn::mapper::window_centre(grid, &f.base_to_map);
-        let centre = tarn::grid::key_of(res, cx, cy);
-        let (x0, y0) = (centre.x - n / 2, centre.y - n / 2);
+        let CellKey { x: x0, y: y0 } = tarn::grid::window_origin(grid, cx, cy);
         for i in (0..c.len()).filter(|&i| c.is_valid(i)) {
             let p = c.point_in_map(i);
             let k = tarn::grid::key_of(res, p.x, p.y);
