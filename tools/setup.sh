@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what the Python checks in tools/ need: Debian's libusb (open3d imports it) and a
 # virtualenv at .venv with tools/requirements*.txt and the Python package of python/. Safe
-# to run again; quick when done.
+# to run again; quick when done. Nothing is cached outside the checkout (pip keeps no wheels), so a
+# run takes no more disk than its .venv and target.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
@@ -14,8 +15,8 @@ stamp=.venv/.requirements
 if [ ! -x .venv/bin/python ] || ! cat tools/requirements*.txt | cmp -s - "$stamp"; then
   echo "tools/setup.sh: creating .venv"
   python3 -m venv .venv
-  .venv/bin/pip install -q --upgrade pip
-  .venv/bin/pip install -q -r tools/requirements.txt -r tools/requirements-python.txt
+  .venv/bin/pip install -q --no-cache-dir --upgrade pip
+  .venv/bin/pip install -q --no-cache-dir -r tools/requirements.txt -r tools/requirements-python.txt
   cat tools/requirements*.txt > "$stamp"
 fi
 .venv/bin/python -c "import open3d, trimesh, mcap_ros2, rosbags, dask.distributed" >/dev/null
@@ -25,5 +26,5 @@ fi
 # Cargo skips the build when nothing changed.
 echo "tools/setup.sh: pip install ./python"
 PATH="$PWD/.venv/bin:$PATH" CARGO_TARGET_DIR="$PWD/target" MATURIN_PEP517_ARGS="--profile dev" \
-  .venv/bin/pip install -q --no-build-isolation ./python
+  .venv/bin/pip install -q --no-cache-dir --no-build-isolation ./python
 .venv/bin/python -c "import tarn, tarn.dask" >/dev/null
