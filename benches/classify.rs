@@ -1,7 +1,8 @@
 //! Classifying a 640 × 480 frame with the colour lookup table on one core (the paper: 40 ms
 //! on a 433 MHz PowerPC; target here ≤ 1 ms), direct mixture evaluation for comparison,
 //! every table size (its RELLIS accuracy is printed by `examples/rellis_eval.rs`), and the
-//! projection of a 640 × 480 label image onto a 400 × 400 grid by stereo points and by rays.
+//! projection of a 640 × 480 label image onto a 400 × 400 grid by stereo points and by rays,
+//! and the undistorted ray of every pixel of a 640 × 480 camera.
 //!
 //! The model is trained on the left half of the RELLIS-3D frame in ../shared/data; the frame
 //! is the 640 × 480 centre-bottom crop of that image (puddles, track, grass, some sky).
@@ -165,5 +166,26 @@ fn project(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, classify, project);
+/// Every pixel's ray of a 640 × 480 camera (what a label stage computes once per camera):
+/// the simulated rigs' plumb_bob lens, and a fisheye.
+fn pixel_rays(c: &mut Criterion) {
+    let mut g = c.benchmark_group("pixel_rays_640x480");
+    g.throughput(Throughput::Elements(640 * 480));
+    for (name, d) in [
+        (
+            "plumb_bob",
+            Distortion::PlumbBob([-0.12, 0.03, 0.0005, -0.0003, 0.0]),
+        ),
+        (
+            "equidistant",
+            Distortion::Equidistant([0.1, -0.02, 0.003, 0.0]),
+        ),
+    ] {
+        let cam = CameraModel::new(640, 480, [457.0, 457.0, 319.5, 239.5], d, "cam").unwrap();
+        g.bench_function(name, |b| b.iter(|| cam.pixel_rays()));
+    }
+    g.finish();
+}
+
+criterion_group!(benches, classify, project, pixel_rays);
 criterion_main!(benches);

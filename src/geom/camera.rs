@@ -129,7 +129,7 @@ impl CameraModel {
         match self.distortion {
             // ROS drivers of undistorted cameras publish plumb_bob with zero coefficients.
             Distortion::None | Distortion::PlumbBob([0.0, 0.0, 0.0, 0.0, 0.0]) => Some([xd, yd]),
-            Distortion::PlumbBob([k1, k2, _, _, k3]) => {
+            Distortion::PlumbBob([k1, k2, p1, p2, k3]) => {
                 // Strong barrel distortion folds the image: r·(1 + k1 r² + k2 r⁴ + k3 r⁶)
                 // rises to a maximum at `r_max` and falls beyond it, so a distorted point has
                 // a second preimage outside the lens's valid field. Start from the inverse of
@@ -142,7 +142,8 @@ impl CameraModel {
                 let r0 = if rd < 1e-15 {
                     0.0
                 } else {
-                    // Bisection on [0, r_max] (radial(r) is increasing there).
+                    // radial(r) − rd is increasing on [0, hi]: Newton's steps kept inside a
+                    // shrinking bracket (a bisection step where Newton would leave it).
                     let hi = if r_max.is_finite() {
                         r_max
                     } else {
@@ -159,15 +160,29 @@ impl CameraModel {
                         hi
                     } else {
                         let (mut lo, mut hi) = (0.0, hi);
-                        for _ in 0..80 {
-                            let m = 0.5 * (lo + hi);
-                            if radial(m) < rd {
-                                lo = m;
+                        let mut r = rd.min(hi);
+                        for _ in 0..100 {
+                            let f = radial(r) - rd;
+                            if f < 0.0 {
+                                lo = r;
                             } else {
-                                hi = m;
+                                hi = r;
                             }
+                            let s = r * r;
+                            let df = 1.0 + s * (3.0 * k1 + s * (5.0 * k2 + s * 7.0 * k3));
+                            let next = r - f / df;
+                            let next = if next > lo && next < hi && df > 0.0 {
+                                next
+                            } else {
+                                0.5 * (lo + hi)
+                            };
+                            if (next - r).abs() <= 1e-15 * r.max(1e-300) || hi - lo <= 1e-15 * hi {
+                                r = next;
+                                break;
+                            }
+                            r = next;
                         }
-                        0.5 * (lo + hi)
+                        r
                     }
                 };
                 let (mut a, mut b) = if rd < 1e-15 {
@@ -181,12 +196,14 @@ impl CameraModel {
                     if ea.abs() < 1e-14 && eb.abs() < 1e-14 {
                         break;
                     }
-                    // Numerical Jacobian (the function is a smooth polynomial).
-                    let h = 1e-7;
-                    let [aa, ab] = self.distort(a + h, b);
-                    let [ba, bb] = self.distort(a, b + h);
-                    let (j11, j21, j12, j22) =
-                        ((aa - fa) / h, (ab - fb) / h, (ba - fa) / h, (bb - fb) / h);
+                    // The distortion's Jacobian, in closed form.
+                    let s = a * a + b * b;
+                    let radial = 1.0 + s * (k1 + s * (k2 + s * k3));
+                    let dr = 2.0 * (k1 + s * (2.0 * k2 + s * 3.0 * k3));
+                    let j11 = radial + a * a * dr + 2.0 * p1 * b + 6.0 * p2 * a;
+                    let j12 = a * b * dr + 2.0 * p1 * a + 2.0 * p2 * b;
+                    let j21 = j12;
+                    let j22 = radial + b * b * dr + 6.0 * p1 * b + 2.0 * p2 * a;
                     let det = j11 * j22 - j12 * j21;
                     if det.abs() < 1e-12 || !det.is_finite() {
                         return None;
