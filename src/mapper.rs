@@ -504,7 +504,7 @@ impl MapperConfig {
             ));
         }
         if let Some(l) = &self.labels {
-            l.compile()
+            l.check()
                 .map_err(|e| Error::invalid("mapper config labels", e.to_string()))?;
         }
         Ok(())

@@ -3,6 +3,10 @@
 //! With `bits` bits per channel the table has 2^(3·bits) entries of one byte; each entry is
 //! the label of its bin's centre colour. 8 bits is exact (16 MiB), 6 bits is 256 KiB and fits
 //! a second-level cache. Classifying a pixel is three shifts and one load.
+//!
+//! A classifier whose label depends on a colour only through R + G + B and min(R, G, B)
+//! ([`PixelClassifier::by_sum_and_min`]) compiles at 8 bits to a table over those two
+//! instead: exact, 766 × 256 entries (196 KiB), a sum, a minimum and one load per pixel.
 
 use image::RgbImage;
 use rayon::prelude::*;
@@ -16,6 +20,10 @@ use crate::error::{Error, Result};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ColorLut {
     bits: u8,
+    /// Indexed by R + G + B and min(R, G, B) (`sum · 256 + min`), not by the quantised
+    /// channels.
+    #[serde(default)]
+    sum_min: bool,
     table: Vec<Label>,
 }
 
@@ -42,6 +50,13 @@ impl ColorLut {
                 })
                 .collect()
         });
+        if let (8, Some(table)) = (bits, &by_sum_min) {
+            return Ok(ColorLut {
+                bits,
+                sum_min: true,
+                table: table.to_vec(),
+            });
+        }
         let mut table = vec![Label::Other; n * n * n];
         table.par_chunks_mut(n).enumerate().for_each(|(rg, out)| {
             let (r, g) = (centre(rg / n), centre(rg % n));
@@ -56,7 +71,11 @@ impl ColorLut {
                 };
             }
         });
-        Ok(ColorLut { bits, table })
+        Ok(ColorLut {
+            bits,
+            sum_min: false,
+            table,
+        })
     }
 
     /// Bits per channel of the table's bins, 1..=8.
@@ -71,6 +90,9 @@ impl ColorLut {
 
     #[inline(always)]
     fn index(&self, r: u8, g: u8, b: u8) -> usize {
+        if self.sum_min {
+            return sum_min_index(r, g, b);
+        }
         let s = 8 - self.bits as u32;
         let bits = self.bits as u32;
         (((r as usize) >> s) << (2 * bits)) | (((g as usize) >> s) << bits) | ((b as usize) >> s)
@@ -78,7 +100,8 @@ impl ColorLut {
 
     /// Labels a packed RGB buffer into `out` on the calling thread (no parallelism). One
     /// pass, no allocation: per pixel three shifts, two ors and one table load (the index is
-    /// masked to the table's power-of-two length, so the load needs no bounds branch).
+    /// masked to the table's power-of-two length, so the load needs no bounds branch), or
+    /// for a (sum, min) table a sum, a minimum and one load.
     pub fn classify_into(&self, rgb: &[u8], out: &mut [Label]) -> Result<()> {
         if rgb.len() != 3 * out.len() {
             return Err(Error::invalid(
@@ -86,9 +109,24 @@ impl ColorLut {
                 format!("{} bytes of RGB for {} labels", rgb.len(), out.len()),
             ));
         }
+        let table = &self.table[..];
+        if self.sum_min {
+            let table: &[Label; 766 * 256] = table.try_into().map_err(|_| {
+                Error::invalid(
+                    "lookup table",
+                    format!(
+                        "a (sum, min) table of {} entries, not 766 × 256",
+                        table.len()
+                    ),
+                )
+            })?;
+            for (o, px) in out.iter_mut().zip(rgb.chunks_exact(3)) {
+                *o = table[sum_min_index(px[0], px[1], px[2])];
+            }
+            return Ok(());
+        }
         let s = 8 - self.bits as u32;
         let (bg, br) = (self.bits as u32, 2 * self.bits as u32);
-        let table = &self.table[..];
         let mask = table.len() - 1;
         for (o, px) in out.iter_mut().zip(rgb.chunks_exact(3)) {
             let (r, g, b) = (px[0], px[1], px[2]);
@@ -117,8 +155,15 @@ impl ColorLut {
 
 impl PixelClassifier for ColorLut {
     fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
-        self.table[self.index(rgb[0], rgb[1], rgb[2])]
+        let i = self.index(rgb[0], rgb[1], rgb[2]);
+        self.table.get(i).copied().unwrap_or(Label::Unknown)
     }
+}
+
+/// The (sum, min) table's index of a colour: `(R + G + B) · 256 + min(R, G, B)`.
+#[inline(always)]
+fn sum_min_index(r: u8, g: u8, b: u8) -> usize {
+    (r as usize + g as usize + b as usize) * 256 + r.min(g).min(b) as usize
 }
 
 /// A colour with channel sum `sum` and smallest channel `min`, if there is one.
@@ -163,6 +208,35 @@ mod tests {
                 ColorLut::compile(&Full(r), bits).unwrap()
             );
         }
+    }
+
+    /// A (sum, min) classifier's exact table is the small one, and the same labels as the
+    /// cube of every colour a classifier without that promise compiles to.
+    #[test]
+    fn an_exact_sum_min_table_is_small_and_the_full_cube() {
+        struct Full(RuleClassifier);
+        impl PixelClassifier for Full {
+            fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
+                self.0.classify_pixel(rgb)
+            }
+        }
+        let r = RuleClassifier::default();
+        let small = ColorLut::compile(&r, 8).unwrap();
+        assert_eq!(small.table_bytes(), 766 * 256);
+        let cube = ColorLut::compile(&Full(r), 8).unwrap();
+        assert_eq!(cube.table_bytes(), 1 << 24);
+        let rgb: Vec<u8> = (0..1u32 << 24)
+            .step_by(7)
+            .flat_map(|c| [(c >> 16) as u8, (c >> 8) as u8, c as u8])
+            .collect();
+        let (mut a, mut b) = (
+            vec![Label::Other; rgb.len() / 3],
+            vec![Label::Other; rgb.len() / 3],
+        );
+        small.classify_into(&rgb, &mut a).unwrap();
+        cube.classify_into(&rgb, &mut b).unwrap();
+        assert!(a == b, "the (sum, min) table and the cube disagree");
+        assert!(a.iter().any(|l| *l == Label::Water) && a.iter().any(|l| *l == Label::Sky));
     }
 
     proptest! {

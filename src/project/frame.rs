@@ -228,6 +228,18 @@ impl LabelsConfig {
     /// (or the Table 1 rule), SWIR and MWIR with their defaults. MWIR without `hour` is an
     /// error that says so.
     pub fn compile(&self) -> Result<FrameLabelConfig> {
+        self.compile_at(6, 8)
+    }
+
+    /// Every check of [`Self::compile`] (the colour model read, the sensors' settings) with
+    /// one-bit lookup tables, which take no time to build.
+    pub fn check(&self) -> Result<()> {
+        self.compile_at(1, 1).map(|_| ())
+    }
+
+    /// [`Self::compile`] with the lookup tables' bits per channel for a colour model and
+    /// for the rule.
+    fn compile_at(&self, model_bits: u8, rule_bits: u8) -> Result<FrameLabelConfig> {
         use crate::classify::color::RuleClassifier;
         use crate::classify::gmm::ColorModel;
         let mut cfg = FrameLabelConfig {
@@ -243,8 +255,8 @@ impl LabelsConfig {
             match s {
                 LabelSensor::Colour => {
                     cfg.colour = Some(match &self.colour_model {
-                        Some(p) => ColorLut::compile(&ColorModel::load(p)?, 6)?,
-                        None => ColorLut::compile(&RuleClassifier::default(), 8)?,
+                        Some(p) => ColorLut::compile(&ColorModel::load(p)?, model_bits)?,
+                        None => ColorLut::compile(&RuleClassifier::default(), rule_bits)?,
                     })
                 }
                 LabelSensor::Swir => cfg.swir = Some(SwirConfig::default()),
