@@ -10,6 +10,11 @@ sample in the ingest called by a cue counts as ingest); samples in no stage are
         --per-frame-maps
     perf script -i perf.data > perf.txt
     python3 tools/perf_stages.py perf.txt
+    python3 tools/perf_stages.py perf.txt --within 'label'   # that stage, by function
+
+With `--within WORD`, the samples of the stages whose name contains WORD are split
+further by the innermost tarn function of their stack (inlined frames count as their
+own function).
 """
 import sys, re, collections
 pats = [
@@ -26,6 +31,8 @@ pats = [
  ('export (end of build)', r'io::export|finish_map'),
  ('log reading and decoding', r'io::frames|io::mcap|io::ros|ZSTD|zstd'),
 ]
+within = sys.argv[sys.argv.index('--within') + 1] if '--within' in sys.argv else None
+by_fn = collections.Counter()
 cnt = collections.Counter()
 total = 0
 stack = []
@@ -36,7 +43,12 @@ def flush():
     for f in stack:
         for name, p in pats:
             if re.search(p, f):
-                cnt[name] += 1; return
+                cnt[name] += 1
+                if within and within in name:
+                    fn = next((re.sub(r'::\{\{closure\}\}.*|\s*\(inlined\)', '', m.group(0))
+                               for g in stack for m in [re.search(r'tarn::[\w:]+(\{\{closure\}\})?', g)] if m), '?')
+                    by_fn[fn] += 1
+                return
     cnt['other: ' + (stack[0][:60] if stack else '?')] += 1
 for line in open(sys.argv[1], errors='replace'):
     if not line.strip():
@@ -52,3 +64,8 @@ print(f'{100*other/total:5.1f}%  other (allocator, kernel, thread pool)')
 print(f'{total} samples')
 for k, v in cnt.most_common(8):
     if k.startswith('other'): print('   ', f'{100*v/total:4.1f}%', k)
+if within:
+    n = sum(by_fn.values())
+    print(f'\nstages matching {within!r}: {n} samples, by innermost tarn function')
+    for k, v in by_fn.most_common(20):
+        print(f'{100*v/max(n, 1):5.1f}%  {k}')

@@ -70,6 +70,53 @@ impl Default for BenchOptions {
     }
 }
 
+/// [`BenchReport::snapshot_cells_changed`] and `_or_beside` of a mapper publishing after
+/// every one of `frames`; `None` with fewer than two published maps.
+fn snapshot_churn(
+    cfg: &tarn::mapper::MapperConfig,
+    frames: &[Frame],
+) -> Result<Option<(f64, f64)>> {
+    use std::collections::{HashMap, HashSet};
+    use tarn::grid::CellKey;
+    let mut m = tarn::mapper::Mapper::new(cfg.clone())?;
+    m.set_publish(true);
+    let (mut changed, mut beside) = (Vec::new(), Vec::new());
+    let mut previous: Option<std::sync::Arc<tarn::hazard::HazardMap>> = None;
+    for f in frames {
+        m.update(f)?;
+        let map = m.hazard_map();
+        if let Some(prev) = previous.filter(|_| !map.cells.is_empty()) {
+            // Records compared by their bits (a NaN depth equals itself).
+            let old: HashMap<CellKey, String> = prev
+                .cells
+                .iter()
+                .map(|c| (c.key, format!("{c:?}")))
+                .collect();
+            let keys: HashSet<CellKey> = map.cells.iter().map(|c| c.key).collect();
+            let moved: Vec<CellKey> = map
+                .cells
+                .iter()
+                .filter(|c| old.get(&c.key) != Some(&format!("{c:?}")))
+                .map(|c| c.key)
+                .collect();
+            let near: HashSet<CellKey> = moved
+                .iter()
+                .flat_map(|k| {
+                    (-1..=1).flat_map(move |dy| {
+                        (-1..=1).map(move |dx| CellKey::new(k.x + dx, k.y + dy))
+                    })
+                })
+                .filter(|k| keys.contains(k))
+                .collect();
+            let n = map.cells.len() as f64;
+            changed.push(moved.len() as f64 / n);
+            beside.push(near.len() as f64 / n);
+        }
+        previous = Some(map);
+    }
+    Ok((!changed.is_empty()).then(|| (median(&mut changed), median(&mut beside))))
+}
+
 /// The result of [`run`]; `tarn bench --json` prints it.
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
@@ -105,6 +152,13 @@ pub struct BenchReport {
     /// published), over the second half of the log's frames, held in memory, after the
     /// first half: the steady state. `None` off unix.
     pub page_faults_per_frame: Option<f64>,
+    /// What an incremental water stage could skip: per published frame after the first,
+    /// the share of the snapshot's cells whose record differs from the previous
+    /// snapshot's (new cells included), and the share within one cell of such a cell (a
+    /// record reads its 3 × 3 neighbourhood, so a stage that recomputes only what changed
+    /// recomputes at least these). Medians over the log's frames.
+    pub snapshot_cells_changed: Option<f64>,
+    pub snapshot_cells_changed_or_beside: Option<f64>,
     /// Minor page faults per frame of the whole online build (`build_log` with the map
     /// published every frame, reading the log included), over all its frames.
     pub page_faults_per_frame_build: Option<f64>,
@@ -495,6 +549,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         let cells = m.grid().map_or(0, |g| g.size() * g.size());
         (faults, m.window_heap_bytes(), cells)
     };
+    let churn = snapshot_churn(&log_cfg.mapper, &frames)?;
 
     // The whole log, offline (the water stage once, at the end), and as the vehicle runs
     // it (the hazard map published after every frame) for the full frame's time.
@@ -554,6 +609,8 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         ),
         frame_stages,
         classify_ms_640x480: classify,
+        snapshot_cells_changed: churn.map(|c| c.0),
+        snapshot_cells_changed_or_beside: churn.map(|c| c.1),
         offline_x_realtime: duration / build_s,
         offline_build_s: build_s,
         log_duration_s: duration,
@@ -610,7 +667,8 @@ impl BenchReport {
             "one thread, M points/s: ingest of the frame's {} scan {} (plain binning {}, ratio {}); \
              dense batch {:.1} (plain {:.1}, ratio {:.2})\n\
              page faults per frame {} (steady state), {} (whole online build); \
-             {:.1} bytes per window cell over all per-cell allocations\n",
+             {:.1} bytes per window cell over all per-cell allocations\n\
+             snapshot cells changed per frame {} %, or beside a changed one {} %\n",
             self.frame_lidar_shape
                 .map_or("–".into(), |(r, c)| format!("{r}×{c}")),
             f(self.ingest_scan_points_per_s_1t, 1e6, 1),
@@ -622,6 +680,8 @@ impl BenchReport {
             f(self.page_faults_per_frame, 1.0, 0),
             f(self.page_faults_per_frame_build, 1.0, 0),
             self.bytes_per_cell_all,
+            f(self.snapshot_cells_changed, 0.01, 1),
+            f(self.snapshot_cells_changed_or_beside, 0.01, 1),
         ));
         s
     }
@@ -675,6 +735,13 @@ mod tests {
         assert!(r.ingest_vs_plain_scan.is_some_and(|v| v > 0.0));
         assert!(r.ingest_vs_plain_dense > 0.0);
         assert!(r.frame_lidar_shape.is_some_and(|(rows, _)| rows > 1));
+        // A drive changes some of the window's records every frame, not all, and the
+        // neighbours of the changed ones add to them.
+        let (c, b) = (
+            r.snapshot_cells_changed.unwrap(),
+            r.snapshot_cells_changed_or_beside.unwrap(),
+        );
+        assert!(c > 0.0 && c < 1.0 && b >= c && b <= 1.0, "{c} {b}");
         #[cfg(unix)]
         assert!(r.page_faults_per_frame.is_some() && r.page_faults_per_frame_build.is_some());
         let json = serde_json::to_value(&r).unwrap();
