@@ -6,7 +6,7 @@
 //!
 //! A classifier whose label depends on a colour only through R + G + B and min(R, G, B)
 //! ([`PixelClassifier::by_sum_and_min`]) compiles at 8 bits to a table over those two
-//! instead: exact, 766 × 256 entries (196 KiB), a sum, a minimum and one load per pixel.
+//! instead: exact, 766 × 256 entries (192 KiB), a sum, a minimum and one load per pixel.
 
 use image::RgbImage;
 use rayon::prelude::*;

@@ -183,7 +183,7 @@ pub struct LabelsConfig {
     /// Sensors whose labels vote (a sensor the log lacks is skipped, and counted).
     pub sensors: Vec<LabelSensor>,
     /// A colour model (JSON from `tarn train-colour`), compiled into a 6-bit lookup table;
-    /// without it the paper's Table 1 rule (8-bit table).
+    /// without it the paper's Table 1 rule (its exact table over brightness and saturation).
     pub colour_model: Option<std::path::PathBuf>,
     /// Local solar hour of the log (0..24), which the MWIR labels need.
     pub hour: Option<f64>,
