@@ -39,23 +39,6 @@ pub fn floor_i64(v: f64) -> i64 {
     t.saturating_sub((v < t as f64) as i64)
 }
 
-/// `floor_i64(x / d)`, bit for bit, for `d` positive and finite and `inv` = `1.0 / d`:
-/// a multiplication, and the division only where the product lies within rounding of an
-/// integer (there the two quotients may straddle it). The product and the correctly
-/// rounded quotient differ by under 4·10⁻¹⁶ of their size, far inside the margin taken.
-#[inline(always)]
-pub fn floor_div(x: f64, d: f64, inv: f64) -> i64 {
-    let q = x * inv;
-    let f = floor_i64(q);
-    let frac = q - f as f64;
-    let tol = 1e-12 * q.abs().max(1.0);
-    if frac > tol && frac < 1.0 - tol {
-        f
-    } else {
-        floor_i64(x / d)
-    }
-}
-
 /// `v.ceil() as i64`, bit for bit (NaN → 0, saturating), without a call: see
 /// [`floor_i64`].
 #[inline(always)]
@@ -234,29 +217,6 @@ mod tests {
         #[test]
         fn floor_i64_is_floor_as_i64(v in proptest::num::f64::ANY) {
             proptest::prop_assert_eq!(super::floor_i64(v), v.floor() as i64);
-        }
-
-        /// Any x, including values a few ulps either side of a multiple of the divisor.
-        #[test]
-        fn floor_div_is_floor_of_the_quotient(
-            x in proptest::num::f64::ANY,
-            d in proptest::prop_oneof![
-                proptest::strategy::Just(0.1f64),
-                proptest::strategy::Just(0.05f64),
-                proptest::strategy::Just(0.3f64),
-                1e-3f64..10.0,
-            ],
-            k in -10_000_000i64..10_000_000,
-            ulps in -4i64..=4,
-        ) {
-            let inv = 1.0 / d;
-            proptest::prop_assert_eq!(super::floor_div(x, d, inv), super::floor_i64(x / d));
-            let near = f64::from_bits(((k as f64 * d).to_bits() as i64 + ulps) as u64);
-            proptest::prop_assert_eq!(
-                super::floor_div(near, d, inv),
-                super::floor_i64(near / d),
-                "{} / {}", near, d
-            );
         }
 
         #[test]

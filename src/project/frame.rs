@@ -875,29 +875,10 @@ fn quad_cells(surface: &GridSurface, q: [Vector4<f64>; 4], mut f: impl FnMut(usi
     // The quad is split into the triangles a-b-d and a-d-c. Everything of a triangle that
     // does not depend on the cell is taken once (the same arithmetic, in the same order,
     // as a cell-by-cell barycentric test: the results are bit for bit those).
-    let t0 = Tri::new([a, b, d], res, o, n);
-    // Most quads near the camera lie within one cell: when the whole quad's range is that
-    // one cell, and the first triangle overlaps it, that is every vote (the second
-    // triangle's range is within the same cell, and the cell counts once, with the first).
-    if let Some(t) = &t0 {
-        let lo = |v: fn(&Vector4<f64>) -> f64| q.iter().map(v).fold(f64::INFINITY, f64::min);
-        let hi = |v: fn(&Vector4<f64>) -> f64| q.iter().map(v).fold(f64::NEG_INFINITY, f64::max);
-        let [i0, i1, j0, j1] = Tri::range_of(
-            [lo(|p| p.x), hi(|p| p.x), lo(|p| p.y), hi(|p| p.y)],
-            res,
-            o,
-            n,
-        );
-        if i0 == i1 && j0 == j1 && t.range == [i0, i1, j0, j1] {
-            let (x, y) = ((i0 as f64 + 0.5) * res, (j0 as f64 + 0.5) * res);
-            if let Some(l) = t.bary(x, y) {
-                let level = l[0] * t.p[0].w + l[1] * t.p[1].w + l[2] * t.p[2].w;
-                f(((j0 - o.y) * n + (i0 - o.x)) as usize, level);
-                return;
-            }
-        }
-    }
-    let tris = [t0, Tri::new([a, d, c], res, o, n)];
+    let tris = [
+        Tri::new([a, b, d], res, o, n),
+        Tri::new([a, d, c], res, o, n),
+    ];
     for (k, t) in tris.iter().enumerate() {
         let Some(t) = t else { continue };
         let [i0, i1, j0, j1] = t.range;
@@ -948,12 +929,14 @@ impl Tri {
         });
         let lo = |v: fn(&Vector4<f64>) -> f64| p.iter().map(v).fold(f64::INFINITY, f64::min);
         let hi = |v: fn(&Vector4<f64>) -> f64| p.iter().map(v).fold(f64::NEG_INFINITY, f64::max);
-        let range = Self::range_of(
-            [lo(|p| p.x), hi(|p| p.x), lo(|p| p.y), hi(|p| p.y)],
-            res,
-            o,
-            n,
-        );
+        let first = |m: f64, origin: i64| ceil_i64((m - half) / res - 0.5).max(origin);
+        let last = |m: f64, origin: i64| floor_i64((m + half) / res - 0.5).min(origin + n - 1);
+        let range = [
+            first(lo(|p| p.x), o.x),
+            last(hi(|p| p.x), o.x),
+            first(lo(|p| p.y), o.y),
+            last(hi(|p| p.y), o.y),
+        ];
         Some(Tri {
             p,
             u,
@@ -962,15 +945,6 @@ impl Tri {
             reach,
             range,
         })
-    }
-
-    /// The cells (i0, i1, j0, j1) whose centres lie within half a cell of the box
-    /// [x_lo, x_hi, y_lo, y_hi], clipped to the window.
-    fn range_of([xl, xh, yl, yh]: [f64; 4], res: f64, o: CellKey, n: i64) -> [i64; 4] {
-        let half = 0.5 * res;
-        let first = |m: f64, origin: i64| ceil_i64((m - half) / res - 0.5).max(origin);
-        let last = |m: f64, origin: i64| floor_i64((m + half) / res - 0.5).min(origin + n - 1);
-        [first(xl, o.x), last(xh, o.x), first(yl, o.y), last(yh, o.y)]
     }
 
     /// Barycentric coordinates of the centre (x, y), if the cell overlaps the triangle:

@@ -19,7 +19,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geom::{floor_div, floor_i64};
+use crate::geom::floor_i64;
 use crate::grid::{CellKey, RollingGrid};
 
 /// Dense elevation snapshot of a [`RollingGrid`] window. See the module documentation.
@@ -27,8 +27,6 @@ use crate::grid::{CellKey, RollingGrid};
 pub struct GridSurface {
     n: usize,
     resolution: f64,
-    /// 1 / `resolution`, for [`floor_div`].
-    inv_resolution: f64,
     origin: CellKey,
     /// Elevations (map frame, metres) row-major from the window's lower-left key; NaN = none.
     z: Vec<f32>,
@@ -154,7 +152,6 @@ impl GridSurface {
         GridSurface {
             n,
             resolution,
-            inv_resolution: 1.0 / resolution,
             origin,
             z,
             blocks,
@@ -203,9 +200,8 @@ impl GridSurface {
     #[inline]
     fn cell_of(&self, x: f64, y: f64) -> Option<(usize, usize)> {
         // Checked: a point far beyond the window saturates the floor near i64::MAX.
-        let (res, inv) = (self.resolution, self.inv_resolution);
-        let i = floor_div(x, res, inv).checked_sub(self.origin.x)?;
-        let j = floor_div(y, res, inv).checked_sub(self.origin.y)?;
+        let i = floor_i64(x / self.resolution).checked_sub(self.origin.x)?;
+        let j = floor_i64(y / self.resolution).checked_sub(self.origin.y)?;
         let n = self.n as i64;
         (i >= 0 && j >= 0 && i < n && j < n).then_some((i as usize, j as usize))
     }
