@@ -7,11 +7,11 @@
 
 use serde::Serialize;
 
-use super::lidar::{LidarCueModel, LidarCueStats, ScanSurface};
+use super::lidar::{LidarBuffers, LidarCueModel, LidarCueStats, ScanSurface};
 use super::prior::WaterPrior;
 use super::stereo::{stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig};
 use crate::error::Result;
-use crate::grid::{IngestStats, RangeNoise, RollingGrid};
+use crate::grid::{CellKey, Evidence, IngestStats, RangeNoise, RollingGrid};
 use crate::io::frames::Frame;
 use crate::io::ros::convert::{Image, Pixels};
 
@@ -65,6 +65,9 @@ pub struct FrameCues {
     /// The water an earlier map found, read by the lidar cue ([`WaterPrior`]); `None`:
     /// the cues see this frame alone.
     pub prior: Option<WaterPrior>,
+    /// The lidar cue's storage and its evidence batch, reused from frame to frame.
+    lidar_bufs: LidarBuffers,
+    batch: Vec<(CellKey, Evidence)>,
 }
 
 /// Intensity of a camera image as a [`GrayImage`] (mean of R, G, B for colour).
@@ -83,12 +86,15 @@ pub fn gray_of(image: &Image) -> Result<GrayImage> {
 impl FrameCues {
     /// A runner of the cues `cfg` names.
     pub fn new(cfg: FrameCueConfig) -> Self {
-        FrameCues { cfg, prior: None }
+        FrameCues {
+            cfg,
+            ..FrameCues::default()
+        }
     }
 
     /// Runs the configured cues on `frame`, ingests the corrected clouds into `grid` and
     /// merges the evidence.
-    pub fn apply(&self, frame: &Frame, grid: &mut RollingGrid) -> Result<FrameCuesReport> {
+    pub fn apply(&mut self, frame: &Frame, grid: &mut RollingGrid) -> Result<FrameCuesReport> {
         let mut rep = FrameCuesReport::default();
         self.apply_lidar(frame, grid, &mut rep)?;
         self.apply_stereo(frame, grid, &mut rep)?;
@@ -99,25 +105,27 @@ impl FrameCues {
     /// configured and the frame has a lidar cloud. Returns what the scan says of the
     /// surface ([`ScanSurface`]) for the image labels that follow.
     pub fn apply_lidar(
-        &self,
+        &mut self,
         frame: &Frame,
         grid: &mut RollingGrid,
         rep: &mut FrameCuesReport,
     ) -> Result<Option<ScanSurface>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(model), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
-            let out = model.run_with(
+            let mut out = model.run_in(
                 cloud,
                 res,
                 z_ref,
                 self.cfg.surface_points,
                 self.prior.as_ref(),
+                &mut self.lidar_bufs,
             )?;
             rep.lidar_ingest = Some(grid.ingest(&out.corrected, &self.cfg.lidar_noise)?);
             rep.lidar = Some(out.stats);
-            let batch = out.evidence.into_batch();
-            rep.evidence_cells += batch.len();
-            rep.evidence_dropped += grid.apply_evidence(&batch);
+            out.evidence.drain_batch_into(&mut self.batch);
+            rep.evidence_cells += self.batch.len();
+            rep.evidence_dropped += grid.apply_evidence(&self.batch);
+            self.lidar_bufs.recycle(out.evidence, out.corrected);
             return Ok(Some(out.surface));
         }
         Ok(None)

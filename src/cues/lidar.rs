@@ -299,6 +299,24 @@ pub struct LidarCues {
     pub surface: ScanSurface,
 }
 
+/// Storage of [`LidarCueModel::run_in`] kept from scan to scan: the beam directions, and
+/// the evidence map and corrected cloud of a run once given back
+/// ([`LidarBuffers::recycle`]).
+#[derive(Debug, Clone, Default)]
+pub struct LidarBuffers {
+    dirs: Vec<Option<Vector3<f64>>>,
+    evidence: Option<EvidenceMap>,
+    corrected: Option<PointCloud>,
+}
+
+impl LidarBuffers {
+    /// Keeps a used run's evidence map and corrected cloud for the next run's.
+    pub fn recycle(&mut self, evidence: EvidenceMap, corrected: PointCloud) {
+        self.evidence = Some(evidence);
+        self.corrected = Some(corrected);
+    }
+}
+
 /// What a frame's range sensor says of the surface, for the image labels
 /// ([`crate::project::FrameLabels`]): from a lidar scan, how far dry ground returned and
 /// points (map frame) where it found dry ground or water; from stereo, what each element
@@ -523,6 +541,22 @@ impl LidarCueModel {
         surface_points: bool,
         prior: Option<&WaterPrior>,
     ) -> Result<LidarCues> {
+        let mut bufs = LidarBuffers::default();
+        self.run_in(cloud, resolution, z_ref, surface_points, prior, &mut bufs)
+    }
+
+    /// [`Self::run_with`] in the storage of earlier scans (`bufs`; give a run's evidence map
+    /// and corrected cloud back with [`LidarBuffers::recycle`] once used): the same
+    /// result, without a scan's worth of fresh memory.
+    pub fn run_in(
+        &self,
+        cloud: &PointCloud,
+        resolution: f64,
+        z_ref: f64,
+        surface_points: bool,
+        prior: Option<&WaterPrior>,
+        bufs: &mut LidarBuffers,
+    ) -> Result<LidarCues> {
         cloud.validate()?;
         let n = cloud.len();
         if let BeamModel::Directions(d) = &self.beams {
@@ -545,13 +579,14 @@ impl LidarCueModel {
                 ));
             }
         }
-        let dirs = beam_directions(cloud, &self.beams);
-        let lines = scan_lines(cloud, &dirs);
+        beam_directions_into(cloud, &self.beams, &mut bufs.dirs);
+        let dirs = &bufs.dirs;
+        let lines = scan_lines(cloud, dirs);
         let o = cloud.sensor_origin_in_map();
         let level0 = o.z - self.optics.config().height_m;
         let walked: Vec<(Vec<Event>, f64)> = lines
             .par_iter()
-            .map(|line| self.walk(cloud, &dirs, line, o, level0, prior))
+            .map(|line| self.walk(cloud, dirs, line, o, level0, prior))
             .collect();
         // The scan's own dry limit per line: the farthest lookahead its dry ground returned
         // from (a vertical scanner's one line likewise).
@@ -566,8 +601,20 @@ impl LidarCueModel {
             })
             .collect();
 
-        let mut ev = EvidenceMap::new(resolution, z_ref);
-        let mut corrected = cloud.clone();
+        let mut ev = match bufs.evidence.take() {
+            Some(mut e) => {
+                e.reset(resolution, z_ref);
+                e
+            }
+            None => EvidenceMap::new(resolution, z_ref),
+        };
+        let mut corrected = match bufs.corrected.take() {
+            Some(mut c) => {
+                c.clone_from(cloud);
+                c
+            }
+            None => cloud.clone(),
+        };
         let mut stats = LidarCueStats {
             slots: n as u64,
             missing: (n - cloud.valid_count()) as u64,
@@ -1015,6 +1062,17 @@ enum Event {
 /// Map-frame unit direction of every slot: from the point for real returns, from the beam
 /// model for missing ones (`None` where it cannot be known).
 pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vector3<f64>>> {
+    let mut out = Vec::new();
+    beam_directions_into(cloud, model, &mut out);
+    out
+}
+
+/// [`beam_directions`] into `local`'s storage (its contents replaced).
+fn beam_directions_into(
+    cloud: &PointCloud,
+    model: &BeamModel,
+    local: &mut Vec<Option<Vector3<f64>>>,
+) {
     let rot = cloud.frame_to_map.rotation;
     let so = cloud.sensor_origin;
     let (rows, cols) = (cloud.rows, cloud.cols);
@@ -1026,15 +1084,14 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
     };
     let from_angles =
         |az: f64, el: f64| Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-    let mut local: Vec<Option<Vector3<f64>>> = (0..cloud.len())
-        .map(|i| {
-            if cloud.is_valid(i) {
-                from_point(i)
-            } else {
-                None
-            }
-        })
-        .collect();
+    local.clear();
+    local.extend((0..cloud.len()).map(|i| {
+        if cloud.is_valid(i) {
+            from_point(i)
+        } else {
+            None
+        }
+    }));
     match model {
         BeamModel::Directions(d) => {
             for (i, l) in local.iter_mut().enumerate() {
@@ -1063,7 +1120,7 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
             }
         }
         BeamModel::Infer { .. } if cols == 1 && rows > 2 => {
-            infer_single_column(&mut local);
+            infer_single_column(local);
         }
         BeamModel::Infer { max_gap_fraction } => {
             let cyclic = rows > 1;
@@ -1106,7 +1163,9 @@ pub fn beam_directions(cloud: &PointCloud, model: &BeamModel) -> Vec<Option<Vect
             }
         }
     }
-    local.into_iter().map(|d| d.map(|v| rot * v)).collect()
+    for d in local.iter_mut() {
+        *d = d.map(|v| rot * v);
+    }
 }
 
 /// Fills the missing beams of a single-column scan (sensor frame, one beam per row) from

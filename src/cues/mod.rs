@@ -99,6 +99,14 @@ impl EvidenceMap {
         }
     }
 
+    /// Empties the map for cells `resolution` metres wide and levels relative to `z_ref`,
+    /// keeping its storage.
+    pub fn reset(&mut self, resolution: f64, z_ref: f64) {
+        self.resolution = resolution;
+        self.z_ref = z_ref;
+        self.cells.clear();
+    }
+
     /// The evidence of the cell under the map point `(x, y)`, created empty if needed.
     /// `None` for non-finite coordinates.
     pub fn at(&mut self, x: f64, y: f64) -> Option<&mut Evidence> {
@@ -151,6 +159,14 @@ impl EvidenceMap {
         for (k, e) in &o.cells {
             self.cells.entry(*k).or_default().merge(e);
         }
+    }
+
+    /// [`Self::into_batch`] into `out`'s storage (its contents replaced), leaving this map
+    /// empty with its storage kept.
+    pub fn drain_batch_into(&mut self, out: &mut Vec<(CellKey, Evidence)>) {
+        out.clear();
+        out.extend(self.cells.drain());
+        out.sort_unstable_by_key(|(k, _)| *k);
     }
 
     /// The batch for [`crate::grid::RollingGrid::apply_evidence`], in key order.

@@ -58,7 +58,7 @@ pub fn pose_is_finite(p: &Pose) -> bool {
 /// A point cloud, organized (rows × cols, as a spinning lidar's rings × columns or a stereo
 /// disparity image) or not (`rows == 1`). A missing return keeps its slot, with NaN
 /// coordinates, so the beam it belongs to is still known.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, PartialEq)]
 pub struct PointCloud {
     /// Rows (lidar rings, image rows); 1 for an unorganized cloud.
     pub rows: usize,
@@ -78,6 +78,35 @@ pub struct PointCloud {
     pub sensor_origin: Point3<f64>,
     /// Acquisition time, seconds (0 when unknown).
     pub stamp: f64,
+}
+
+impl Clone for PointCloud {
+    fn clone(&self) -> Self {
+        PointCloud {
+            rows: self.rows,
+            cols: self.cols,
+            xyz: self.xyz.clone(),
+            intensity: self.intensity.clone(),
+            reflectivity: self.reflectivity.clone(),
+            rgb: self.rgb.clone(),
+            frame_to_map: self.frame_to_map,
+            sensor_origin: self.sensor_origin,
+            stamp: self.stamp,
+        }
+    }
+
+    /// A copy of `source` in `self`'s storage (a scan's copy without fresh memory).
+    fn clone_from(&mut self, source: &Self) {
+        self.rows = source.rows;
+        self.cols = source.cols;
+        self.xyz.clone_from(&source.xyz);
+        self.intensity.clone_from(&source.intensity);
+        self.reflectivity.clone_from(&source.reflectivity);
+        self.rgb.clone_from(&source.rgb);
+        self.frame_to_map = source.frame_to_map;
+        self.sensor_origin = source.sensor_origin;
+        self.stamp = source.stamp;
+    }
 }
 
 impl PointCloud {

@@ -1,7 +1,7 @@
 use super::*;
 use crate::cues::prior::{PriorLevel, WaterPrior};
 use crate::cues::testutil::TestRng;
-use crate::grid::{key_of, CellKey, GridConfig, RollingGrid};
+use crate::grid::{key_of, CellKey, Evidence, GridConfig, RollingGrid};
 use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig};
 
 const RES: f64 = 0.1;
@@ -454,6 +454,73 @@ fn results_do_not_depend_on_thread_count() {
     let (a, b) = (run(1), run(2));
     assert_eq!(a.evidence.clone().into_batch(), b.evidence.into_batch());
     assert_eq!(a.stats, b.stats);
+}
+
+/// A scan run in the storage of earlier, different scans (larger, smaller, with and without
+/// intensity) gives what it gives alone.
+#[test]
+fn buffers_reused_across_scans_give_each_scan_its_own_result() {
+    let cue = LidarCueModel::new(
+        optics(1.8),
+        BeamModel::default(),
+        LidarCueConfig::default(),
+        Some(ReflectivityConfig::default()),
+    )
+    .unwrap();
+    let (start, end) = cue.interval().unwrap();
+    let c0 = 0.5 * (start + end);
+    let pond = move |x: f64, y: f64| (x - c0).hypot(y - 0.5) <= 2.0;
+    let scene = Scene {
+        model: cue.optics().clone(),
+        depth: 0.3,
+        in_pond: &pond,
+    };
+    let mut rng = TestRng(5);
+    let scans: Vec<PointCloud> = [
+        (16, 512, true),
+        (8, 256, false),
+        (32, 1024, true),
+        (16, 512, false),
+    ]
+    .into_iter()
+    .map(|(rings, cols, lit)| {
+        let (mut c, _, _) = spinning_scan(&scene, rings, cols);
+        if lit {
+            c.intensity = Some(
+                (0..c.len())
+                    .map(|_| (10.0 + rng.uniform()) as f32)
+                    .collect(),
+            );
+        }
+        c
+    })
+    .collect();
+    let mut bufs = LidarBuffers::default();
+    for (i, c) in scans.iter().enumerate() {
+        let fresh = cue.run_with(c, RES, 0.0, true, None).unwrap();
+        let reused = cue.run_in(c, RES, 0.0, true, None, &mut bufs).unwrap();
+        assert!(
+            fresh.evidence.iter().count() > 10,
+            "scan {i}: {:?}",
+            fresh.stats
+        );
+        assert_eq!(fresh.stats, reused.stats, "scan {i}");
+        // Bit for bit (NaN slots included, which `==` calls unequal).
+        let bits = |v: &dyn std::fmt::Debug| format!("{v:?}");
+        assert!(
+            bits(&fresh.corrected) == bits(&reused.corrected),
+            "scan {i}"
+        );
+        assert!(bits(&fresh.surface) == bits(&reused.surface), "scan {i}");
+        let (mut a, mut b) = (fresh.evidence, reused.evidence);
+        let mut batch = vec![(CellKey::new(7, 7), Evidence::default())];
+        b.drain_batch_into(&mut batch);
+        assert_eq!(a.clone().into_batch(), batch, "scan {i}");
+        assert!(b.iter().next().is_none());
+        a.reset(RES, 0.0);
+        assert!(a.iter().next().is_none());
+        bufs.recycle(b, reused.corrected);
+    }
 }
 
 #[test]
