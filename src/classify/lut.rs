@@ -191,16 +191,18 @@ mod tests {
         assert!(l.classify_into(&[0; 5], &mut [Label::Other; 2]).is_err());
     }
 
+    /// The rule without its promise to depend on sum and min only.
+    struct Full(RuleClassifier);
+    impl PixelClassifier for Full {
+        fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
+            self.0.classify_pixel(rgb)
+        }
+    }
+
     /// A classifier that says it depends on sum and min only compiles to the same table as
     /// one evaluated at every bin.
     #[test]
     fn sum_min_compile_is_the_full_compile() {
-        struct Full(RuleClassifier);
-        impl PixelClassifier for Full {
-            fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
-                self.0.classify_pixel(rgb)
-            }
-        }
         let r = RuleClassifier::default();
         for bits in [1, 4, 6] {
             assert_eq!(
@@ -214,12 +216,6 @@ mod tests {
     /// cube of every colour a classifier without that promise compiles to.
     #[test]
     fn an_exact_sum_min_table_is_small_and_the_full_cube() {
-        struct Full(RuleClassifier);
-        impl PixelClassifier for Full {
-            fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
-                self.0.classify_pixel(rgb)
-            }
-        }
         let r = RuleClassifier::default();
         let small = ColorLut::compile(&r, 8).unwrap();
         assert_eq!(small.table_bytes(), 766 * 256);

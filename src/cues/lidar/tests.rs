@@ -420,15 +420,20 @@ fn spinning_lidar_with_inferred_beams_finds_the_pond_and_only_the_pond() {
     assert_eq!(dry_water, 0, "{dry_water} of {dry} dry cells called water");
 }
 
-#[test]
-fn results_do_not_depend_on_thread_count() {
-    let cue = LidarCueModel::new(
+/// A spinning lidar 1.8 m up with every cue, the reflectivity cue included.
+fn reflectivity_cue() -> LidarCueModel {
+    LidarCueModel::new(
         optics(1.8),
         BeamModel::default(),
         LidarCueConfig::default(),
         Some(ReflectivityConfig::default()),
     )
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let cue = reflectivity_cue();
     let (start, end) = cue.interval().unwrap();
     let c0 = 0.5 * (start + end);
     let pond = move |x: f64, y: f64| (x - c0).hypot(y) <= 2.0;
@@ -460,13 +465,7 @@ fn results_do_not_depend_on_thread_count() {
 /// intensity) gives what it gives alone.
 #[test]
 fn buffers_reused_across_scans_give_each_scan_its_own_result() {
-    let cue = LidarCueModel::new(
-        optics(1.8),
-        BeamModel::default(),
-        LidarCueConfig::default(),
-        Some(ReflectivityConfig::default()),
-    )
-    .unwrap();
+    let cue = reflectivity_cue();
     let (start, end) = cue.interval().unwrap();
     let c0 = 0.5 * (start + end);
     let pond = move |x: f64, y: f64| (x - c0).hypot(y - 0.5) <= 2.0;
