@@ -82,30 +82,34 @@ pub struct PointCloud {
 
 impl Clone for PointCloud {
     fn clone(&self) -> Self {
-        PointCloud {
-            rows: self.rows,
-            cols: self.cols,
-            xyz: self.xyz.clone(),
-            intensity: self.intensity.clone(),
-            reflectivity: self.reflectivity.clone(),
-            rgb: self.rgb.clone(),
-            frame_to_map: self.frame_to_map,
-            sensor_origin: self.sensor_origin,
-            stamp: self.stamp,
-        }
+        let mut c = PointCloud::unorganized(Vec::new());
+        c.clone_from(self);
+        c
     }
 
     /// A copy of `source` in `self`'s storage (a scan's copy without fresh memory).
     fn clone_from(&mut self, source: &Self) {
-        self.rows = source.rows;
-        self.cols = source.cols;
-        self.xyz.clone_from(&source.xyz);
-        self.intensity.clone_from(&source.intensity);
-        self.reflectivity.clone_from(&source.reflectivity);
-        self.rgb.clone_from(&source.rgb);
-        self.frame_to_map = source.frame_to_map;
-        self.sensor_origin = source.sensor_origin;
-        self.stamp = source.stamp;
+        // Every field by name: a field added to the struct is an error here until copied.
+        let PointCloud {
+            rows,
+            cols,
+            xyz,
+            intensity,
+            reflectivity,
+            rgb,
+            frame_to_map,
+            sensor_origin,
+            stamp,
+        } = source;
+        self.rows = *rows;
+        self.cols = *cols;
+        self.xyz.clone_from(xyz);
+        self.intensity.clone_from(intensity);
+        self.reflectivity.clone_from(reflectivity);
+        self.rgb.clone_from(rgb);
+        self.frame_to_map = *frame_to_map;
+        self.sensor_origin = *sensor_origin;
+        self.stamp = *stamp;
     }
 }
 
@@ -252,6 +256,23 @@ mod tests {
         fn ceil_i64_is_ceil_as_i64(v in proptest::num::f64::ANY) {
             proptest::prop_assert_eq!(super::ceil_i64(v), v.ceil() as i64);
         }
+    }
+
+    /// A copy into another cloud's storage (larger, with other optional fields) is the
+    /// cloud, field for field.
+    #[test]
+    fn clone_from_is_a_clone() {
+        let mut a = PointCloud::organized(2, 3, vec![[1.0, f32::NAN, 3.0]; 6]).unwrap();
+        a.intensity = Some(vec![0.5; 6]);
+        a.rgb = Some(vec![[1, 2, 3]; 6]);
+        a.frame_to_map = pose_xyz_rpy(1.0, 2.0, 3.0, 0.1, 0.2, 0.3);
+        a.sensor_origin = Point3::new(0.0, 0.0, 1.5);
+        a.stamp = 12.5;
+        let mut b = PointCloud::unorganized(vec![[9.0; 3]; 100]);
+        b.reflectivity = Some(vec![7.0; 100]);
+        b.clone_from(&a);
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+        assert_eq!(format!("{a:?}"), format!("{:?}", a.clone()));
     }
 
     #[test]
