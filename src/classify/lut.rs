@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 
 /// A lookup table of labels over quantised RGB. See the module documentation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "RawLut")]
 pub struct ColorLut {
     bits: u8,
     /// Indexed by R + G + B and min(R, G, B) (`sum · 256 + min`), not by the quantised
@@ -25,6 +26,45 @@ pub struct ColorLut {
     #[serde(default)]
     sum_min: bool,
     table: Vec<Label>,
+}
+
+/// A [`ColorLut`] as read, before its table is checked against its bits.
+#[derive(Deserialize)]
+struct RawLut {
+    bits: u8,
+    #[serde(default)]
+    sum_min: bool,
+    table: Vec<Label>,
+}
+
+impl TryFrom<RawLut> for ColorLut {
+    type Error = Error;
+
+    /// A table read from elsewhere has the length its bits say: 2^(3·bits) entries, or
+    /// 766 × 256 for an 8-bit (sum, min) table.
+    fn try_from(r: RawLut) -> Result<Self> {
+        let want = match (r.bits, r.sum_min) {
+            (8, true) => Some(766 * 256),
+            (1..=8, false) => Some(1usize << (3 * r.bits as u32)),
+            _ => None,
+        };
+        if want != Some(r.table.len()) {
+            return Err(Error::invalid(
+                "lookup table",
+                format!(
+                    "{} entries for {} bits{}",
+                    r.table.len(),
+                    r.bits,
+                    if r.sum_min { " over (sum, min)" } else { "" }
+                ),
+            ));
+        }
+        Ok(ColorLut {
+            bits: r.bits,
+            sum_min: r.sum_min,
+            table: r.table,
+        })
+    }
 }
 
 impl ColorLut {
@@ -189,6 +229,35 @@ mod tests {
         assert!(ColorLut::compile(&r, 9).is_err());
         let l = ColorLut::compile(&r, 3).unwrap();
         assert!(l.classify_into(&[0; 5], &mut [Label::Other; 2]).is_err());
+    }
+
+    /// A table read back is the table; one whose length does not match its bits is an
+    /// error when read, not a panic when used.
+    #[test]
+    fn a_table_read_back_is_checked() {
+        let r = RuleClassifier::default();
+        for l in [
+            ColorLut::compile(&r, 3).unwrap(),
+            ColorLut::compile(&r, 8).unwrap(),
+        ] {
+            let json = serde_json::to_string(&l).unwrap();
+            assert_eq!(serde_json::from_str::<ColorLut>(&json).unwrap(), l);
+        }
+        for bad in [
+            r#"{"bits": 3, "table": []}"#,
+            r#"{"bits": 8, "sum_min": true, "table": ["water"]}"#,
+            r#"{"bits": 0, "table": []}"#,
+            r#"{"bits": 9, "table": []}"#,
+            r#"{"bits": 2, "sum_min": true, "table": []}"#,
+        ] {
+            let e = serde_json::from_str::<ColorLut>(bad)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("lookup table") || e.contains("bits"),
+                "{bad}: {e}"
+            );
+        }
     }
 
     /// The rule without its promise to depend on sum and min only.
