@@ -151,15 +151,8 @@ impl ColorLut {
         }
         let table = &self.table[..];
         if self.sum_min {
-            let table: &[Label; 766 * 256] = table.try_into().map_err(|_| {
-                Error::invalid(
-                    "lookup table",
-                    format!(
-                        "a (sum, min) table of {} entries, not 766 × 256",
-                        table.len()
-                    ),
-                )
-            })?;
+            // Its length is checked where a table is made or read (`compile`, `RawLut`).
+            let table: &[Label; 766 * 256] = table.try_into().expect("a (sum, min) table");
             for (o, px) in out.iter_mut().zip(rgb.chunks_exact(3)) {
                 *o = table[sum_min_index(px[0], px[1], px[2])];
             }
@@ -195,8 +188,7 @@ impl ColorLut {
 
 impl PixelClassifier for ColorLut {
     fn classify_pixel(&self, rgb: [u8; 3]) -> Label {
-        let i = self.index(rgb[0], rgb[1], rgb[2]);
-        self.table.get(i).copied().unwrap_or(Label::Unknown)
+        self.table[self.index(rgb[0], rgb[1], rgb[2])]
     }
 }
 

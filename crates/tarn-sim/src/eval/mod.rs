@@ -279,14 +279,7 @@ impl ObstacleLimits {
         x: f64,
         y: f64,
     ) -> bool {
-        let at = |x: f64, y: f64| {
-            index
-                .get(&CellKey::new(
-                    (x / res).floor() as i64,
-                    (y / res).floor() as i64,
-                ))
-                .copied()
-        };
+        let at = |x: f64, y: f64| index.get(&tarn::grid::key_of(res, x, y)).copied();
         let Some(t) = at(x, y) else {
             return false;
         };
@@ -297,7 +290,7 @@ impl ObstacleLimits {
             return false;
         }
         let nb: crate::hazard::Neighbourhood = std::array::from_fn(|j| {
-            let (dx, dy) = ((j % 3) as f64 - 1.0, (j / 3) as f64 - 1.0);
+            let (dx, dy) = neighbour_offset(j);
             let z = at(x + dx * mres, y + dy * mres)
                 .filter(|n| n.class != Class::Water)
                 .map_or(f64::NAN, |n| n.z);
@@ -306,6 +299,12 @@ impl ObstacleLimits {
         let grad = self.max_slope_deg.to_radians().tan();
         terrain_hazard(&nb, (t.z, 0.0), mres, self.max_step_m, grad).1 == Hazard::Obstacle
     }
+}
+
+/// Offset (−1, 0 or 1 in x and y) of neighbour `j` of a 3 × 3 neighbourhood, row by row
+/// from the lower left (the order of [`crate::hazard::Neighbourhood`]).
+fn neighbour_offset(j: usize) -> (f64, f64) {
+    ((j % 3) as f64 - 1.0, (j / 3) as f64 - 1.0)
 }
 
 /// What `tarn eval` reports.
@@ -638,7 +637,7 @@ impl<'a> Scorer<'a> {
             .cells
             .iter()
             .map(|c| {
-                let key = CellKey::new((c.x / res).floor() as i64, (c.y / res).floor() as i64);
+                let key = tarn::grid::key_of(res, c.x, c.y);
                 let t = index.get(&key).copied();
                 Scored {
                     cell: c,
@@ -648,9 +647,8 @@ impl<'a> Scorer<'a> {
                     obstacle: limits.truth_obstacle(&index, res, mres, c.x, c.y),
                     lidar: false,
                     near_object: (0..9).any(|j| {
-                        let (dx, dy) = ((j % 3) as f64 - 1.0, (j / 3) as f64 - 1.0);
-                        let (x, y) = (c.x + dx * mres, c.y + dy * mres);
-                        let k = CellKey::new((x / res).floor() as i64, (y / res).floor() as i64);
+                        let (dx, dy) = neighbour_offset(j);
+                        let k = tarn::grid::key_of(res, c.x + dx * mres, c.y + dy * mres);
                         index.get(&k).is_some_and(|t| t.hazard == Hazard::Obstacle)
                     }),
                 }
