@@ -98,6 +98,22 @@ pub struct LidarConfig {
     pub reflectivity_cue: ReflectivityConfig,
 }
 
+impl LidarConfig {
+    /// The lidar cue model of this lidar mounted `height_m` above the ground, as the
+    /// [`Mapper`] runs it.
+    pub fn cue_model(&self, height_m: f64) -> Result<LidarCueModel> {
+        LidarCueModel::new(
+            MapperConfig::lidar_optics(self, height_m),
+            BeamModel::Infer {
+                max_gap_fraction: self.max_gap_fraction,
+            },
+            self.cue,
+            self.reflectivity.then_some(self.reflectivity_cue),
+        )
+        .map(|m| m.with_range_noise(self.noise))
+    }
+}
+
 impl Default for LidarConfig {
     /// A 905 nm spinning lidar whose returns from 30 % ground end at 40 m: the default
     /// scene's sensor (`maps/default.toml`).
@@ -857,7 +873,7 @@ impl Mapper {
         let mut lidar_height = None;
         if let Some(l) = cfg.lidar.as_ref().filter(|l| l.cues) {
             if let Some(h) = l.height_m {
-                fc.lidar = Some(Self::cue_model(l, h)?);
+                fc.lidar = Some(l.cue_model(h)?);
                 lidar_height = Some(h);
             }
         }
@@ -887,18 +903,6 @@ impl Mapper {
             frames: 0,
             warned_unorganized: false,
         })
-    }
-
-    fn cue_model(l: &LidarConfig, height_m: f64) -> Result<LidarCueModel> {
-        LidarCueModel::new(
-            MapperConfig::lidar_optics(l, height_m),
-            BeamModel::Infer {
-                max_gap_fraction: l.max_gap_fraction,
-            },
-            l.cue,
-            l.reflectivity.then_some(l.reflectivity_cue),
-        )
-        .map(|m| m.with_range_noise(l.noise))
     }
 
     /// The mapper's configuration.
@@ -997,7 +1001,7 @@ impl Mapper {
                     // Centimetres: the estimate is a median of noisy returns.
                     let h = (h * 100.0).round() / 100.0;
                     if h > 0.0 {
-                        self.cues.cfg.lidar = Some(Self::cue_model(l, h)?);
+                        self.cues.cfg.lidar = Some(l.cue_model(h)?);
                         self.lidar_height = Some(h);
                     }
                 }

@@ -21,17 +21,14 @@ use tarn::build::{build_log, LogBuildConfig};
 use tarn::classify::color::RuleClassifier;
 use tarn::classify::lut::ColorLut;
 use tarn::classify::Label;
-use tarn::cues::{
-    estimate_sensor_height, stereo_reflections, BeamModel, LidarCueConfig, LidarCueModel,
-    StereoCueConfig,
-};
+use tarn::cues::frame::gray_of;
+use tarn::cues::{estimate_sensor_height, stereo_reflections_with, MirrorCheck, StereoCueConfig};
 use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;
 use tarn::grid::{CellKey, GridConfig, RangeNoise, RollingGrid, TileMap};
 use tarn::hazard::HazardMap;
 use tarn::io::frames::{Frame, FrameStream, LogConfig};
 use tarn::io::ros::convert::Pixels;
-use tarn::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
 use tarn::project::{FrameLabelConfig, FrameLabels};
 use tarn_sim::sim::synthetic_lidar_cloud;
 
@@ -131,6 +128,10 @@ pub struct BenchReport {
     pub frame_ms_method: String,
     /// The stages summed into `frame_ms`.
     pub frame_stages: Vec<String>,
+    /// Where `frame_ms` goes: each stage of `Mapper::update` (recentre, lidar, stereo,
+    /// labels, water), its median over the log's frames, median over the repetitions
+    /// (the medians need not sum to `frame_ms`).
+    pub frame_stages_ms: BTreeMap<String, f64>,
     /// Colour classification of a 640 × 480 image through the lookup table, one thread.
     pub classify_ms_640x480: f64,
     /// Log duration over the time `build::build_log` takes for the whole log (median).
@@ -392,6 +393,37 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         ..LogBuildConfig::default()
     };
 
+    // Each stage runs with what the mapper runs it with: the config's lidar noise and cue
+    // model, the stereo noise of the frame's camera and baseline, the stereo cue's mirror
+    // check and surface points as configured.
+    let mcfg = &log_cfg.mapper;
+    let lidar = frame.lidar.as_ref();
+    let stereo = frame.stereo.as_ref();
+    let camera = frame.image.as_ref().and_then(|i| i.camera.as_ref());
+    let lidar_noise = mcfg.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise);
+    let stereo_noise = match (&mcfg.stereo, stereo) {
+        (Some(s), Some(c)) => s.range_noise(camera, c.cols, frame.stereo_baseline_m).0,
+        _ => RangeNoise::STEREO,
+    };
+    let lidar_model = match (mcfg.lidar.as_ref().filter(|l| l.cues), lidar) {
+        (Some(l), Some(c)) => Some(
+            l.cue_model(
+                l.height_m
+                    .or_else(|| estimate_sensor_height(c))
+                    .unwrap_or(1.8),
+            )?,
+        ),
+        _ => None,
+    };
+    let stereo_cue = mcfg.stereo.as_ref().filter(|s| s.reflections);
+    let gray = match (stereo_cue.filter(|s| s.mirror_check), &frame.image) {
+        (Some(_), Some(img)) if img.camera.is_some() => Some(gray_of(&img.image)?),
+        _ => None,
+    };
+    let surface_points = colour_labels
+        .as_ref()
+        .is_some_and(|m| m.colour.is_some() && m.colour_check);
+
     // The grid as a mapper holds it at the middle frame.
     let res = opts.grid.resolution;
     let z_ref = opts.grid.z_ref;
@@ -399,34 +431,13 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let mut grid = RollingGrid::new(opts.grid.clone(), centre.x, centre.y)?;
     for f in &frames[..=mid] {
         if let Some(c) = &f.lidar {
-            grid.ingest(c, &RangeNoise::LIDAR)?;
+            grid.ingest(c, &lidar_noise)?;
         }
         if let Some(c) = &f.stereo {
-            grid.ingest(c, &RangeNoise::STEREO)?;
+            grid.ingest(c, &stereo_noise)?;
         }
     }
 
-    let lidar = frame.lidar.as_ref();
-    let stereo = frame.stereo.as_ref();
-    let lidar_model = match lidar {
-        Some(c) => Some(LidarCueModel::new(
-            LidarModelConfig {
-                height_m: estimate_sensor_height(c).unwrap_or(1.8),
-                attenuation: Attenuation::PureWater {
-                    wavelength_nm: 905.0,
-                },
-                albedo: 0.3,
-                aperture_diameter_m: 0.0254,
-                n_water: 1.33,
-                sensitivity: Sensitivity::DryLimit(40.0),
-                solid_angle: SolidAngleForm::Exact,
-            },
-            BeamModel::default(),
-            LidarCueConfig::default(),
-            None,
-        )?),
-        None => None,
-    };
     let lut = ColorLut::compile(&RuleClassifier::default(), opts.lut_bits)?;
     let rgb = rgb_640x480(frame);
     let mut labels = vec![Label::Other; 640 * 480];
@@ -453,21 +464,28 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let mut st = Stages(Vec::new());
     if let Some(c) = lidar {
         st.add("ingest_lidar", true, move || {
-            gl.ingest(c, &RangeNoise::LIDAR).map(|_| ())
+            gl.ingest(c, &lidar_noise).map(|_| ())
         });
     }
     if let Some(c) = stereo {
         st.add("ingest_stereo", true, move || {
-            gs.ingest(c, &RangeNoise::STEREO).map(|_| ())
+            gs.ingest(c, &stereo_noise).map(|_| ())
         });
     }
     if let (Some(c), Some(m)) = (lidar, &lidar_model) {
         st.add("cue_lidar", true, move || m.run(c, res, z_ref).map(|_| ()));
     }
-    if let Some(c) = stereo {
-        let cfg = StereoCueConfig::default();
+    if let (Some(c), Some(s)) = (stereo, stereo_cue) {
+        let cfg = StereoCueConfig {
+            noise: stereo_noise,
+            ..s.cue
+        };
+        let check = gray
+            .as_ref()
+            .zip(camera)
+            .map(|(image, camera)| MirrorCheck { camera, image });
         st.add("cue_stereo", true, move || {
-            stereo_reflections(c, res, z_ref, None, &cfg).map(|_| ())
+            stereo_reflections_with(c, res, z_ref, check, &cfg, surface_points).map(|_| ())
         });
     }
     if let Some(rgb) = &rgb {
@@ -507,7 +525,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     if let Some(c) = lidar {
         let mut g1 = grid.clone();
         st.add("ingest_lidar_1t", false, move || {
-            one.install(|| g1.ingest(c, &RangeNoise::LIDAR).map(|_| ()))
+            one.install(|| g1.ingest(c, &lidar_noise).map(|_| ()))
         });
         let mut bins = PlainBins::new(n, res, origin);
         st.add("plain_lidar_1t", false, move || {
@@ -559,7 +577,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     };
     let mut builds = Vec::new();
     let mut duration = 0.0;
-    let mut frame_totals = Vec::new();
+    // Per stage of `Mapper::update` (and "total"), its median over the log's frames in each
+    // repetition.
+    let mut frame_parts: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let mut build_faults = Vec::new();
     for r in 0..reps.min(3) {
         let out = tmp.path().join(format!("build{r}"));
@@ -572,17 +592,21 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         if let (Some(a), Some(b)) = (f0, minor_faults()) {
             build_faults.push((b - a) as f64 / rep.frames_fused.max(1) as f64);
         }
-        frame_totals.extend(
-            rep.stage_latency_ms
-                .iter()
-                .filter(|s| s.stage == "total")
-                .map(|s| s.median_ms),
-        );
+        for s in &rep.stage_latency_ms {
+            frame_parts
+                .entry(s.stage.clone())
+                .or_default()
+                .push(s.median_ms);
+        }
     }
     let build_s = median(&mut builds);
     // The full frame is what `Mapper::update` takes (median over the log's frames, then
     // over the repetitions); the stage medians above say where that time goes.
-    let frame_ms = median(&mut frame_totals);
+    let mut frame_stages_ms: BTreeMap<String, f64> = frame_parts
+        .iter_mut()
+        .map(|(k, v)| (k.clone(), median(v)))
+        .collect();
+    let frame_ms = frame_stages_ms.remove("total").unwrap_or(f64::NAN);
     let classify = stages_ms
         .get("classify_640x480")
         .copied()
@@ -608,6 +632,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             }
         ),
         frame_stages,
+        frame_stages_ms,
         classify_ms_640x480: classify,
         snapshot_cells_changed: churn.map(|c| c.0),
         snapshot_cells_changed_or_beside: churn.map(|c| c.1),
@@ -645,6 +670,10 @@ impl BenchReport {
     pub fn markdown(&self) -> String {
         let mut s = String::from("| stage | median ms |\n| --- | ---: |\n");
         for (k, v) in &self.stages_ms {
+            s.push_str(&format!("| {k} | {v:.3} |\n"));
+        }
+        s.push_str("\n| stage of `Mapper::update` | median ms |\n| --- | ---: |\n");
+        for (k, v) in &self.frame_stages_ms {
             s.push_str(&format!("| {k} | {v:.3} |\n"));
         }
         s.push_str(&format!(
@@ -724,6 +753,12 @@ mod tests {
             assert!(v.is_finite() && v > 0.0, "{s}: {v}");
         }
         assert!(r.frame_stages.iter().all(|s| r.stages_ms.contains_key(s)));
+        // The mapper's own stages, with the rig's cues and labels all running.
+        for s in ["lidar", "stereo", "labels", "water"] {
+            let v = r.frame_stages_ms[s];
+            assert!(v.is_finite() && v > 0.0 && v < r.frame_ms, "{s}: {v}");
+        }
+        assert!(r.stages_ms["cue_stereo"] > 0.0);
         assert!(r.frame_ms.is_finite() && r.frame_ms > 0.0, "{}", r.frame_ms);
         assert!(r.ingest_points_per_s > 0.0 && r.offline_x_realtime > 0.0);
         assert!(r.log_duration_s > 0.0);
