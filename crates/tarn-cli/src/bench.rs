@@ -22,6 +22,7 @@ use tarn::classify::color::RuleClassifier;
 use tarn::classify::lut::ColorLut;
 use tarn::classify::Label;
 use tarn::cues::frame::gray_of;
+use tarn::cues::lidar::LidarBuffers;
 use tarn::cues::{estimate_sensor_height, stereo_reflections_with, MirrorCheck, StereoCueConfig};
 use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;
@@ -394,8 +395,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     };
 
     // Each stage runs with what the mapper runs it with: the config's lidar noise and cue
-    // model, the stereo noise of the frame's camera and baseline, the stereo cue's mirror
-    // check and surface points as configured.
+    // model (its buffers kept from run to run), the stereo noise of the frame's camera and
+    // baseline, the stereo cue's mirror check, and the surface points the colour check
+    // reads.
     let mcfg = &log_cfg.mapper;
     let lidar = frame.lidar.as_ref();
     let stereo = frame.stereo.as_ref();
@@ -473,7 +475,12 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         });
     }
     if let (Some(c), Some(m)) = (lidar, &lidar_model) {
-        st.add("cue_lidar", true, move || m.run(c, res, z_ref).map(|_| ()));
+        let mut bufs = LidarBuffers::default();
+        st.add("cue_lidar", true, move || {
+            let out = m.run_in(c, res, z_ref, surface_points, None, &mut bufs)?;
+            bufs.recycle(out.evidence, out.corrected);
+            Ok(())
+        });
     }
     if let (Some(c), Some(s)) = (stereo, stereo_cue) {
         let cfg = StereoCueConfig {
