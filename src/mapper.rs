@@ -321,6 +321,27 @@ impl Default for MapperConfig {
 pub const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
 
 impl MapperConfig {
+    /// The cues a mapper of this config runs on every frame, with `labels` its compiled
+    /// image labels: the lidar's noise, the stereo reflection cue and its mirror check, and
+    /// the surface points when the colour check reads them. The lidar cue model is left
+    /// out (`None`): it needs the sensor's height ([`LidarConfig::cue_model`]).
+    pub fn frame_cue_config(
+        &self,
+        labels: Option<&crate::project::FrameLabelConfig>,
+    ) -> FrameCueConfig {
+        FrameCueConfig {
+            lidar: None,
+            lidar_noise: self.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise),
+            stereo: self
+                .stereo
+                .as_ref()
+                .filter(|s| s.reflections)
+                .map(|s| s.cue),
+            mirror_check: self.stereo.as_ref().is_some_and(|s| s.mirror_check),
+            surface_points: labels.is_some_and(|m| m.colour.is_some() && m.colour_check),
+        }
+    }
+
     /// Every sensor a log may carry: the lidar and the stereo pair with every cue, and
     /// colour and SWIR labels (MWIR labels need the log's solar hour, which a log does not
     /// carry). A sensor the log lacks costs nothing.
@@ -863,13 +884,12 @@ impl Mapper {
     /// here; with `height_m` absent, on the first scan that allows the estimate.
     pub fn new(cfg: MapperConfig) -> Result<Mapper> {
         cfg.validate()?;
-        let mut fc = FrameCueConfig {
-            lidar: None,
-            lidar_noise: cfg.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise),
-            stereo: cfg.stereo.as_ref().filter(|s| s.reflections).map(|s| s.cue),
-            mirror_check: cfg.stereo.as_ref().is_some_and(|s| s.mirror_check),
-            surface_points: false,
+        let models = match (&cfg.label_models, &cfg.labels) {
+            (Some(m), _) => Some(m.clone()),
+            (None, Some(l)) => Some(l.compile()?),
+            (None, None) => None,
         };
+        let mut fc = cfg.frame_cue_config(models.as_ref());
         let mut lidar_height = None;
         if let Some(l) = cfg.lidar.as_ref().filter(|l| l.cues) {
             if let Some(h) = l.height_m {
@@ -879,14 +899,6 @@ impl Mapper {
         }
         let global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
         let empty = Arc::new(HazardMap::new(cfg.grid.resolution, Vec::new()));
-        let models = match (&cfg.label_models, &cfg.labels) {
-            (Some(m), _) => Some(m.clone()),
-            (None, Some(l)) => Some(l.compile()?),
-            (None, None) => None,
-        };
-        fc.surface_points = models
-            .as_ref()
-            .is_some_and(|m| m.colour.is_some() && m.colour_check);
         let labels = models.map(crate::project::FrameLabels::new).transpose()?;
         Ok(Mapper {
             cfg,

@@ -18,7 +18,6 @@ tabulates them again).
 """
 import argparse
 import json
-import math
 import os
 import shutil
 import statistics

@@ -83,6 +83,28 @@ pub fn gray_of(image: &Image) -> Result<GrayImage> {
     GrayImage::new(image.width, image.height, pixels)
 }
 
+/// The grey image the stereo cue's mirror check reads (`mirror_check` on and a colour
+/// camera with its model in `frame`), `None` otherwise; pair it with the camera in a
+/// [`MirrorCheck`] ([`mirror_check_of`]).
+pub fn mirror_gray(frame: &Frame, mirror_check: bool) -> Result<Option<GrayImage>> {
+    match &frame.image {
+        Some(img) if mirror_check && img.camera.is_some() => Ok(Some(gray_of(&img.image)?)),
+        _ => Ok(None),
+    }
+}
+
+/// The mirror check of `frame` over its grey image `gray` ([`mirror_gray`]).
+pub fn mirror_check_of<'a>(
+    frame: &'a Frame,
+    gray: Option<&'a GrayImage>,
+) -> Option<MirrorCheck<'a>> {
+    let camera = frame.image.as_ref()?.camera.as_ref()?;
+    Some(MirrorCheck {
+        camera,
+        image: gray?,
+    })
+}
+
 impl FrameCues {
     /// A runner of the cues `cfg` names.
     pub fn new(cfg: FrameCueConfig) -> Self {
@@ -142,17 +164,8 @@ impl FrameCues {
     ) -> Result<Option<ScanSurface>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(scfg), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
-            let gray = match (&frame.image, self.cfg.mirror_check) {
-                (Some(img), true) if img.camera.is_some() => Some(gray_of(&img.image)?),
-                _ => None,
-            };
-            let check = match (&gray, &frame.image) {
-                (Some(g), Some(img)) => img
-                    .camera
-                    .as_ref()
-                    .map(|camera| MirrorCheck { camera, image: g }),
-                _ => None,
-            };
+            let gray = mirror_gray(frame, self.cfg.mirror_check)?;
+            let check = mirror_check_of(frame, gray.as_ref());
             let out =
                 stereo_reflections_with(cloud, res, z_ref, check, scfg, self.cfg.surface_points)?;
             rep.stereo_ingest = Some(grid.ingest(&out.corrected, &scfg.noise)?);

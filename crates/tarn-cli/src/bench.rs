@@ -21,9 +21,9 @@ use tarn::build::{build_log, LogBuildConfig};
 use tarn::classify::color::RuleClassifier;
 use tarn::classify::lut::ColorLut;
 use tarn::classify::Label;
-use tarn::cues::frame::gray_of;
+use tarn::cues::frame::{mirror_check_of, mirror_gray};
 use tarn::cues::lidar::LidarBuffers;
-use tarn::cues::{estimate_sensor_height, stereo_reflections_with, MirrorCheck, StereoCueConfig};
+use tarn::cues::{estimate_sensor_height, stereo_reflections_with, StereoCueConfig};
 use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;
 use tarn::grid::{CellKey, GridConfig, RangeNoise, RollingGrid, TileMap};
@@ -394,15 +394,16 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         ..LogBuildConfig::default()
     };
 
-    // Each stage runs with what the mapper runs it with: the config's lidar noise and cue
-    // model (its buffers kept from run to run), the stereo noise of the frame's camera and
-    // baseline, the stereo cue's mirror check, and the surface points the colour check
-    // reads.
+    // Each stage runs with what the mapper runs it with: its cue config (the lidar's noise,
+    // the stereo cue with its mirror check, the surface points the colour check reads),
+    // the lidar cue model (its buffers kept from run to run), and the stereo noise of the
+    // frame's camera and baseline.
     let mcfg = &log_cfg.mapper;
+    let fc = mcfg.frame_cue_config(colour_labels.as_ref());
     let lidar = frame.lidar.as_ref();
     let stereo = frame.stereo.as_ref();
     let camera = frame.image.as_ref().and_then(|i| i.camera.as_ref());
-    let lidar_noise = mcfg.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise);
+    let lidar_noise = fc.lidar_noise;
     let stereo_noise = match (&mcfg.stereo, stereo) {
         (Some(s), Some(c)) => s.range_noise(camera, c.cols, frame.stereo_baseline_m).0,
         _ => RangeNoise::STEREO,
@@ -417,14 +418,8 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         ),
         _ => None,
     };
-    let stereo_cue = mcfg.stereo.as_ref().filter(|s| s.reflections);
-    let gray = match (stereo_cue.filter(|s| s.mirror_check), &frame.image) {
-        (Some(_), Some(img)) if img.camera.is_some() => Some(gray_of(&img.image)?),
-        _ => None,
-    };
-    let surface_points = colour_labels
-        .as_ref()
-        .is_some_and(|m| m.colour.is_some() && m.colour_check);
+    let gray = mirror_gray(frame, fc.stereo.is_some() && fc.mirror_check)?;
+    let surface_points = fc.surface_points;
 
     // The grid as a mapper holds it at the middle frame.
     let res = opts.grid.resolution;
@@ -482,15 +477,12 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             Ok(())
         });
     }
-    if let (Some(c), Some(s)) = (stereo, stereo_cue) {
+    if let (Some(c), Some(cue)) = (stereo, fc.stereo) {
         let cfg = StereoCueConfig {
             noise: stereo_noise,
-            ..s.cue
+            ..cue
         };
-        let check = gray
-            .as_ref()
-            .zip(camera)
-            .map(|(image, camera)| MirrorCheck { camera, image });
+        let check = mirror_check_of(frame, gray.as_ref());
         st.add("cue_stereo", true, move || {
             stereo_reflections_with(c, res, z_ref, check, &cfg, surface_points).map(|_| ())
         });
