@@ -47,6 +47,22 @@ pub fn ceil_i64(v: f64) -> i64 {
     t.saturating_add((v > t as f64) as i64)
 }
 
+/// `floor(v / res)` computed with a multiply by `inv = 1 / res`. The product differs from
+/// the correctly rounded quotient by at most a few ulps (relative 2⁻⁵¹, under 10⁻⁶ for
+/// |q| < 10⁹), so when the product's fraction is at least 10⁻⁶ from an integer both have
+/// the same floor; otherwise (and for huge |q|) the division decides.
+#[inline]
+pub fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
+    let q = v * inv;
+    let f = floor_i64(q);
+    let frac = q - f as f64;
+    if frac > 1e-6 && frac < 1.0 - 1e-6 && q.abs() < 1e9 {
+        f
+    } else {
+        floor_i64(v / res)
+    }
+}
+
 /// True when every component of the pose is finite and the rotation is a unit quaternion.
 pub fn pose_is_finite(p: &Pose) -> bool {
     let q = p.rotation.coords;

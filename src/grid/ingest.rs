@@ -32,7 +32,7 @@ use serde::{Deserialize, Serialize};
 use super::cell::{quantize_mm, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
 use super::{Elev, Layers, RollingGrid};
 use crate::error::{Error, Result};
-use crate::geom::PointCloud;
+use crate::geom::{cell_coord, floor_i64, PointCloud};
 
 /// Elevation noise of a range sensor against range `r` (metres from the sensor):
 /// `σ(r) = sigma0 + per_m·r + per_m2·r²`. Lidar is close to constant (beam divergence adds a
@@ -286,30 +286,6 @@ fn fast_threshold(gate: Option<(f32, f32)>, k: f64, min_mm: f64) -> i32 {
         return i32::MAX; // every point takes the exact test
     }
     (-floor_i64(-thr)) as i32
-}
-
-/// `floor(v / res)` computed with a multiply by `inv = 1 / res`. The product differs from
-/// the correctly rounded quotient by at most a few ulps (relative 2⁻⁵¹, under 10⁻⁶ for
-/// |q| < 10⁹), so when the product's fraction is at least 10⁻⁶ from an integer both have
-/// the same floor; otherwise (and for huge |q|) the division decides.
-#[inline]
-pub(crate) fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
-    let q = v * inv;
-    let f = floor_i64(q);
-    let frac = q - f as f64;
-    if frac > 1e-6 && frac < 1.0 - 1e-6 && q.abs() < 1e9 {
-        f
-    } else {
-        floor_i64(v / res)
-    }
-}
-
-/// `floor(v)` as an integer without a libm call (baseline x86-64 has no SSE4.1 `roundsd`).
-#[inline]
-fn floor_i64(v: f64) -> i64 {
-    let t = v as i64;
-    // Saturating: `as` saturates below −2⁶³, where the correction must not overflow.
-    t.saturating_sub(((t as f64) > v) as i64)
 }
 
 /// [`super::quantize_weight`] bit for bit, with the clamp before the conversion so the cast

@@ -563,7 +563,7 @@ proptest! {
         let inside = (k as f64 + frac) * res;
         for v in [v, inside, -v, -inside] {
             prop_assert_eq!(
-                super::ingest::cell_coord(v, 1.0 / res, res),
+                crate::geom::cell_coord(v, 1.0 / res, res),
                 (v / res).floor() as i64,
                 "v {} res {}", v, res
             );
