@@ -238,16 +238,53 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         // Built, from a damaged input: the outputs are written and name what was skipped.
         Err(e) if e.downcast_ref::<build_cmd::DamagedInput>().is_some() => {
-            eprintln!("tarn: warning: {e:#}");
+            eprintln!("tarn: warning: {}", chain_message(&e));
             ExitCode::from(3)
         }
         Err(e) => {
-            eprintln!("tarn: error: {e:#}");
+            eprintln!("tarn: error: {}", chain_message(&e));
             let interrupted = e
                 .chain()
                 .any(|c| matches!(c.downcast_ref(), Some(tarn::Error::Interrupted(_))));
             // 128 + SIGINT, as a shell reports a process stopped by Ctrl-C.
             ExitCode::from(if interrupted { 130 } else { 1 })
         }
+    }
+}
+
+/// An error and its causes, as `{:#}` joins them (": "), but leaving out a cause whose
+/// text its parent already ends with: the library's I/O errors say what the operating
+/// system said and also give it as their source, and it would be printed twice.
+fn chain_message(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if msg.ends_with(&text) {
+            continue;
+        }
+        if !msg.is_empty() {
+            msg.push_str(": ");
+        }
+        msg.push_str(&text);
+    }
+    msg
+}
+
+#[cfg(test)]
+mod chain_tests {
+    use super::chain_message;
+
+    #[test]
+    fn a_cause_its_parent_quotes_is_printed_once() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "no such file");
+        let e =
+            anyhow::Error::new(tarn::Error::io("/x/mapper.toml", io)).context("building log.mcap");
+        assert_eq!(
+            chain_message(&e),
+            "building log.mcap: /x/mapper.toml: no such file"
+        );
+        // Causes that are not quoted are all kept, in order.
+        let e = anyhow::anyhow!("inner").context("middle").context("outer");
+        assert_eq!(chain_message(&e), "outer: middle: inner");
     }
 }
