@@ -52,7 +52,7 @@ pub fn ceil_i64(v: f64) -> i64 {
 /// |q| < 10⁹), so when the product's fraction is at least 10⁻⁶ from an integer both have
 /// the same floor; otherwise (and for huge |q|) the division decides.
 #[inline]
-pub fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
+pub(crate) fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
     let q = v * inv;
     let f = floor_i64(q);
     let frac = q - f as f64;
