@@ -728,6 +728,11 @@ pub struct LogBuildReport {
     pub lidar_height_m: Option<f64>,
     /// The lidar cues' no-return diagnostic interval (lookahead, m).
     pub diagnostic_interval_m: Option<(f64, f64)>,
+    /// Every sensor value the mapper used, its source (log, config or rig file, measured,
+    /// default), the measurement beside any stated value, the cues that waited for a value
+    /// and the stated values the log contradicts ([`crate::calib`]).
+    #[serde(default)]
+    pub calibration: crate::calib::CalibrationReport,
     /// What happened to the lidar points, summed over frames.
     pub lidar_points: IngestStats,
     /// What happened to the stereo points, summed over frames.
@@ -1106,6 +1111,7 @@ pub fn build_log(
     let cues = cue_names(mapper.config());
     let lidar_height_m = mapper.lidar_height();
     let diagnostic_interval_m = mapper.diagnostic_interval();
+    let calibration = mapper.calibration().clone();
     let fusion = mapper.config().fusion;
     let (gcfg, res) = (
         mapper.config().grid.clone(),
@@ -1143,6 +1149,7 @@ pub fn build_log(
         cues,
         lidar_height_m,
         diagnostic_interval_m,
+        calibration,
         lidar_points: lidar,
         stereo_points: stereo,
         cue_counts: counts,

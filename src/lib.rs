@@ -10,6 +10,7 @@
 #![warn(missing_docs)]
 
 pub mod build;
+pub mod calib;
 pub mod classify;
 pub mod cues;
 pub mod error;

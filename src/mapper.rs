@@ -46,6 +46,7 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use crate::calib::{Calibration, CalibrationReport, Source, Sourced, StereoStated};
 use crate::cues::prior::WaterPrior;
 use crate::cues::{
     estimate_sensor_height, BeamModel, FrameCueConfig, FrameCues, FrameCuesReport, LidarCueConfig,
@@ -87,8 +88,12 @@ pub struct LidarConfig {
     /// Directions of missing beams are inferred from the scan across at most this fraction
     /// of a row.
     pub max_gap_fraction: f64,
-    /// Range noise of the returns.
-    pub noise: RangeNoise,
+    /// Range noise of the returns, as the datasheet states it. Absent: measured from the
+    /// scans themselves ([`crate::calib`]), and until then the noisy end of real lidars
+    /// ([`crate::calib::NOISY_LIDAR`]). A stated noise that the scans contradict is
+    /// reported, and the measurement used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<RangeNoise>,
     /// Farthest plausible return, m: points beyond it are dropped (made missing returns)
     /// and counted in the frame's warnings.
     pub max_range_m: f64,
@@ -110,7 +115,12 @@ impl LidarConfig {
             self.cue,
             self.reflectivity.then_some(self.reflectivity_cue),
         )
-        .map(|m| m.with_range_noise(self.noise))
+        .map(|m| m.with_range_noise(self.stated_noise()))
+    }
+
+    /// The stated range noise, or the noisy end of real lidars when none is stated.
+    pub fn stated_noise(&self) -> RangeNoise {
+        self.noise.unwrap_or(crate::calib::NOISY_LIDAR)
     }
 }
 
@@ -129,7 +139,7 @@ impl Default for LidarConfig {
             aperture_diameter_m: 0.0254,
             n_water: 1.33,
             max_gap_fraction: 0.25,
-            noise: RangeNoise::LIDAR,
+            noise: None,
             max_range_m: 300.0,
             cue: LidarCueConfig::default(),
             reflectivity_cue: ReflectivityConfig::default(),
@@ -148,9 +158,11 @@ pub struct StereoConfig {
     pub mirror_check: bool,
     /// Disparity noise (one σ, pixels of the disparity image that made the cloud): a
     /// datasheet value. With the focal length (the left `CameraInfo`), the binning (image
-    /// width over cloud width) and the baseline, it gives the cloud's range noise
-    /// ([`StereoConfig::range_noise`]).
-    pub disparity_noise_px: f64,
+    /// width over cloud width) and the baseline, it states the cloud's range noise
+    /// ([`StereoConfig::stated`]). Absent (a log alone): the noise is measured from the log
+    /// ([`crate::calib`]) and the reflection cue waits until it is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub disparity_noise_px: Option<f64>,
     /// Smallest disparity the matcher reports (pixels of the disparity image).
     pub min_disparity_px: f64,
     /// The baseline (m), for logs without the right camera's `CameraInfo` (which, when
@@ -159,8 +171,8 @@ pub struct StereoConfig {
     /// Farthest plausible stereo point, m: points beyond it are dropped (made NaN) and
     /// counted in the frame's warnings.
     pub max_range_m: f64,
-    /// Cue settings; `cue.noise` is the range noise used only where the frame does not
-    /// give the focal length and the baseline.
+    /// Cue settings; of `cue.noise` only `sigma0` (the near-range term a of
+    /// σ_z = a + c·z²) is read: c is stated or measured per frame.
     pub cue: StereoCueConfig,
 }
 
@@ -169,7 +181,7 @@ impl Default for StereoConfig {
         StereoConfig {
             reflections: true,
             mirror_check: true,
-            disparity_noise_px: 0.5,
+            disparity_noise_px: None,
             min_disparity_px: 1.0,
             baseline_m: None,
             max_range_m: 200.0,
@@ -178,43 +190,43 @@ impl Default for StereoConfig {
     }
 }
 
-/// Where a frame's stereo range noise came from.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum StereoNoiseSource {
-    /// σ_z = z²·σ_d·k/(f·B), from the camera, the binning, the baseline and σ_d.
-    Disparity,
-    /// The config's `cue.noise` polynomial: the frame had no camera model or no baseline.
-    Config,
-}
-
 impl StereoConfig {
-    /// The range noise of a stereo cloud of `cloud_cols` columns from a left camera
-    /// `camera` and a baseline `baseline_m` (the log's, else the config's): depth
-    /// z = f_k·B/d with f_k = f/k (k = image width / cloud width, the binning), so a
-    /// disparity error of σ_d is a depth error of z²·σ_d/(f_k·B) = z²·σ_d·k/(f·B). Range
-    /// stands in for depth (r ≥ z: the noise is not underestimated). Without a camera or a
-    /// baseline, the config's `cue.noise`.
-    pub fn range_noise(
+    /// What the frame and this config state of the stereo cloud's noise: the left camera's
+    /// focal length, the binning k (image width over the cloud's `cloud_cols`), the
+    /// baseline (the log's `baseline_m`, else the config's) and σ_d. Depth
+    /// z = f_k·B/d with f_k = f/k, so a disparity error of σ_d is a depth error of
+    /// z²·σ_d/(f_k·B): c = σ_d·k/(f·B) when every part is stated
+    /// ([`crate::calib::StereoStated::per_m2`]).
+    pub fn stated(
         &self,
         camera: Option<&crate::geom::camera::CameraModel>,
         cloud_cols: usize,
         baseline_m: Option<f64>,
-    ) -> (RangeNoise, StereoNoiseSource) {
-        let b = baseline_m
-            .or(self.baseline_m)
-            .filter(|b| b.is_finite() && *b > 0.0);
-        match (camera, b) {
-            (Some(cam), Some(b)) if cloud_cols > 0 && cam.fx > 0.0 => {
-                let k = (cam.width / cloud_cols).max(1) as f64;
-                let noise = RangeNoise {
-                    sigma0: self.cue.noise.sigma0,
-                    per_m: 0.0,
-                    per_m2: self.disparity_noise_px * k / (cam.fx * b),
-                };
-                (noise, StereoNoiseSource::Disparity)
-            }
-            _ => (self.cue.noise, StereoNoiseSource::Config),
+    ) -> StereoStated {
+        let ok = |b: &f64| b.is_finite() && *b > 0.0;
+        let sourced = |value, source| Sourced { value, source };
+        let camera = camera.filter(|c| c.fx.is_finite() && c.fx > 0.0 && cloud_cols > 0);
+        StereoStated {
+            focal_px: camera.map(|c| c.fx),
+            binning: camera.map(|c| (c.width / cloud_cols).max(1)),
+            baseline_m: baseline_m
+                .filter(ok)
+                .map(|b| sourced(b, Source::Log))
+                .or_else(|| {
+                    self.baseline_m
+                        .filter(ok)
+                        .map(|b| sourced(b, Source::Config))
+                }),
+            disparity_noise_px: self.disparity_noise_px.map(|s| sourced(s, Source::Config)),
+        }
+    }
+
+    /// The range noise of a cloud whose σ_z = a + c·z² has c = `per_m2` (a: `cue.noise`).
+    pub fn noise_of(&self, per_m2: f64) -> RangeNoise {
+        RangeNoise {
+            sigma0: self.cue.noise.sigma0,
+            per_m: 0.0,
+            per_m2,
         }
     }
 }
@@ -331,7 +343,10 @@ impl MapperConfig {
     ) -> FrameCueConfig {
         FrameCueConfig {
             lidar: None,
-            lidar_noise: self.lidar.as_ref().map_or(RangeNoise::LIDAR, |l| l.noise),
+            lidar_noise: self
+                .lidar
+                .as_ref()
+                .map_or(crate::calib::NOISY_LIDAR, |l| l.stated_noise()),
             stereo: self
                 .stereo
                 .as_ref()
@@ -394,7 +409,7 @@ impl MapperConfig {
     pub fn hazard_config(&self) -> HazardConfig {
         let mut water = self.water;
         if let (None, Some(l)) = (water.min_bottom_depth_m, &self.lidar) {
-            water.min_bottom_depth_m = Some(2.0 * l.noise.sigma0);
+            water.min_bottom_depth_m = Some(2.0 * l.stated_noise().sigma0);
         }
         HazardConfig {
             fusion: self.fusion,
@@ -476,7 +491,9 @@ impl MapperConfig {
                     "the reflectivity cue runs inside the lidar cues: set lidar.cues too",
                 ));
             }
-            named("lidar.noise", l.noise.validate())?;
+            if let Some(n) = &l.noise {
+                named("lidar.noise", n.validate())?;
+            }
             named("lidar.cue", l.cue.validate())?;
             // The prior holds the window's bodies and their reach: bounded by the window.
             let side = self.grid.resolution * self.grid.size_cells as f64;
@@ -499,11 +516,13 @@ impl MapperConfig {
                     "the mirror check confirms stereo reflections: set stereo.reflections too",
                 ));
             }
-            if !(s.disparity_noise_px.is_finite() && s.disparity_noise_px >= 0.0) {
-                return Err(Error::invalid(
-                    "mapper config stereo.disparity_noise_px",
-                    format!("{} is not a number ≥ 0", s.disparity_noise_px),
-                ));
+            if let Some(d) = s.disparity_noise_px {
+                if !(d.is_finite() && d >= 0.0) {
+                    return Err(Error::invalid(
+                        "mapper config stereo.disparity_noise_px",
+                        format!("{d} is not a number ≥ 0"),
+                    ));
+                }
             }
             if !(s.min_disparity_px.is_finite() && s.min_disparity_px > 0.0) {
                 return Err(Error::invalid(
@@ -683,8 +702,12 @@ pub struct FrameReport {
     pub cues: FrameCuesReport,
     /// The lidar height used by the cue model (given or estimated), once known.
     pub lidar_height_m: Option<f64>,
-    /// The stereo cloud's range noise and where it came from (a frame with a stereo cloud).
-    pub stereo_noise: Option<(RangeNoise, StereoNoiseSource)>,
+    /// The stereo cloud's range noise and where its c came from (a frame with a stereo
+    /// cloud).
+    pub stereo_noise: Option<(RangeNoise, Source)>,
+    /// Every sensor value used so far, its source, and what the log measured
+    /// ([`crate::calib`]).
+    pub calibration: CalibrationReport,
     /// Cells of the published snapshot.
     pub snapshot_cells: usize,
     /// Snapshot cells called water.
@@ -812,6 +835,20 @@ fn gate_range(
     Some((c, n, far))
 }
 
+/// The name of the channel the reflectivity cue reads from `cloud`, when it has one.
+fn strength_channel(cloud: &crate::geom::PointCloud, l: &LidarConfig) -> Option<&'static str> {
+    use crate::cues::reflectivity::Channel;
+    match (
+        l.reflectivity_cue.channel,
+        &cloud.reflectivity,
+        &cloud.intensity,
+    ) {
+        (Channel::Reflectivity, Some(_), _) | (Channel::Auto, Some(_), _) => Some("reflectivity"),
+        (Channel::Intensity, _, Some(_)) | (Channel::Auto, None, Some(_)) => Some("intensity"),
+        _ => None,
+    }
+}
+
 /// The online mapper. See the module documentation.
 pub struct Mapper {
     cfg: MapperConfig,
@@ -829,6 +866,8 @@ pub struct Mapper {
     frames: u64,
     /// Whether the warning that the lidar cues cannot run on an unorganized scan was given.
     warned_unorganized: bool,
+    /// The sensors' noise, measured from the frames and checked against what is stated.
+    calib: Calibration,
 }
 
 impl Mapper {
@@ -914,6 +953,7 @@ impl Mapper {
             scratch: Default::default(),
             frames: 0,
             warned_unorganized: false,
+            calib: Calibration::default(),
         })
     }
 
@@ -939,6 +979,12 @@ impl Mapper {
     /// The lidar height the cue model uses, once known.
     pub fn lidar_height(&self) -> Option<f64> {
         self.lidar_height
+    }
+
+    /// Every sensor value used so far, where it came from, and what the log measured
+    /// ([`crate::calib`]); it converges as frames come.
+    pub fn calibration(&self) -> &CalibrationReport {
+        self.calib.report()
     }
 
     /// The lidar cues' diagnostic interval (m of lookahead), once the cue model exists.
@@ -1008,6 +1054,16 @@ impl Mapper {
         let t = Instant::now();
         let mut surface = None;
         if let (Some(l), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
+            // An unorganized scan (one row of many points: a driver's flat cloud without a
+            // `ring` field to organize it by) has no scan lines for the cues to walk, nor
+            // for the noise to be measured along.
+            let unorganized = cloud.rows == 1 && cloud.cols > 1;
+            let noise = if unorganized {
+                l.stated_noise()
+            } else {
+                self.calib.lidar_noise(cloud, l.noise)
+            };
+            self.cues.cfg.lidar_noise = noise;
             if l.cues && self.cues.cfg.lidar.is_none() {
                 if let Some(h) = estimate_sensor_height(cloud) {
                     // Centimetres: the estimate is a median of noisy returns.
@@ -1018,11 +1074,17 @@ impl Mapper {
                     }
                 }
             }
-            // An unorganized scan (one row of many points: a driver's flat cloud without a
-            // `ring` field to organize it by) has no scan lines for the cues to walk.
-            let unorganized = cloud.rows == 1 && cloud.cols > 1;
+            if let Some(m) = self.cues.cfg.lidar.as_mut() {
+                m.set_range_noise(noise);
+            }
             if self.cues.cfg.lidar.is_some() && !unorganized {
                 surface = self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
+                let law = rep.cues.reflectivity_law;
+                if let (Some(law), Some(ch)) = (law, strength_channel(cloud, l)) {
+                    if law.samples > 0 {
+                        self.calib.intensity_falloff(law.exponent, ch);
+                    }
+                }
             } else {
                 if unorganized && l.cues && !self.warned_unorganized {
                     self.warned_unorganized = true;
@@ -1034,22 +1096,33 @@ impl Mapper {
                         cloud.cols
                     ));
                 }
-                rep.lidar_ingest = Some(grid.ingest(cloud, &l.noise)?);
+                rep.lidar_ingest = Some(grid.ingest(cloud, &noise)?);
             }
+            let source = if l.height_m.is_some() {
+                Source::Config
+            } else {
+                Source::Measured
+            };
+            self.calib
+                .set_lidar_height(self.lidar_height.map(|value| Sourced { value, source }));
         }
         rep.lidar_height_m = self.lidar_height;
         times.lidar = t.elapsed().as_secs_f64();
 
-        // 3. stereo
+        // 3. stereo: its noise measured (against this frame's lidar scan when there is
+        // one), then the reflection cue, which waits while the noise is unknown.
         let t = Instant::now();
         if let (Some(s), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
             let camera = frame.image.as_ref().and_then(|i| i.camera.as_ref());
-            let (noise, source) = s.range_noise(camera, cloud.cols, frame.stereo_baseline_m);
-            rep.stereo_noise = Some((noise, source));
+            let stated = s.stated(camera, cloud.cols, frame.stereo_baseline_m);
+            let lidar = self.cfg.lidar.as_ref().and(frame.lidar.as_ref());
+            let (c, known) = self.calib.stereo_noise(cloud, lidar, stated);
+            let noise = s.noise_of(c.value);
+            rep.stereo_noise = Some((noise, c.source));
             if let Some(c) = self.cues.cfg.stereo.as_mut() {
                 c.noise = noise;
             }
-            if s.reflections {
+            if s.reflections && known {
                 // What stereo says of the surface joins what the lidar says.
                 if let Some(st) = self.cues.apply_stereo(frame, grid, &mut rep.cues)? {
                     surface = Some(match surface {
@@ -1064,6 +1137,7 @@ impl Mapper {
                 rep.stereo_ingest = Some(grid.ingest(cloud, &noise)?);
             }
         }
+        rep.calibration = self.calib.report().clone();
         times.stereo = t.elapsed().as_secs_f64();
 
         // 4. labels: colour, SWIR and MWIR classification projected onto the map as votes.

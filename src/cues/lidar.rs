@@ -484,8 +484,13 @@ impl LidarCueModel {
     /// The range noise of the scans' returns (default [`RangeNoise::LIDAR`]): it sets the
     /// below-level gate's noise floor ([`LidarCueConfig::below_gate_m`]).
     pub fn with_range_noise(mut self, noise: RangeNoise) -> Self {
-        self.noise = noise;
+        self.set_range_noise(noise);
         self
+    }
+
+    /// Sets the range noise of the returns in place ([`LidarCueModel::with_range_noise`]).
+    pub fn set_range_noise(&mut self, noise: RangeNoise) {
+        self.noise = noise;
     }
 
     /// The water optics model the cue uses.

@@ -176,8 +176,13 @@ proptest::proptest! {
 #[test]
 fn a_bottom_returns_significant_depth_follows_the_lidars_noise() {
     let mut c = MapperConfig::default();
+    // Stated, or the noisy end of real lidars when it is not.
+    assert_eq!(c.hazard_config().water.min_bottom_depth_m, Some(0.06));
     let l = c.lidar.as_mut().unwrap();
-    l.noise.sigma0 = 0.015;
+    l.noise = Some(crate::grid::RangeNoise {
+        sigma0: 0.015,
+        ..crate::grid::RangeNoise::LIDAR
+    });
     assert_eq!(c.hazard_config().water.min_bottom_depth_m, Some(0.03));
     c.water.min_bottom_depth_m = Some(0.1);
     assert_eq!(c.hazard_config().water.min_bottom_depth_m, Some(0.1));

@@ -403,9 +403,17 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let lidar = frame.lidar.as_ref();
     let stereo = frame.stereo.as_ref();
     let camera = frame.image.as_ref().and_then(|i| i.camera.as_ref());
-    let lidar_noise = fc.lidar_noise;
+    // The noise the mapper would have measured by this frame (the frame alone).
+    let mut calib = tarn::calib::Calibration::default();
+    let lidar_noise = match (&mcfg.lidar, lidar) {
+        (Some(l), Some(c)) => calib.lidar_noise(c, l.noise),
+        _ => fc.lidar_noise,
+    };
     let stereo_noise = match (&mcfg.stereo, stereo) {
-        (Some(s), Some(c)) => s.range_noise(camera, c.cols, frame.stereo_baseline_m).0,
+        (Some(s), Some(c)) => {
+            let stated = s.stated(camera, c.cols, frame.stereo_baseline_m);
+            s.noise_of(calib.stereo_noise(c, lidar, stated).0.value)
+        }
         _ => RangeNoise::STEREO,
     };
     let lidar_model = match (mcfg.lidar.as_ref().filter(|l| l.cues), lidar) {

@@ -464,6 +464,10 @@ fn print_log_summary(r: &LogBuildReport) {
         );
     }
     print_water(&r.water);
+    crate::log_cmd::print_calibration(&r.calibration, r.frames_fused);
+    for w in &r.calibration.warnings {
+        eprintln!("warning: calibration: {w}");
+    }
     print_latency(r);
     for e in r.errors.iter().take(10) {
         println!("  skipped: {e}");

@@ -88,11 +88,21 @@ pub fn info(
     let cfg = cfg.with_topics_of(&summary, named, &log)?;
     let mut stream = FrameStream::open(&log, &cfg)?;
     let mut frame_errors = Vec::new();
+    // The sensors' calibration as `tarn build LOG` measures it, over the first frames.
+    let mut mapper = tarn::mapper::Mapper::new(tarn::mapper::MapperConfig::every_sensor())?;
+    mapper.set_publish(false);
     for f in stream.by_ref() {
-        if let Err(e) = f {
-            frame_errors.push(e.to_string());
+        match f {
+            Ok(frame) if mapper.frames() < CALIBRATION_FRAMES => {
+                if let Err(e) = mapper.update(&frame) {
+                    frame_errors.push(format!("frame at {:.6} s: {e}", frame.stamp));
+                }
+            }
+            Ok(_) => {}
+            Err(e) => frame_errors.push(e.to_string()),
         }
     }
+    let calibration = mapper.calibration().clone();
     let stats = stream.stats().clone();
     if as_json {
         let mut out = json!({
@@ -107,6 +117,7 @@ pub fn info(
             "frames": stats,
             "errors": frame_errors,
             "damaged": summary.damaged,
+            "calibration": calibration,
         });
         if dump {
             let mut msgs = Vec::new();
@@ -159,8 +170,94 @@ pub fn info(
     for e in &frame_errors {
         println!("  error: {e}");
     }
+    print_calibration(&calibration, mapper.frames());
     no_frames_warning(&cfg, &stats);
     crate::build_cmd::damaged_input(&log, "counted", &summary.damaged)
+}
+
+/// Frames `tarn info` measures the sensors' calibration over.
+const CALIBRATION_FRAMES: u64 = 20;
+
+/// The calibration section, as lines a person reads.
+pub fn print_calibration(c: &tarn::calib::CalibrationReport, frames: u64) {
+    use tarn::calib::Source;
+    let src = |s: Source| match s {
+        Source::Log => "log",
+        Source::Config => "config/rig",
+        Source::Measured => "measured",
+        Source::Default => "assumed (noisy end)",
+    };
+    let opt =
+        |v: Option<f64>, unit: &str| v.map_or("—".to_string(), |v| format!("{v:.4} {unit}"));
+    println!("  calibration (over {frames} frames):");
+    if let Some(s) = &c.stereo {
+        println!(
+            "    stereo: focal {} , binning {}, baseline {}, σ_d {}",
+            opt(s.focal_px, "px"),
+            s.binning.map_or("—".into(), |k| k.to_string()),
+            s.baseline_m.map_or("none".into(), |b| format!(
+                "{:.4} m ({})",
+                b.value,
+                src(b.source)
+            )),
+            s.disparity_noise_px
+                .map_or("not stated".into(), |d| format!(
+                    "{:.3} px ({})",
+                    d.value,
+                    src(d.source)
+                )),
+        );
+        println!(
+            "    stereo noise c (σ_z = a + c·z², 1/m): stated {}, measured {} (against the lidar {}, \
+             local planes {}), used {}",
+            opt(s.stated_per_m2, ""),
+            opt(s.measured.map(|m| m.per_m2), ""),
+            opt(s.measured_by_lidar_per_m2, ""),
+            opt(s.measured_by_planes_per_m2, ""),
+            s.used_per_m2
+                .map_or("—".into(), |u| format!("{:.4} ({})", u.value, src(u.source))),
+        );
+        if let Some(d) = s.implied_disparity_noise_px {
+            println!("    σ_d implied by the measurement: {d:.3} px");
+        }
+    }
+    if let Some(l) = &c.lidar {
+        println!(
+            "    lidar range noise σ0: stated {}, measured {}, used {}",
+            opt(l.stated_sigma0_m, "m"),
+            l.measured.map_or("—".into(), |m| format!(
+                "{:.4} m + {:.5}·r",
+                m.noise.sigma0, m.noise.per_m
+            )),
+            l.used_sigma0_m.map_or("—".into(), |u| format!(
+                "{:.4} m ({})",
+                u.value,
+                src(u.source)
+            )),
+        );
+        if let Some(h) = l.height_m {
+            println!("    lidar height: {:.2} m ({})", h.value, src(h.source));
+        }
+        if let Some(law) = &l.intensity_law {
+            println!(
+                "    lidar `{}` falls as r^{:.2} over the ground: {}, incidence exponent {:.2}",
+                law.channel,
+                law.falloff_exponent,
+                if law.range_compensated {
+                    "range-compensated"
+                } else {
+                    "raw (not range-compensated)"
+                },
+                law.incidence_exponent
+            );
+        }
+    }
+    for w in &c.waited {
+        println!("    waited: {w}");
+    }
+    for w in &c.warnings {
+        println!("    warning: {w}");
+    }
 }
 
 /// On stderr when no frame would be built: `tarn build` would refuse the log.

@@ -26,8 +26,15 @@ pub fn run(scene_path: &Path, out: &Path) -> anyhow::Result<()> {
         scene.description,
         sim_dir.display()
     );
-    let s = simulate(&scene, &sim_dir, SimOptions { noise: true })
-        .with_context(|| format!("simulating {}", scene_path.display()))?;
+    let s = simulate(
+        &scene,
+        &sim_dir,
+        SimOptions {
+            noise: true,
+            ..SimOptions::default()
+        },
+    )
+    .with_context(|| format!("simulating {}", scene_path.display()))?;
     println!(
         "  {} frames: {} lidar returns, {} stereo points; truth {} cells, {} water",
         s.frames, s.lidar_returns, s.stereo_points, s.truth_cells, s.water_cells

@@ -4,7 +4,18 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use tarn_sim::sim::{simulate, Scene, SimOptions};
+use tarn_sim::sim::{simulate, LogCalibration, Scene, SimOptions};
+
+fn parse_calibration(s: &str) -> Result<LogCalibration, String> {
+    LogCalibration::ALL
+        .iter()
+        .find(|(n, _)| *n == s)
+        .map(|(_, c)| *c)
+        .ok_or_else(|| {
+            let names: Vec<&str> = LogCalibration::ALL.iter().map(|(n, _)| *n).collect();
+            format!("{s:?} is not one of {}", names.join(", "))
+        })
+}
 
 #[derive(Args)]
 pub struct SimulateArgs {
@@ -19,6 +30,11 @@ pub struct SimulateArgs {
     /// Exact geometry: no range, disparity or pixel noise and no stereo dropout.
     #[arg(long)]
     pub no_noise: bool,
+    /// How much of the rig's calibration the log carries: full, no-right-info (no right
+    /// camera CameraInfo), zero-baseline (its P[0][3] = 0), raw-as-reflectivity (the
+    /// lidar's raw intensity named `reflectivity`).
+    #[arg(long, default_value = "full", value_parser = parse_calibration)]
+    pub calibration: LogCalibration,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -26,7 +42,11 @@ pub struct SimulateArgs {
 
 pub fn run_simulate(a: &SimulateArgs) -> anyhow::Result<()> {
     let scene = Scene::load_with_rig(&a.scene, a.rig.as_deref())?;
-    let r = simulate(&scene, &a.out, SimOptions { noise: !a.no_noise })
+    let opts = SimOptions {
+        noise: !a.no_noise,
+        calibration: a.calibration,
+    };
+    let r = simulate(&scene, &a.out, opts)
         .with_context(|| format!("simulating {}", a.scene.display()))?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);

@@ -5,7 +5,8 @@ use std::sync::OnceLock;
 
 use std::sync::Arc;
 
-use tarn::grid::{RangeNoise, RollingGrid, TileMap};
+use tarn::calib::Source;
+use tarn::grid::{RollingGrid, TileMap};
 use tarn::hazard::HazardMap;
 use tarn::io::frames::{Frame, FrameStream, LogConfig};
 use tarn::mapper::*;
@@ -41,7 +42,15 @@ fn sim() -> &'static Sim {
     static SIM: OnceLock<Sim> = OnceLock::new();
     SIM.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        simulate(&small_scene(), dir.path(), SimOptions { noise: true }).unwrap();
+        simulate(
+            &small_scene(),
+            dir.path(),
+            SimOptions {
+                noise: true,
+                ..SimOptions::default()
+            },
+        )
+        .unwrap();
         let log = dir.path().join("log.mcap");
         let frames: Vec<Frame> = FrameStream::open(&log, &LogConfig::default())
             .unwrap()
@@ -182,7 +191,7 @@ fn without_cues_the_mapper_is_plain_ingest() {
         .all(|r| r.cues.lidar.is_none() && r.cues.stereo_runs == 0));
     let mut grid: Option<RollingGrid> = None;
     let mut global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref).unwrap();
-    for f in &s.frames {
+    for (f, r) in s.frames.iter().zip(&reps) {
         let (cx, cy) = window_centre(&cfg.grid, &f.base_to_map);
         let g = match grid.as_mut() {
             Some(g) => {
@@ -191,14 +200,12 @@ fn without_cues_the_mapper_is_plain_ingest() {
             }
             None => grid.insert(RollingGrid::new(cfg.grid.clone(), cx, cy).unwrap()),
         };
-        g.ingest(f.lidar.as_ref().unwrap(), &RangeNoise::LIDAR)
-            .unwrap();
-        let stereo = f.stereo.as_ref().unwrap();
-        let camera = f.image.as_ref().and_then(|i| i.camera.as_ref());
-        let (noise, source) =
-            StereoConfig::default().range_noise(camera, stereo.cols, f.stereo_baseline_m);
-        assert_eq!(source, StereoNoiseSource::Disparity);
-        g.ingest(stereo, &noise).unwrap();
+        // With the noise the mapper measured from the log by that frame.
+        let lidar_noise = r.calibration.lidar.as_ref().unwrap().used_noise.unwrap();
+        g.ingest(f.lidar.as_ref().unwrap(), &lidar_noise).unwrap();
+        let (noise, source) = r.stereo_noise.unwrap();
+        assert_eq!(source, Source::Measured);
+        g.ingest(f.stereo.as_ref().unwrap(), &noise).unwrap();
     }
     grid.unwrap().flush(&mut global);
     assert!(tiles == global);
@@ -357,12 +364,12 @@ fn a_lidar_only_config_runs_no_stereo_code() {
     assert_eq!(tarn::build::cue_names(&cfg), ["lidar", "reflectivity"]);
 }
 
-/// The stereo range noise comes from the disparity noise, the focal length and binning of
-/// the log's camera and the baseline of its right CameraInfo: σ_z = z²·σ_d·k/(f·B).
-/// Without a baseline (from the log or the config) it falls back to the config's and says
-/// so.
+/// The stereo range noise is stated by the disparity noise, the focal length and binning
+/// of the log's camera and the baseline of its right CameraInfo: σ_z = z²·σ_d·k/(f·B);
+/// the mapper measures it from the log and uses the measurement, within 30 % of the rig's
+/// true coefficient from the first frame.
 #[test]
-fn stereo_noise_comes_from_the_camera_and_the_baseline() {
+fn stereo_noise_is_stated_by_the_camera_and_measured_from_the_log() {
     let s = sim();
     let f = &s.frames[2];
     let cam = f.image.as_ref().unwrap().camera.as_ref().unwrap();
@@ -373,32 +380,41 @@ fn stereo_noise_comes_from_the_camera_and_the_baseline() {
     let k = (cam.width / cloud.cols) as f64;
     assert_eq!(k, spec.bin as f64);
     let cfg = StereoConfig {
-        disparity_noise_px: 0.4,
+        disparity_noise_px: Some(0.4),
         ..StereoConfig::default()
     };
-    let (n, src) = cfg.range_noise(Some(cam), cloud.cols, Some(b));
-    assert_eq!(src, StereoNoiseSource::Disparity);
-    assert!((n.per_m2 - 0.4 * k / (cam.fx * b)).abs() < 1e-15);
-    assert_eq!(n.per_m, 0.0);
-    // The config's baseline serves a log without the right camera; neither: the config's
-    // noise polynomial.
+    let stated = cfg.stated(Some(cam), cloud.cols, Some(b));
+    assert_eq!(stated.baseline_m.unwrap().source, tarn::calib::Source::Log);
+    assert!((stated.per_m2().unwrap() - 0.4 * k / (cam.fx * b)).abs() < 1e-15);
+    // The config's baseline serves a log without the right camera; without σ_d, a camera
+    // or a baseline, nothing is stated.
     let with_b = StereoConfig {
         baseline_m: Some(b),
         ..cfg
     };
-    assert_eq!(with_b.range_noise(Some(cam), cloud.cols, None), (n, src));
-    assert_eq!(
-        cfg.range_noise(Some(cam), cloud.cols, None),
-        (cfg.cue.noise, StereoNoiseSource::Config)
-    );
-    assert_eq!(
-        cfg.range_noise(None, cloud.cols, Some(b)).1,
-        StereoNoiseSource::Config
-    );
-    // The mapper reports what it used.
+    let s2 = with_b.stated(Some(cam), cloud.cols, None);
+    assert_eq!(s2.baseline_m.unwrap().source, tarn::calib::Source::Config);
+    assert_eq!(s2.per_m2(), stated.per_m2());
+    assert_eq!(cfg.stated(Some(cam), cloud.cols, None).per_m2(), None);
+    assert_eq!(cfg.stated(None, cloud.cols, Some(b)).per_m2(), None);
+    let unstated = StereoConfig::default().stated(Some(cam), cloud.cols, Some(b));
+    assert_eq!(unstated.per_m2(), None);
+    // The mapper measures it from the first frame on, and reports what it used.
+    let true_c = spec.disparity_noise_px * k / (cam.fx * b);
     let mut m = Mapper::new(MapperConfig::default()).unwrap();
-    let r = m.update(f).unwrap();
-    assert_eq!(r.stereo_noise.unwrap().1, StereoNoiseSource::Disparity);
+    for f in &s.frames {
+        let r = m.update(f).unwrap();
+        let (noise, source) = r.stereo_noise.unwrap();
+        assert_eq!(source, Source::Measured);
+        assert!(
+            (noise.per_m2 / true_c - 1.0).abs() < 0.3,
+            "{} for {true_c}",
+            noise.per_m2
+        );
+    }
+    let st = m.calibration().stereo.as_ref().unwrap();
+    assert_eq!(st.frames_waited, 0);
+    assert!(st.stated_per_m2.is_none());
 }
 
 #[test]

@@ -22,7 +22,15 @@ fn drive(dir: &std::path::Path, waypoints: &[[f64; 2]]) -> std::path::PathBuf {
     s.trajectory.speed = 3.0;
     s.trajectory.rate_hz = 2.0;
     s.trajectory.frames = Some(8);
-    simulate(&s, dir, SimOptions { noise: true }).unwrap();
+    simulate(
+        &s,
+        dir,
+        SimOptions {
+            noise: true,
+            ..SimOptions::default()
+        },
+    )
+    .unwrap();
     dir.join("log.mcap")
 }
 

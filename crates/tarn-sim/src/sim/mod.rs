@@ -24,7 +24,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub use render::{
     body_to_optical, lens, mount, pinhole, radiance, render_image, sun, water_views, Band, Lidar,
@@ -45,12 +45,44 @@ use crate::io::ros::{Header, Image, TfMessage, Time, TransformStamped};
 pub struct SimOptions {
     /// Sensor noise (range, disparity, dropout, pixel noise). Off: exact geometry.
     pub noise: bool,
+    /// How much of the rig's calibration the log carries, as real logs vary.
+    pub calibration: LogCalibration,
 }
 
 impl Default for SimOptions {
     fn default() -> Self {
-        SimOptions { noise: true }
+        SimOptions {
+            noise: true,
+            calibration: LogCalibration::Full,
+        }
     }
+}
+
+/// How much of its calibration a simulated log carries: real logs are often recorded
+/// without the right camera's `CameraInfo`, with a zero baseline in it, or with a raw
+/// intensity under the name `reflectivity`. The sensors' data are the same in every case.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LogCalibration {
+    /// Everything a driver publishes: both `CameraInfo`s, the lidar's channel by its name.
+    #[default]
+    Full,
+    /// No `/camera_right/camera_info`: no baseline in the log.
+    NoRightInfo,
+    /// The right `CameraInfo` with P[0][3] = 0 (a zero baseline, as RELLIS-3D ships it).
+    ZeroBaseline,
+    /// The lidar's raw intensity (falling as 1/r²) written as `reflectivity`.
+    RawAsReflectivity,
+}
+
+impl LogCalibration {
+    /// Every variant, by its name on the command line.
+    pub const ALL: [(&'static str, LogCalibration); 4] = [
+        ("full", LogCalibration::Full),
+        ("no-right-info", LogCalibration::NoRightInfo),
+        ("zero-baseline", LogCalibration::ZeroBaseline),
+        ("raw-as-reflectivity", LogCalibration::RawAsReflectivity),
+    ];
 }
 
 /// What [`simulate`] did.
@@ -183,17 +215,17 @@ pub fn apply_rig(cfg: &mut crate::mapper::MapperConfig, rig: &RigSpec) {
             aperture_diameter_m: l.aperture_m,
             // The datasheet's range and a margin for range noise: nothing real lies beyond.
             max_range_m: l.max_range_m * 1.1,
-            noise: RangeNoise {
+            noise: Some(RangeNoise {
                 sigma0: l.range_noise_m.max(0.01),
                 ..RangeNoise::LIDAR
-            },
+            }),
             ..c
         }),
         _ => None,
     };
     cfg.stereo = match (&rig.stereo, cfg.stereo.take()) {
         (Some(s), Some(c)) => Some(StereoConfig {
-            disparity_noise_px: s.disparity_noise_px,
+            disparity_noise_px: Some(s.disparity_noise_px),
             min_disparity_px: s.min_disparity_px,
             baseline_m: Some(s.baseline_m),
             max_range_m: s.max_range_m * 1.1,
@@ -213,7 +245,18 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
     let w = World::build(scene)?;
     let poses = trajectory(&w);
     let rig = &scene.rig;
-    let lidar = rig.lidar.as_ref().map(Lidar::new).transpose()?;
+    let raw_as_reflectivity = opts.calibration == LogCalibration::RawAsReflectivity;
+    let lidar = rig
+        .lidar
+        .as_ref()
+        .map(|spec| {
+            let mut spec = spec.clone();
+            if raw_as_reflectivity {
+                spec.intensity = IntensityKind::Raw;
+            }
+            Lidar::new(&spec)
+        })
+        .transpose()?;
     let stereo = rig.stereo.as_ref().map(Stereo::new).transpose()?;
     let camera = rig
         .camera
@@ -255,15 +298,10 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
                 nalgebra::UnitQuaternion::identity(),
             );
         statics.push(tf(start, "base_link", RIGHT_CAMERA_FRAME, right));
-        topics.extend(
-            [
-                "/stereo/points",
-                "/camera/image",
-                "/camera/camera_info",
-                "/camera_right/camera_info",
-            ]
-            .map(String::from),
-        );
+        topics.extend(["/stereo/points", "/camera/image", "/camera/camera_info"].map(String::from));
+        if opts.calibration != LogCalibration::NoRightInfo {
+            topics.push("/camera_right/camera_info".to_string());
+        }
     }
     if let Some((_, m)) = &camera {
         statics.push(tf(start, "base_link", CAMERA_FRAME, *m));
@@ -308,7 +346,10 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         write_s += tw.elapsed().as_secs_f64();
         if let Some(l) = &lidar {
             let tr = Instant::now();
-            let (cloud, water) = l.scan_with_water(&w, &(base * l.mount), f, opts.noise)?;
+            let (mut cloud, water) = l.scan_with_water(&w, &(base * l.mount), f, opts.noise)?;
+            if raw_as_reflectivity {
+                cloud.reflectivity = cloud.intensity.take();
+            }
             seen.extend(water.iter().map(|p| key(p[0], p[1])));
             render_s += tr.elapsed().as_secs_f64();
             rep.lidar_beams += cloud.len() as u64;
@@ -354,11 +395,13 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
                 header(p.stamp, CAMERA_FRAME),
                 ns,
             )?;
-            log.write_camera_info_msg(
-                "/camera_right/camera_info",
-                &s.right_info(header(p.stamp, RIGHT_CAMERA_FRAME)),
-                ns,
-            )?;
+            if opts.calibration != LogCalibration::NoRightInfo {
+                let mut info = s.right_info(header(p.stamp, RIGHT_CAMERA_FRAME));
+                if opts.calibration == LogCalibration::ZeroBaseline {
+                    info.p[3] = 0.0;
+                }
+                log.write_camera_info_msg("/camera_right/camera_info", &info, ns)?;
+            }
             write_s += tw.elapsed().as_secs_f64();
         }
         // The single cameras: colour (without a stereo partner), SWIR, MWIR.

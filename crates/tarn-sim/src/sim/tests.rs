@@ -500,7 +500,16 @@ fn run_sim(threads: usize, noise: bool) -> (tempfile::TempDir, SimReport) {
         .build()
         .unwrap();
     let r = pool
-        .install(|| simulate(&scene, dir.path(), SimOptions { noise }))
+        .install(|| {
+            simulate(
+                &scene,
+                dir.path(),
+                SimOptions {
+                    noise,
+                    ..SimOptions::default()
+                },
+            )
+        })
         .unwrap();
     (dir, r)
 }
@@ -947,7 +956,15 @@ fn a_rig_cannot_carry_scene_truth() {
         std::fs::write(&p, t).unwrap();
         let scene = Scene::load_with_rig(&p, Some(&rig)).unwrap();
         let out = dir.path().join(format!("sim{i}"));
-        simulate(&scene, &out, SimOptions { noise: false }).unwrap();
+        simulate(
+            &scene,
+            &out,
+            SimOptions {
+                noise: false,
+                ..SimOptions::default()
+            },
+        )
+        .unwrap();
         assert!(!out.join("mapper.toml").exists());
         let cfg = mapper_config(&RigSpec::load(&out.join("rig.toml")).unwrap());
         assert_eq!(cfg.lidar.as_ref().unwrap().attenuation_per_m, None);
@@ -972,7 +989,10 @@ fn the_log_carries_the_baseline_and_the_distortion() {
     simulate(
         &Scene::from_toml_str(&t).unwrap(),
         dir.path(),
-        SimOptions { noise: false },
+        SimOptions {
+            noise: false,
+            ..SimOptions::default()
+        },
     )
     .unwrap();
     let frames: Vec<_> = crate::io::frames::FrameStream::open(
