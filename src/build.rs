@@ -985,6 +985,7 @@ pub fn build_log(
     mapper.set_publish(cfg.per_frame_maps);
     let summary = crate::io::log::summarize_quick(input)?;
     let log_cfg = frame_log_config(cfg, &summary, input)?;
+    calibrate_on_log(&mut mapper, input, &log_cfg)?;
     let mut stream = FrameStream::open(input, &log_cfg)?;
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
     let mut counts = CueCounts::default();
@@ -1179,6 +1180,32 @@ pub fn build_log(
     Ok(report)
 }
 
+/// Frames of a log's start an offline build reads to measure the sensors' noise, at most.
+pub const CALIBRATION_MAX_FRAMES: usize = 200;
+
+/// Shows the first frames of the log to `mapper` ([`Mapper::calibrate`]) until its
+/// calibration is settled, at most [`CALIBRATION_MAX_FRAMES`], and holds what it measured:
+/// every build of the log, whole or in time chunks, then fuses every frame with the same
+/// noise. Frames that cannot be read are left to the build, which reports them.
+pub fn calibrate_on_log(
+    mapper: &mut Mapper,
+    input: &Path,
+    log_cfg: &crate::io::frames::LogConfig,
+) -> Result<()> {
+    let stream = crate::io::frames::FrameStream::open(input, log_cfg)?;
+    for frame in stream.take(CALIBRATION_MAX_FRAMES).flatten() {
+        crate::interrupt::check("measuring the sensors' noise")?;
+        // A frame the mapper refuses (an implausible pose) is refused again, and reported,
+        // when the build reaches it.
+        let _ = mapper.calibrate(&frame);
+        if mapper.calibration_settled() {
+            break;
+        }
+    }
+    mapper.hold_calibration();
+    Ok(())
+}
+
 /// The log settings of a build: [`LogBuildConfig::log`] with its sensor topics chosen
 /// ([`crate::io::frames::LogConfig::with_topics_of`]: named ones, else by message type).
 pub fn frame_log_config(
@@ -1244,6 +1271,7 @@ pub fn build_tiles(
     mapper.set_publish(false);
     let summary = crate::io::log::summarize_quick(input)?;
     let log_cfg = frame_log_config(cfg, &summary, input)?;
+    calibrate_on_log(&mut mapper, input, &log_cfg)?;
     let mut stream = FrameStream::open(input, &log_cfg)?;
     let (mut frames_fused, mut frames_outside) = (0u64, 0u64);
     let mut errors = Vec::new();

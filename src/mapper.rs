@@ -623,6 +623,39 @@ impl MapperConfig {
         Ok(())
     }
 
+    /// The datasheet values of the configured sensors that hold their defaults: what a
+    /// mapper of this config assumes of sensors the log cannot describe (a rig file states
+    /// them).
+    pub fn assumed_datasheet_values(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        if let Some(l) = &self.lidar {
+            let d = LidarConfig::default();
+            for (name, value, default) in [
+                ("lidar.wavelength_nm", l.wavelength_nm, d.wavelength_nm),
+                ("lidar.dry_limit_m", l.dry_limit_m, d.dry_limit_m),
+                ("lidar.albedo", l.albedo, d.albedo),
+                (
+                    "lidar.aperture_diameter_m",
+                    l.aperture_diameter_m,
+                    d.aperture_diameter_m,
+                ),
+            ] {
+                if value == default {
+                    v.push(format!("{name} = {value} (the default)"));
+                }
+            }
+        }
+        if let Some(s) = &self.stereo {
+            if s.min_disparity_px == StereoConfig::default().min_disparity_px {
+                v.push(format!(
+                    "stereo.min_disparity_px = {} (the default)",
+                    s.min_disparity_px
+                ));
+            }
+        }
+        v
+    }
+
     /// The optics of the configured lidar at sensor height `height_m`.
     fn lidar_optics(l: &LidarConfig, height_m: f64) -> LidarModelConfig {
         LidarModelConfig {
@@ -835,6 +868,24 @@ fn gate_range(
     Some((c, n, far))
 }
 
+/// The vehicle's and the clouds' poses are rotations within the map.
+fn check_frame_poses(frame: &Frame) -> Result<()> {
+    check_pose(frame.stamp, "vehicle (base_link → map)", &frame.base_to_map)?;
+    for (what, c) in [("lidar", &frame.lidar), ("stereo", &frame.stereo)] {
+        if let Some(c) = c {
+            check_pose(frame.stamp, &format!("{what} cloud"), &c.frame_to_map)?;
+        }
+    }
+    Ok(())
+}
+
+/// The noise a frame is fused with ([`Mapper::observe_noise`]).
+#[derive(Default)]
+struct FrameNoise {
+    lidar: Option<RangeNoise>,
+    stereo: Option<(Sourced, bool)>,
+}
+
 /// The name of the channel the reflectivity cue reads from `cloud`, when it has one.
 fn strength_channel(cloud: &crate::geom::PointCloud, l: &LidarConfig) -> Option<&'static str> {
     use crate::cues::reflectivity::Channel;
@@ -919,6 +970,49 @@ impl Mapper {
         out
     }
 
+    /// Measures the sensors' noise on `frame` (gated) until the calibration holds its
+    /// values: the lidar's range noise, and the stereo cloud's c with whether it is known.
+    fn observe_noise(&mut self, frame: &Frame) -> FrameNoise {
+        self.calib.count_frame();
+        let mut out = FrameNoise::default();
+        if let (Some(l), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
+            // An unorganized scan has no scan lines to measure the noise along.
+            if !(cloud.rows == 1 && cloud.cols > 1) {
+                out.lidar = Some(self.calib.lidar_noise(cloud, l.noise));
+            }
+        }
+        if let (Some(s), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
+            let camera = frame.image.as_ref().and_then(|i| i.camera.as_ref());
+            let stated = s.stated(camera, cloud.cols, frame.stereo_baseline_m);
+            let lidar = self.cfg.lidar.as_ref().and(frame.lidar.as_ref());
+            out.stereo = Some(self.calib.stereo_noise(cloud, lidar, stated));
+        }
+        out
+    }
+
+    /// Measures the sensors' noise on `frame` without mapping it, as [`Mapper::update`]
+    /// would: an offline build shows the log's first frames to the mapper this way until
+    /// [`Mapper::calibration_settled`], so that every frame is fused with the noise held
+    /// from then on, whichever piece of the log a mapper builds. On a vehicle, calling it
+    /// on the first frames before mapping them does the same.
+    pub fn calibrate(&mut self, frame: &Frame) -> Result<()> {
+        check_frame_poses(frame)?;
+        let mut rep = FrameReport::default();
+        let gated = self.gate_frame(frame, &mut rep);
+        self.observe_noise(gated.as_ref().unwrap_or(frame));
+        Ok(())
+    }
+
+    /// Holds the calibration's values as they are ([`crate::calib::Calibration::hold`]).
+    pub fn hold_calibration(&mut self) {
+        self.calib.hold();
+    }
+
+    /// Whether the calibration holds its values ([`crate::calib::Calibration::is_settled`]).
+    pub fn calibration_settled(&self) -> bool {
+        self.calib.is_settled()
+    }
+
     /// A mapper for `cfg` (validated). With a given lidar height the cue model is built
     /// here; with `height_m` absent, on the first scan that allows the estimate.
     pub fn new(cfg: MapperConfig) -> Result<Mapper> {
@@ -936,6 +1030,8 @@ impl Mapper {
                 lidar_height = Some(h);
             }
         }
+        let mut calib = Calibration::default();
+        calib.set_assumed(cfg.assumed_datasheet_values());
         let global = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
         let empty = Arc::new(HazardMap::new(cfg.grid.resolution, Vec::new()));
         let labels = models.map(crate::project::FrameLabels::new).transpose()?;
@@ -953,7 +1049,7 @@ impl Mapper {
             scratch: Default::default(),
             frames: 0,
             warned_unorganized: false,
-            calib: Calibration::default(),
+            calib,
         })
     }
 
@@ -1027,14 +1123,10 @@ impl Mapper {
         let mut times = StageTimes::default();
 
         // 0. plausibility: poses that are rotations within the map, points within range.
-        check_pose(frame.stamp, "vehicle (base_link → map)", &frame.base_to_map)?;
-        for (what, c) in [("lidar", &frame.lidar), ("stereo", &frame.stereo)] {
-            if let Some(c) = c {
-                check_pose(frame.stamp, &format!("{what} cloud"), &c.frame_to_map)?;
-            }
-        }
+        check_frame_poses(frame)?;
         let gated = self.gate_frame(frame, &mut rep);
         let frame = gated.as_ref().unwrap_or(frame);
+        let noise = self.observe_noise(frame);
 
         // 1. recentre
         let t = Instant::now();
@@ -1058,11 +1150,7 @@ impl Mapper {
             // `ring` field to organize it by) has no scan lines for the cues to walk, nor
             // for the noise to be measured along.
             let unorganized = cloud.rows == 1 && cloud.cols > 1;
-            let noise = if unorganized {
-                l.stated_noise()
-            } else {
-                self.calib.lidar_noise(cloud, l.noise)
-            };
+            let noise = noise.lidar.unwrap_or_else(|| l.stated_noise());
             self.cues.cfg.lidar_noise = noise;
             if l.cues && self.cues.cfg.lidar.is_none() {
                 if let Some(h) = estimate_sensor_height(cloud) {
@@ -1112,11 +1200,9 @@ impl Mapper {
         // 3. stereo: its noise measured (against this frame's lidar scan when there is
         // one), then the reflection cue, which waits while the noise is unknown.
         let t = Instant::now();
-        if let (Some(s), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
-            let camera = frame.image.as_ref().and_then(|i| i.camera.as_ref());
-            let stated = s.stated(camera, cloud.cols, frame.stereo_baseline_m);
-            let lidar = self.cfg.lidar.as_ref().and(frame.lidar.as_ref());
-            let (c, known) = self.calib.stereo_noise(cloud, lidar, stated);
+        if let (Some(s), Some(cloud), Some((c, known))) =
+            (&self.cfg.stereo, &frame.stereo, noise.stereo)
+        {
             let noise = s.noise_of(c.value);
             rep.stereo_noise = Some((noise, c.source));
             if let Some(c) = self.cues.cfg.stereo.as_mut() {

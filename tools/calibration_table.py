@@ -98,9 +98,10 @@ for scene in scenes:
         if lid and lid.get("measured"):
             n = lid["measured"]["noise"]
             law = lid.get("intensity_law")
+            inc = "not determined" if not law or law["incidence_exponent"] is None else f"{law['incidence_exponent']:.2f}"
             law_s = (f"; its `{law['channel']}` falls as r^{law['falloff_exponent']:.2f} "
                      f"({'range-compensated' if law['range_compensated'] else 'raw'}, incidence "
-                     f"exponent {law['incidence_exponent']:.2f})") if law else ""
+                     f"exponent {inc})") if law else ""
             print(f"Lidar (plain build): range noise measured {n['sigma0']:.4f} m + "
                   f"{n['per_m']:.5f}·r{law_s}.")
             print()

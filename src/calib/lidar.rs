@@ -56,11 +56,19 @@ impl LidarNoiseEstimator {
     /// Adds one organized scan (rings × azimuth columns; a scan of one or two columns, a
     /// vertical scanner, is walked down its column).
     pub fn observe(&mut self, scan: &PointCloud) {
-        let (lines, len, at): (usize, usize, Box<dyn Fn(usize, usize) -> usize>) = if scan.cols >= 3
-        {
-            (scan.rows, scan.cols, Box::new(|l, k| scan.index(l, k)))
+        // Walk the rings (rows); a scan of one or two columns, down its column.
+        let along_rows = scan.cols >= 3;
+        let (lines, len) = if along_rows {
+            (scan.rows, scan.cols)
         } else {
-            (scan.cols, scan.rows, Box::new(|l, k| scan.index(k, l)))
+            (scan.cols, scan.rows)
+        };
+        let at = |l: usize, k: usize| {
+            if along_rows {
+                scan.index(l, k)
+            } else {
+                scan.index(k, l)
+            }
         };
         if len < 3 {
             return;
@@ -131,7 +139,17 @@ impl LidarNoiseEstimator {
         } else {
             0.0
         };
-        let sigma0 = (ms - per_m * mr).max(0.001);
+        // A σ that the fit takes below 5 mm at zero range is held there, and the slope
+        // refitted through it: no lidar is that precise near by.
+        const FLOOR: f64 = 0.005;
+        let (sigma0, per_m) = if ms - per_m * mr >= FLOOR {
+            (ms - per_m * mr, per_m)
+        } else {
+            let (srr, srs) = pts.iter().fold((0.0, 0.0), |(a, b), p| {
+                (a + p.2 * p.0 * p.0, b + p.2 * p.0 * (p.1 - FLOOR))
+            });
+            (FLOOR, if srr > 0.0 { (srs / srr).max(0.0) } else { 0.0 })
+        };
         let noise = RangeNoise {
             sigma0,
             per_m,
@@ -156,8 +174,10 @@ pub struct IntensityLaw {
     /// incidence alone), as opposed to a raw intensity that also falls as 1/r².
     pub range_compensated: bool,
     /// The incidence exponent m of the ground's backscatter (cosᵐθ; 1 for Lambertian)
-    /// that remains once the channel's convention is taken out.
-    pub incidence_exponent: f64,
+    /// that remains once the channel's convention is taken out; `None` where that leaves a
+    /// value outside 0–4, which no surface has: the mix of surfaces along the scan, not
+    /// the incidence, then decides how the channel falls.
+    pub incidence_exponent: Option<f64>,
     /// Scans the median is over.
     pub scans: usize,
 }
@@ -192,11 +212,12 @@ impl IntensityLawEstimator {
         let mut e: Vec<f64> = self.exponents.iter().copied().collect();
         let falloff_exponent = median(&mut e)?;
         let range_compensated = falloff_exponent > -2.0;
-        let incidence_exponent = if range_compensated {
+        let m = if range_compensated {
             -falloff_exponent
         } else {
             -falloff_exponent - 2.0
         };
+        let incidence_exponent = (0.0..=4.0).contains(&m).then_some(m);
         Some(IntensityLaw {
             channel: self.channel?.to_string(),
             falloff_exponent,

@@ -17,6 +17,10 @@
 //!
 //! [`Calibration`] holds the estimators of one mapper and writes the [`CalibrationReport`]
 //! each frame: every value used, its [`Source`], and the measurement beside any stated one.
+//! Each sensor is measured over its first [`Calibration::FRAMES`] frames and the value is
+//! then held; an offline build measures them before it maps the first frame
+//! ([`crate::mapper::Mapper::calibrate`]), so every frame of a log, and every piece a
+//! distributed build cuts it into, is fused with the same noise.
 
 pub mod lidar;
 pub mod robust;
@@ -161,6 +165,8 @@ pub struct StereoCalibration {
     pub implied_disparity_noise_px: Option<f64>,
     /// The c used (last frame), and its source.
     pub used_per_m2: Option<Sourced>,
+    /// Frames the measurement rests on.
+    pub measured_frames: u64,
     /// Frames whose stereo reflection cue waited for the noise to be known.
     pub frames_waited: u64,
 }
@@ -172,6 +178,8 @@ pub struct LidarCalibration {
     pub stated_sigma0_m: Option<f64>,
     /// Range noise measured from the scans (`σ(r) = sigma0 + per_m·r`).
     pub measured: Option<LidarMeasurement>,
+    /// Scans the measurement rests on.
+    pub measured_frames: u64,
     /// The range noise used (last frame): σ0 and its source.
     pub used_sigma0_m: Option<Sourced>,
     /// The range noise used, whole.
@@ -189,6 +197,9 @@ pub struct CalibrationReport {
     pub stereo: Option<StereoCalibration>,
     /// The lidar (absent without lidar scans).
     pub lidar: Option<LidarCalibration>,
+    /// Datasheet values the log cannot carry and nothing stated (they hold the config's
+    /// defaults): what the mapper assumed.
+    pub assumed: Vec<String>,
     /// Cues that waited, and why.
     pub waited: Vec<String>,
     /// Stated values the measurements contradict, and channels that are not what their
@@ -229,29 +240,54 @@ pub struct Calibration {
     stereo: stereo::StereoNoiseEstimator,
     lidar: lidar::LidarNoiseEstimator,
     law: lidar::IntensityLawEstimator,
-    /// Frames each estimator was shown (estimates are refreshed every frame for the first
-    /// [`Calibration::REFRESH_EVERY`] frames, then every that many).
+    /// Frames each estimator was shown, and frames offered in all.
     stereo_frames: u64,
     lidar_frames: u64,
+    frames: u64,
     stereo_estimate: Option<StereoMeasurement>,
     lidar_estimate: Option<LidarMeasurement>,
+    /// Every value held as it is now ([`Calibration::hold`]).
+    held: bool,
     report: CalibrationReport,
 }
 
 impl Calibration {
-    /// Estimates are refreshed every frame for this many frames, then every this many.
-    pub const REFRESH_EVERY: u64 = 10;
+    /// A sensor's noise is measured over its first this many frames, and then held: the
+    /// noise of a sensor does not change along a log, and a value held fixed keeps the map
+    /// of a log independent of how it is cut into pieces ([`Calibration::is_settled`]).
+    /// A sensor whose noise could not be measured yet keeps being measured.
+    pub const FRAMES: u64 = 20;
 
-    fn refresh(frames: u64) -> bool {
-        frames <= 2 * Self::REFRESH_EVERY || frames % Self::REFRESH_EVERY == 0
+    /// Whether every sensor seen has its measurement held, after at least
+    /// [`Calibration::FRAMES`] frames: an offline build measures the log's first frames
+    /// until then before it maps any ([`crate::mapper::Mapper::calibrate`]).
+    pub fn is_settled(&self) -> bool {
+        let held = |seen: u64, measured: bool| seen == 0 || (seen >= Self::FRAMES && measured);
+        self.frames >= Self::FRAMES
+            && held(self.lidar_frames, self.lidar_estimate.is_some())
+            && held(self.stereo_frames, self.stereo_estimate.is_some())
     }
 
-    /// Measures one lidar scan and returns the range noise to use: the measured, else
-    /// `stated`, else [`NOISY_LIDAR`].
+    /// Holds every value as it is now, measured or not: an offline build does so after
+    /// measuring the log's first frames, so that no piece of the log is fused with values
+    /// another piece did not have.
+    pub fn hold(&mut self) {
+        self.held = true;
+    }
+
+    /// Counts one frame offered (whatever sensors it has).
+    pub fn count_frame(&mut self) {
+        self.frames += 1;
+    }
+
+    /// Measures one lidar scan (until its measurement is held) and returns the range noise
+    /// to use: the measured, else `stated`, else [`NOISY_LIDAR`].
     pub fn lidar_noise(&mut self, scan: &PointCloud, stated: Option<RangeNoise>) -> RangeNoise {
-        self.lidar.observe(scan);
-        self.lidar_frames += 1;
-        if Self::refresh(self.lidar_frames) {
+        let held =
+            self.held || (self.lidar_frames >= Self::FRAMES && self.lidar_estimate.is_some());
+        if !held {
+            self.lidar.observe(scan);
+            self.lidar_frames += 1;
             self.lidar_estimate = self.lidar.estimate();
         }
         let r = resolve(
@@ -271,6 +307,7 @@ impl Calibration {
         let l = self.report.lidar.get_or_insert_with(Default::default);
         l.stated_sigma0_m = stated.map(|n| n.sigma0);
         l.measured = self.lidar_estimate;
+        l.measured_frames = self.lidar_frames;
         l.used_sigma0_m = Some(r.used);
         l.used_noise = Some(noise);
         set_warning(&mut self.report.warnings, "lidar range noise", r.warning);
@@ -319,10 +356,15 @@ impl Calibration {
         lidar: Option<&PointCloud>,
         stated: StereoStated,
     ) -> (Sourced, bool) {
-        self.stereo.observe(cloud, lidar);
-        self.stereo_frames += 1;
-        if Self::refresh(self.stereo_frames) {
+        let held =
+            self.held || (self.stereo_frames >= Self::FRAMES && self.stereo_estimate.is_some());
+        if !held {
+            self.stereo.observe(cloud, lidar);
+            self.stereo_frames += 1;
             self.stereo_estimate = self.stereo.estimate();
+            let s = self.report.stereo.get_or_insert_with(Default::default);
+            s.measured_by_lidar_per_m2 = self.stereo.by_lidar().map(|m| m.per_m2);
+            s.measured_by_planes_per_m2 = self.stereo.by_planes().map(|m| m.per_m2);
         }
         let stated_c = stated.per_m2();
         let r = resolve(
@@ -345,10 +387,7 @@ impl Calibration {
         s.disparity_noise_px = stated.disparity_noise_px;
         s.stated_per_m2 = stated_c;
         s.measured = self.stereo_estimate;
-        if Self::refresh(self.stereo_frames) {
-            s.measured_by_lidar_per_m2 = self.stereo.by_lidar().map(|m| m.per_m2);
-            s.measured_by_planes_per_m2 = self.stereo.by_planes().map(|m| m.per_m2);
-        }
+        s.measured_frames = self.stereo_frames;
         s.implied_disparity_noise_px = match (self.stereo_estimate, stated) {
             (
                 Some(m),
@@ -378,6 +417,11 @@ impl Calibration {
         }
         set_warning(&mut self.report.warnings, "stereo noise", r.warning);
         (r.used, known)
+    }
+
+    /// Records the datasheet values that were assumed ([`CalibrationReport::assumed`]).
+    pub fn set_assumed(&mut self, assumed: Vec<String>) {
+        self.report.assumed = assumed;
     }
 
     /// What the calibration came to so far.

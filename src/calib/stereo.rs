@@ -26,8 +26,12 @@
 //! Both are robust (medians of absolute deviations): reflections on water, mixed pixels
 //! at depth edges and rays that meet a trunk before the ground are a minority of outliers.
 //! Matches whose disparity nears the matcher's minimum are truncated, which would bias the
-//! spread low: only points nearer than a quarter of the farthest depth the cloud has reported
-//! (a disparity of at least four times the minimum) are used.
+//! spread low. The farthest depth the cloud reports, z_far, is where the disparity reaches
+//! that minimum d_min (z_far = f_k·B/d_min), so σ_d = c·z_far·d_min: only samples whose
+//! disparity lies three σ_d above the minimum, at depths z ≤ z_far/(1 + 3·c·z_far), are
+//! used, with c the estimate itself (starting from z_far/4, a disparity of four times the
+//! minimum). The depth a sample is judged by is free of its own noise: the lidar's, or
+//! the mean of the three points of a second difference.
 
 use serde::{Deserialize, Serialize};
 
@@ -72,10 +76,11 @@ pub struct StereoMeasurement {
 /// Measures the stereo noise coefficient over the frames it is shown.
 #[derive(Debug, Clone)]
 pub struct StereoNoiseEstimator {
-    /// Inverse-depth error against the lidar, and the lidar surface's share of it.
-    lidar: Pool<[f32; 2]>,
-    /// Second differences of inverse depth along rows, over √6.
-    planes: Pool<f32>,
+    /// Inverse-depth error against the lidar, the lidar surface's share of it, and the
+    /// lidar's depth.
+    lidar: Pool<[f32; 3]>,
+    /// Second differences of inverse depth along rows, over √6, and the triple's depth.
+    planes: Pool<[f32; 2]>,
     /// Farthest stereo depth seen, metres.
     far: f64,
     cells: LidarCells,
@@ -102,7 +107,7 @@ impl StereoNoiseEstimator {
                 self.far = z;
             }
         }
-        let z_max = self.far / 4.0;
+        let z_max = self.far;
         if z_max <= 0.0 {
             return;
         }
@@ -143,7 +148,7 @@ impl StereoNoiseEstimator {
             // Start from the scan's typical ground level, never from the stereo point:
             // where the noisy point lands must not decide which samples are kept.
             let t0 = (self.cells.level - o.z) / d.z;
-            if !(t0 > 0.0) {
+            if t0.is_nan() || t0 <= 0.0 {
                 continue;
             }
             let x0 = o + d * t0;
@@ -154,7 +159,7 @@ impl StereoNoiseEstimator {
             let mut converged = false;
             for _ in 0..6 {
                 t = (cell.h - o.z) / d.z;
-                if !(t > 0.0) {
+                if t.is_nan() || t <= 0.0 {
                     break;
                 }
                 let x = o + d * t;
@@ -176,7 +181,7 @@ impl StereoNoiseEstimator {
             }
             let e = 1.0 / z_s - 1.0 / z_l;
             let share = u.z * cell.sd / (-d.z * z_l * z_l);
-            self.lidar.push([e as f32, share as f32]);
+            self.lidar.push([e as f32, share as f32, z_l as f32]);
         }
     }
 
@@ -207,8 +212,10 @@ impl StereoNoiseEstimator {
                 // Near triples only, judged by their mean, which is independent of the
                 // second difference (for Gaussian noise): a cut on the noisy middle point
                 // would truncate the spread being measured.
-                if (a + b + d) / 3.0 * z_max >= 1.0 {
-                    self.planes.push(((a - 2.0 * b + d) / 6f64.sqrt()) as f32);
+                let w = (a + b + d) / 3.0;
+                if w * z_max >= 1.0 {
+                    self.planes
+                        .push([((a - 2.0 * b + d) / 6f64.sqrt()) as f32, (1.0 / w) as f32]);
                 }
             }
         }
@@ -221,41 +228,76 @@ impl StereoNoiseEstimator {
         self.by_lidar().or_else(|| self.by_planes())
     }
 
+    /// The depth below which matches are free of the matcher's truncation, for a noise
+    /// coefficient `c` (`None`: the first guess, a quarter of the farthest depth).
+    fn untruncated(&self, c: Option<f64>) -> f64 {
+        match c {
+            Some(c) => self.far / (1.0 + 3.0 * c * self.far),
+            None => self.far / 4.0,
+        }
+    }
+
+    /// `estimate` over the samples nearer than the untruncated depth, refined twice with
+    /// the coefficient it gives.
+    fn with_cut<T: Copy>(
+        &self,
+        pool: &Pool<T>,
+        depth: impl Fn(&T) -> f64,
+        estimate: impl Fn(&[T]) -> Option<f64>,
+    ) -> Option<(f64, usize)> {
+        let mut c = None;
+        let mut n = 0;
+        for _ in 0..3 {
+            let cut = self.untruncated(c);
+            let kept: Vec<T> = pool.iter().copied().filter(|s| depth(s) <= cut).collect();
+            if kept.len() < MIN_SAMPLES {
+                return c.map(|c| (c, n));
+            }
+            n = kept.len();
+            c = Some(estimate(&kept)?);
+        }
+        c.map(|c| (c, n))
+    }
+
     /// The measurement against the lidar alone (`None` below [`MIN_SAMPLES`]).
     pub fn by_lidar(&self) -> Option<StereoMeasurement> {
-        if self.lidar.len() < MIN_SAMPLES {
-            return None;
-        }
-        let c0 = mad_sigma(self.lidar.iter().map(|s| s[0] as f64))?;
-        // Where the lidar surface's error would be a noticeable part of the spread, leave
-        // the sample out: what remains adds at most 5 % (in quadrature), never subtracted.
-        let kept: Vec<[f32; 2]> = self
-            .lidar
-            .iter()
-            .copied()
-            .filter(|s| (s[1] as f64) <= 0.3 * c0)
-            .collect();
-        if kept.len() < MIN_SAMPLES {
-            return None;
-        }
-        let c = mad_sigma(kept.iter().map(|s| s[0] as f64))?;
+        let (c, samples) = self.with_cut(
+            &self.lidar,
+            |s| s[2] as f64,
+            |kept| {
+                let c0 = mad_sigma(kept.iter().map(|s| s[0] as f64))?;
+                // Where the lidar surface's error would be a noticeable part of the
+                // spread, leave the sample out: what remains adds at most 5 % (in
+                // quadrature), never subtracted.
+                let near: Vec<f64> = kept
+                    .iter()
+                    .filter(|s| (s[1] as f64) <= 0.3 * c0)
+                    .map(|s| s[0] as f64)
+                    .collect();
+                if near.len() < MIN_SAMPLES {
+                    return None;
+                }
+                mad_sigma(near.into_iter())
+            },
+        )?;
         (c.is_finite() && c > 0.0).then_some(StereoMeasurement {
             per_m2: c,
             method: StereoMethod::LidarSurface,
-            samples: kept.len(),
+            samples,
         })
     }
 
     /// The measurement from the cloud's local planes alone (`None` below [`MIN_SAMPLES`]).
     pub fn by_planes(&self) -> Option<StereoMeasurement> {
-        if self.planes.len() < MIN_SAMPLES {
-            return None;
-        }
-        let c = mad_sigma(self.planes.iter().map(|&r| r as f64))?;
+        let (c, samples) = self.with_cut(
+            &self.planes,
+            |s| s[1] as f64,
+            |kept| mad_sigma(kept.iter().map(|s| s[0] as f64)),
+        )?;
         (c.is_finite() && c > 0.0).then_some(StereoMeasurement {
             per_m2: c,
             method: StereoMethod::Planes,
-            samples: self.planes.len(),
+            samples,
         })
     }
 }

@@ -240,7 +240,7 @@ pub fn print_calibration(c: &tarn::calib::CalibrationReport, frames: u64) {
         }
         if let Some(law) = &l.intensity_law {
             println!(
-                "    lidar `{}` falls as r^{:.2} over the ground: {}, incidence exponent {:.2}",
+                "    lidar `{}` falls as r^{:.2} over the ground: {}, incidence exponent {}",
                 law.channel,
                 law.falloff_exponent,
                 if law.range_compensated {
@@ -248,9 +248,15 @@ pub fn print_calibration(c: &tarn::calib::CalibrationReport, frames: u64) {
                 } else {
                     "raw (not range-compensated)"
                 },
-                law.incidence_exponent
+                law.incidence_exponent.map_or(
+                    "not determined (the mix of surfaces decides)".into(),
+                    |m| format!("{m:.2}")
+                )
             );
         }
+    }
+    if !c.assumed.is_empty() {
+        println!("    assumed: {}", c.assumed.join(", "));
     }
     for w in &c.waited {
         println!("    waited: {w}");

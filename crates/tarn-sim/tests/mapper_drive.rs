@@ -112,6 +112,14 @@ fn offline_build_is_the_online_map() {
     let s = sim();
     let cfg = MapperConfig::default();
     let mut m = Mapper::new(cfg.clone()).unwrap();
+    // As an offline build does: the sensors' noise measured on the first frames, then held.
+    for f in &s.frames {
+        m.calibrate(f).unwrap();
+        if m.calibration_settled() {
+            break;
+        }
+    }
+    m.hold_calibration();
     for f in &s.frames {
         m.update(f).unwrap();
     }
@@ -203,9 +211,8 @@ fn without_cues_the_mapper_is_plain_ingest() {
         // With the noise the mapper measured from the log by that frame.
         let lidar_noise = r.calibration.lidar.as_ref().unwrap().used_noise.unwrap();
         g.ingest(f.lidar.as_ref().unwrap(), &lidar_noise).unwrap();
-        let (noise, source) = r.stereo_noise.unwrap();
-        assert_eq!(source, Source::Measured);
-        g.ingest(f.stereo.as_ref().unwrap(), &noise).unwrap();
+        g.ingest(f.stereo.as_ref().unwrap(), &r.stereo_noise.unwrap().0)
+            .unwrap();
     }
     grid.unwrap().flush(&mut global);
     assert!(tiles == global);
@@ -399,22 +406,81 @@ fn stereo_noise_is_stated_by_the_camera_and_measured_from_the_log() {
     assert_eq!(cfg.stated(None, cloud.cols, Some(b)).per_m2(), None);
     let unstated = StereoConfig::default().stated(Some(cam), cloud.cols, Some(b));
     assert_eq!(unstated.per_m2(), None);
-    // The mapper measures it from the first frame on, and reports what it used.
-    let true_c = spec.disparity_noise_px * k / (cam.fx * b);
+    // This cut-down rig (160 × 120, binned) reports nothing nearer than its matcher's
+    // limit lets the noise be measured: with nothing stated, the reflection cue waits and
+    // says why, and the cloud is fused with the noisy-end coefficient.
     let mut m = Mapper::new(MapperConfig::default()).unwrap();
     for f in &s.frames {
         let r = m.update(f).unwrap();
         let (noise, source) = r.stereo_noise.unwrap();
-        assert_eq!(source, Source::Measured);
-        assert!(
-            (noise.per_m2 / true_c - 1.0).abs() < 0.3,
-            "{} for {true_c}",
-            noise.per_m2
-        );
+        assert_eq!(source, Source::Default);
+        assert_eq!(noise.per_m2, tarn::calib::NOISY_STEREO_PER_M2);
+        assert_eq!(r.cues.stereo_runs, 0);
     }
-    let st = m.calibration().stereo.as_ref().unwrap();
+    let cal = m.calibration();
+    assert_eq!(cal.stereo.as_ref().unwrap().frames_waited, 6);
+    assert!(
+        cal.waited[0].contains("no disparity noise"),
+        "{:?}",
+        cal.waited
+    );
+    // With σ_d stated, the stated coefficient is used from the first frame.
+    let mut cfg = MapperConfig::default();
+    cfg.stereo.as_mut().unwrap().disparity_noise_px = Some(spec.disparity_noise_px);
+    let mut m = Mapper::new(cfg).unwrap();
+    let r = m.update(&s.frames[0]).unwrap();
+    let (noise, source) = r.stereo_noise.unwrap();
+    assert_eq!(source, Source::Config);
+    let true_c = spec.disparity_noise_px * k / (cam.fx * b);
+    assert!((noise.per_m2 / true_c - 1.0).abs() < 1e-9);
+}
+
+/// On the default rig's real-sized stereo pair (640 × 480, binned 2 × 2) the mapper
+/// measures the noise coefficient from the log alone, within 30 % of the rig's true one
+/// from the first frame, against the lidar and from the cloud's own planes.
+#[test]
+fn a_real_sized_stereo_pairs_noise_is_measured_from_the_first_frame() {
+    let mut scene = Scene::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../maps/default.toml"
+    )))
+    .unwrap();
+    scene.trajectory.frames = Some(2);
+    scene.rig.swir = None;
+    scene.rig.mwir = None;
+    let spec = scene.rig.stereo.clone().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    simulate(&scene, dir.path(), SimOptions::default()).unwrap();
+    let frames: Vec<Frame> = FrameStream::open(dir.path().join("log.mcap"), &LogConfig::default())
+        .unwrap()
+        .map(|f| f.unwrap())
+        .collect();
+    let cam = frames[0].image.as_ref().unwrap().camera.clone().unwrap();
+    let k = (cam.width / frames[0].stereo.as_ref().unwrap().cols) as f64;
+    let true_c = spec.disparity_noise_px * k / (cam.fx * spec.baseline_m);
+    let mut m = Mapper::new(MapperConfig::default()).unwrap();
+    let r = m.update(&frames[0]).unwrap();
+    let (noise, source) = r.stereo_noise.unwrap();
+    assert_eq!(source, Source::Measured);
+    assert!(
+        (noise.per_m2 / true_c - 1.0).abs() < 0.3,
+        "{} for {true_c}",
+        noise.per_m2
+    );
+    let st = r.calibration.stereo.unwrap();
     assert_eq!(st.frames_waited, 0);
-    assert!(st.stated_per_m2.is_none());
+    for c in [st.measured_by_lidar_per_m2, st.measured_by_planes_per_m2] {
+        let c = c.expect("both methods measure");
+        assert!((c / true_c - 1.0).abs() < 0.3, "{c} for {true_c}");
+    }
+    // The lidar's range noise too.
+    let l = r.calibration.lidar.unwrap();
+    let sigma = l.measured.unwrap().noise.sigma(10.0);
+    let true_sigma = scene.rig.lidar.unwrap().range_noise_m;
+    assert!(
+        (sigma / true_sigma - 1.0).abs() < 0.3,
+        "{sigma} for {true_sigma}"
+    );
 }
 
 #[test]

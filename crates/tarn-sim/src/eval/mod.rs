@@ -73,6 +73,21 @@ pub struct BinMetrics {
     pub depth_rms_m: Option<f64>,
     pub terrain_cells: usize,
     pub terrain_rms_m: Option<f64>,
+    /// Of `terrain_cells` with a finite `elevation_std` σ, those whose error is within 1σ,
+    /// 2σ and 3σ of the truth (a Gaussian puts 68.3, 95.4 and 99.7 % there), and how many
+    /// had a σ.
+    pub terrain_sigma_cells: usize,
+    pub terrain_within_sigma: [usize; 3],
+    /// `terrain_within_sigma / terrain_sigma_cells`.
+    pub terrain_within_sigma_frac: [Option<f64>; 3],
+    /// Of `terrain_cells`, those whose σ is at most [`CONFIDENT_SIGMA_M`], and the RMS error
+    /// over them: what a planner trusting a small σ gets.
+    pub terrain_confident_cells: usize,
+    pub terrain_confident_rms_m: Option<f64>,
+    /// Reliability of the water probability: per decile of `water` (0–0.1, …, 0.9–1), the
+    /// observed cells with a truth cell, their mean probability and the fraction whose
+    /// truth is water.
+    pub water_reliability: Vec<Reliability>,
     /// Of `terrain_cells`, those where a lidar return the mapper fused fell ([`lidar_cells`]),
     /// off the edges of objects (no truth obstacle within one map cell: a cell astride a
     /// wall holds the wall's returns): the dry ground the lidar saw. 0 without the log's
@@ -127,6 +142,21 @@ pub struct BinMetrics {
     pub obstacle_precision: Option<f64>,
 }
 
+/// One decile of the water probability and what the truth says of its cells.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Reliability {
+    /// The decile's lower edge (0.0, 0.1, …, 0.9).
+    pub p_from: f64,
+    pub cells: usize,
+    /// Mean water probability of its cells.
+    pub mean_p: Option<f64>,
+    /// Fraction of its cells whose truth is water.
+    pub water_fraction: Option<f64>,
+}
+
+/// A terrain cell is confident when its `elevation_std` is at most this (m).
+pub const CONFIDENT_SIGMA_M: f64 = 0.05;
+
 /// How far below the true terrain a dry cell's map z must be to count as sunk (m).
 pub const SUNK_M: f64 = 0.15;
 
@@ -146,6 +176,9 @@ struct Acc {
     depth2: f64,
     terrain2: f64,
     terrain_lidar2: f64,
+    confident2: f64,
+    /// Per decile of p: cells, sum of p, water cells.
+    deciles: [(usize, f64, usize); 10],
 }
 
 impl Acc {
@@ -168,6 +201,13 @@ impl Acc {
             self.m.false_obstacle += usize::from(!obstacle);
         }
         let called = cell.class == Class::Water;
+        let p = cell.water as f64;
+        if p.is_finite() {
+            let d = &mut self.deciles[((p * 10.0).floor() as usize).min(9)];
+            d.0 += 1;
+            d.1 += p;
+            d.2 += usize::from(t.class == Class::Water);
+        }
         if called {
             self.m.called_water += 1;
             self.m.called_true += usize::from(t.class == Class::Water);
@@ -196,7 +236,19 @@ impl Acc {
                 self.m.false_water += 1;
             } else if matches!(t.class, Class::Ground | Class::SnowIce) {
                 self.m.terrain_cells += 1;
-                self.terrain2 += (cell.z - t.z).powi(2);
+                let err = cell.z - t.z;
+                self.terrain2 += err.powi(2);
+                let sd = cell.elevation_std;
+                if sd.is_finite() && sd > 0.0 {
+                    self.m.terrain_sigma_cells += 1;
+                    for (k, n) in self.m.terrain_within_sigma.iter_mut().enumerate() {
+                        *n += usize::from(err.abs() <= (k + 1) as f64 * sd);
+                    }
+                    if sd <= CONFIDENT_SIGMA_M {
+                        self.m.terrain_confident_cells += 1;
+                        self.confident2 += err.powi(2);
+                    }
+                }
                 if s.lidar && !s.near_object {
                     self.m.terrain_lidar_cells += 1;
                     self.terrain_lidar2 += (cell.z - t.z).powi(2);
@@ -239,6 +291,22 @@ impl Acc {
         self.m.depth_rms_m = rms(self.depth2, self.m.depth_cells);
         self.m.terrain_rms_m = rms(self.terrain2, self.m.terrain_cells);
         self.m.terrain_lidar_rms_m = rms(self.terrain_lidar2, self.m.terrain_lidar_cells);
+        self.m.terrain_confident_rms_m = rms(self.confident2, self.m.terrain_confident_cells);
+        self.m.terrain_within_sigma_frac = self
+            .m
+            .terrain_within_sigma
+            .map(|n| ratio(n, self.m.terrain_sigma_cells));
+        self.m.water_reliability = self
+            .deciles
+            .iter()
+            .enumerate()
+            .map(|(k, &(n, sp, w))| Reliability {
+                p_from: k as f64 / 10.0,
+                cells: n,
+                mean_p: (n > 0).then(|| sp / n as f64),
+                water_fraction: ratio(w, n),
+            })
+            .collect();
         self.m
     }
 }
@@ -1003,6 +1071,42 @@ mod tests {
     fn set_class(map: &mut HazardMap, kx: i64, ky: i64, class: Class) {
         let c = map.cells.iter_mut().find(|c| c.key == CellKey::new(kx, ky));
         c.unwrap().class = class;
+    }
+
+    #[test]
+    fn the_maps_sigma_and_water_probability_are_scored() {
+        // 1 m cells along x, 10..20 m from the path: ten dry cells with errors 0.05·k and
+        // σ 0.1, so errors 0, .05, .1 lie within 1σ (3), up to .2 within 2σ (5), up to .3
+        // within 3σ (7); water cells 20..30 of p 0.95, dry ones of p 0.05 and 0.15.
+        let truth = raster(1.0, 40, 1, |kx, _| (20..30).contains(&kx));
+        let mut map = truth.clone();
+        for c in map.cells.iter_mut() {
+            let k = c.key.x;
+            c.elevation_std = if k == 19 { f64::NAN } else { 0.1 };
+            if (10..20).contains(&k) {
+                c.z = 0.05 * (k - 10) as f64;
+            }
+            c.water = match k {
+                20..=29 => 0.95,
+                0..=4 => 0.15,
+                _ => 0.05,
+            };
+        }
+        let info = info(1.0, &[[0.0, 0.5]], None);
+        let b = evaluate_band(&map, &truth, &info, 10.0, 20.0).unwrap();
+        // Cell 19 has no σ: nine scored, errors 0 … 0.40.
+        assert_eq!(b.terrain_sigma_cells, 9);
+        assert_eq!(b.terrain_within_sigma, [3, 5, 7]);
+        assert_eq!(b.terrain_within_sigma_frac[0], Some(3.0 / 9.0));
+        assert_eq!(b.terrain_confident_cells, 0);
+        let all = evaluate(&map, &truth, &info).unwrap().all;
+        let r = &all.water_reliability;
+        assert_eq!(r.len(), 10);
+        assert_eq!((r[0].cells, r[0].water_fraction), (25, Some(0.0)));
+        assert_eq!((r[1].cells, r[1].water_fraction), (5, Some(0.0)));
+        assert_eq!((r[9].cells, r[9].water_fraction), (10, Some(1.0)));
+        assert!((r[9].mean_p.unwrap() - 0.95).abs() < 1e-6);
+        assert_eq!((r[5].cells, r[5].mean_p), (0, None));
     }
 
     #[test]
