@@ -17,8 +17,8 @@ if [ -z "${TARN_BIN:-}" ]; then
 fi
 OUT="${OUT:-out/calibration}"
 DOC="${DOC:-docs/calibration.md}"
-SCENES="${SCENES:-default dry_paved}"
-RIGS="${RIGS:-small wide lidar_camera stereo_camera}"
+SCENES="${SCENES:-default dry_paved pond_far_shore}"
+RIGS="${RIGS:-small wide lidar_camera stereo_camera full_frame vertical_scanner}"
 start=$(date +%s)
 for rig in $RIGS; do
   has_stereo=$(grep -q '^\[stereo\]' "maps/rigs/$rig.toml" && echo 1 || true)

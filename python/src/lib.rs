@@ -759,6 +759,44 @@ impl Mapper {
         Ok(d)
     }
 
+    /// Measures the sensors' noise on a frame without mapping it, as an offline build does
+    /// on the log's first frames before it maps any (`calibration_settled` says when that
+    /// is enough; `hold_calibration()` then keeps the values for every frame after).
+    fn calibrate(&mut self, frame: PyRef<'_, Frame>) -> PyResult<()> {
+        let m = self
+            .mapper
+            .as_mut()
+            .ok_or_else(|| TarnError::new_err("the mapper was finished"))?;
+        m.calibrate(&frame.frame).map_err(err)
+    }
+
+    /// Whether the sensors' noise is measured well enough to be held.
+    #[getter]
+    fn calibration_settled(&self) -> bool {
+        self.mapper
+            .as_ref()
+            .is_some_and(|m| m.calibration_settled())
+    }
+
+    /// Holds the sensors' noise as measured so far, for every frame that follows.
+    fn hold_calibration(&mut self) -> PyResult<()> {
+        let m = self
+            .mapper
+            .as_mut()
+            .ok_or_else(|| TarnError::new_err("the mapper was finished"))?;
+        m.hold_calibration();
+        Ok(())
+    }
+
+    /// Every sensor value used so far, its source and what the log measured, as JSON text.
+    fn calibration(&self) -> PyResult<String> {
+        let m = self
+            .mapper
+            .as_ref()
+            .ok_or_else(|| TarnError::new_err("the mapper was finished"))?;
+        serde_json::to_string(m.calibration()).map_err(|e| TarnError::new_err(e.to_string()))
+    }
+
     /// Frames fused so far.
     #[getter]
     fn frames(&self) -> u64 {

@@ -1,6 +1,7 @@
 """The Python package: builds of simulated logs through `tarn`, tile sets, and the Dask
 map-reduce against the one-process build."""
 
+import json
 import os
 import pathlib
 import pickle
@@ -110,8 +111,22 @@ def test_layers(one_process):
         m.layer("nope")
 
 
-def test_mapper_online_is_the_offline_build(logs):
+def calibrated_mapper(log):
+    """A mapper that measured the sensors' noise on the log's first frames and holds it,
+    as an offline build does before it maps."""
     mp = tarn.Mapper()
+    for f in tarn.read_frames(log):
+        mp.calibrate(f)
+        if mp.calibration_settled:
+            break
+    mp.hold_calibration()
+    return mp
+
+
+def test_mapper_online_is_the_offline_build(logs):
+    mp = calibrated_mapper(logs[1])
+    cal = json.loads(mp.calibration())
+    assert cal["lidar"]["used_sigma0_m"]["source"] == "measured"
     n = 0
     for f in tarn.read_frames(logs[1]):
         assert f.lidar_points().shape[1] == 3
@@ -125,7 +140,7 @@ def test_mapper_online_is_the_offline_build(logs):
 
 
 def test_cells_taken_while_driving_merge_to_the_log(logs):
-    mp = tarn.Mapper()
+    mp = calibrated_mapper(logs[1])
     taken = []
     for f in tarn.read_frames(logs[1]):
         mp.update(f)
