@@ -145,14 +145,9 @@ fn source_name(s: Source) -> &'static str {
 /// What the stereo pair's calibration came to.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct StereoCalibration {
-    /// Focal length of the left camera (px, its `CameraInfo`).
-    pub focal_px: Option<f64>,
-    /// Image width over cloud width (the log's image and cloud).
-    pub binning: Option<usize>,
-    /// The baseline: the right camera's `CameraInfo`, else the config.
-    pub baseline_m: Option<Sourced>,
-    /// The disparity noise σ_d (px of the disparity image) the config or rig file states.
-    pub disparity_noise_px: Option<Sourced>,
+    /// What the log and the config state (its fields stand in this one's JSON object).
+    #[serde(flatten)]
+    pub stated: StereoStated,
     /// c of σ_z = a + c·z² (1/m) from what is stated (σ_d·k/(f·B)), when all of it is.
     pub stated_per_m2: Option<f64>,
     /// c measured from the log.
@@ -207,16 +202,16 @@ pub struct CalibrationReport {
     pub warnings: Vec<String>,
 }
 
-/// The stereo values a frame states.
-#[derive(Debug, Clone, Copy, Default)]
+/// The stereo values a frame and the config state.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct StereoStated {
-    /// The left camera's focal length (px).
+    /// Focal length of the left camera (px, its `CameraInfo`).
     pub focal_px: Option<f64>,
-    /// Image width over cloud width.
+    /// Image width over cloud width (the log's image and cloud).
     pub binning: Option<usize>,
-    /// The baseline and its source.
+    /// The baseline: the right camera's `CameraInfo`, else the config.
     pub baseline_m: Option<Sourced>,
-    /// σ_d and its source.
+    /// The disparity noise σ_d (px of the disparity image) the config or rig file states.
     pub disparity_noise_px: Option<Sourced>,
 }
 
@@ -381,10 +376,7 @@ impl Calibration {
         );
         let known = r.used.source != Source::Default;
         let s = self.report.stereo.get_or_insert_with(Default::default);
-        s.focal_px = stated.focal_px;
-        s.binning = stated.binning;
-        s.baseline_m = stated.baseline_m;
-        s.disparity_noise_px = stated.disparity_noise_px;
+        s.stated = stated;
         s.stated_per_m2 = stated_c;
         s.measured = self.stereo_estimate;
         s.measured_frames = self.stereo_frames;

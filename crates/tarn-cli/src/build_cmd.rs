@@ -464,7 +464,7 @@ fn print_log_summary(r: &LogBuildReport) {
         );
     }
     print_water(&r.water);
-    crate::log_cmd::print_calibration(&r.calibration, r.frames_fused);
+    crate::log_cmd::print_calibration(&r.calibration);
     for w in &r.calibration.warnings {
         eprintln!("warning: calibration: {w}");
     }

@@ -170,7 +170,7 @@ pub fn info(
     for e in &frame_errors {
         println!("  error: {e}");
     }
-    print_calibration(&calibration, mapper.frames());
+    print_calibration(&calibration);
     no_frames_warning(&cfg, &stats);
     crate::build_cmd::damaged_input(&log, "counted", &summary.damaged)
 }
@@ -179,7 +179,7 @@ pub fn info(
 const CALIBRATION_FRAMES: u64 = 20;
 
 /// The calibration section, as lines a person reads.
-pub fn print_calibration(c: &tarn::calib::CalibrationReport, frames: u64) {
+pub fn print_calibration(c: &tarn::calib::CalibrationReport) {
     use tarn::calib::Source;
     let src = |s: Source| match s {
         Source::Log => "log",
@@ -189,18 +189,19 @@ pub fn print_calibration(c: &tarn::calib::CalibrationReport, frames: u64) {
     };
     let opt =
         |v: Option<f64>, unit: &str| v.map_or("—".to_string(), |v| format!("{v:.4} {unit}"));
-    println!("  calibration (over {frames} frames):");
+    println!("  calibration:");
     if let Some(s) = &c.stereo {
         println!(
-            "    stereo: focal {} , binning {}, baseline {}, σ_d {}",
-            opt(s.focal_px, "px"),
-            s.binning.map_or("—".into(), |k| k.to_string()),
-            s.baseline_m.map_or("none".into(), |b| format!(
+            "    stereo: focal {}, binning {}, baseline {}, σ_d {}",
+            opt(s.stated.focal_px, "px"),
+            s.stated.binning.map_or("—".into(), |k| k.to_string()),
+            s.stated.baseline_m.map_or("none".into(), |b| format!(
                 "{:.4} m ({})",
                 b.value,
                 src(b.source)
             )),
-            s.disparity_noise_px
+            s.stated
+                .disparity_noise_px
                 .map_or("not stated".into(), |d| format!(
                     "{:.3} px ({})",
                     d.value,
@@ -208,14 +209,18 @@ pub fn print_calibration(c: &tarn::calib::CalibrationReport, frames: u64) {
                 )),
         );
         println!(
-            "    stereo noise c (σ_z = a + c·z², 1/m): stated {}, measured {} (against the lidar {}, \
-             local planes {}), used {}",
+            "    stereo noise c (σ_z = a + c·z², 1/m): stated {}, measured {} over {} frames \
+             (against the lidar {}, local planes {}), used {}",
             opt(s.stated_per_m2, ""),
             opt(s.measured.map(|m| m.per_m2), ""),
+            s.measured_frames,
             opt(s.measured_by_lidar_per_m2, ""),
             opt(s.measured_by_planes_per_m2, ""),
-            s.used_per_m2
-                .map_or("—".into(), |u| format!("{:.4} ({})", u.value, src(u.source))),
+            s.used_per_m2.map_or("—".into(), |u| format!(
+                "{:.4} ({})",
+                u.value,
+                src(u.source)
+            )),
         );
         if let Some(d) = s.implied_disparity_noise_px {
             println!("    σ_d implied by the measurement: {d:.3} px");
@@ -223,12 +228,13 @@ pub fn print_calibration(c: &tarn::calib::CalibrationReport, frames: u64) {
     }
     if let Some(l) = &c.lidar {
         println!(
-            "    lidar range noise σ0: stated {}, measured {}, used {}",
+            "    lidar range noise σ0: stated {}, measured {} over {} scans, used {}",
             opt(l.stated_sigma0_m, "m"),
             l.measured.map_or("—".into(), |m| format!(
                 "{:.4} m + {:.5}·r",
                 m.noise.sigma0, m.noise.per_m
             )),
+            l.measured_frames,
             l.used_sigma0_m.map_or("—".into(), |u| format!(
                 "{:.4} m ({})",
                 u.value,
