@@ -886,20 +886,6 @@ struct FrameNoise {
     stereo: Option<(Sourced, bool)>,
 }
 
-/// The name of the channel the reflectivity cue reads from `cloud`, when it has one.
-fn strength_channel(cloud: &crate::geom::PointCloud, l: &LidarConfig) -> Option<&'static str> {
-    use crate::cues::reflectivity::Channel;
-    match (
-        l.reflectivity_cue.channel,
-        &cloud.reflectivity,
-        &cloud.intensity,
-    ) {
-        (Channel::Reflectivity, Some(_), _) | (Channel::Auto, Some(_), _) => Some("reflectivity"),
-        (Channel::Intensity, _, Some(_)) | (Channel::Auto, None, Some(_)) => Some("intensity"),
-        _ => None,
-    }
-}
-
 /// The online mapper. See the module documentation.
 pub struct Mapper {
     cfg: MapperConfig,
@@ -978,7 +964,7 @@ impl Mapper {
         if let (Some(l), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
             // An unorganized scan has no scan lines to measure the noise along.
             if !(cloud.rows == 1 && cloud.cols > 1) {
-                out.lidar = Some(self.calib.lidar_noise(cloud, l.noise));
+                out.lidar = Some(self.calib.lidar_noise(cloud, l.noise, &l.reflectivity_cue));
             }
         }
         if let (Some(s), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
@@ -1164,15 +1150,12 @@ impl Mapper {
             }
             if let Some(m) = self.cues.cfg.lidar.as_mut() {
                 m.set_range_noise(noise);
+                if let Some(c) = self.calib.range_compensated() {
+                    m.set_range_compensated(Some(c));
+                }
             }
             if self.cues.cfg.lidar.is_some() && !unorganized {
                 surface = self.cues.apply_lidar(frame, grid, &mut rep.cues)?;
-                let law = rep.cues.reflectivity_law;
-                if let (Some(law), Some(ch)) = (law, strength_channel(cloud, l)) {
-                    if law.samples > 0 {
-                        self.calib.intensity_falloff(law.exponent, ch);
-                    }
-                }
             } else {
                 if unorganized && l.cues && !self.warned_unorganized {
                     self.warned_unorganized = true;

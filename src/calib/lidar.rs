@@ -182,6 +182,32 @@ pub struct IntensityLaw {
     pub scans: usize,
 }
 
+/// How the strength channel `cfg` reads falls with range over one scan's ground: the
+/// exponent of [`crate::cues::ChannelLaw`] fitted to the returns whose beams drop 3–45°
+/// below the horizontal in the map (mostly the ground around the vehicle), and the
+/// channel's name; `None` without such a fit.
+pub fn scan_falloff(
+    scan: &PointCloud,
+    cfg: &crate::cues::ReflectivityConfig,
+) -> Option<(f64, &'static str)> {
+    let name = crate::cues::reflectivity::channel_name(scan, cfg)?;
+    let o = scan.sensor_origin_in_map();
+    let (lo, hi) = (3f64.to_radians().sin(), 45f64.to_radians().sin());
+    let samples: Vec<(f64, f64)> = (0..scan.len())
+        .filter(|&i| scan.is_valid(i))
+        .filter_map(|i| {
+            let v = scan.point_in_map(i) - o;
+            let r = v.norm();
+            let s = -v.z / r;
+            if !(s >= lo && s <= hi && r >= cfg.min_range_m && r <= cfg.max_range_m) {
+                return None;
+            }
+            crate::cues::reflectivity::channel_value(scan, i, cfg).map(|(x, _)| (x, r))
+        })
+        .collect();
+    crate::cues::ChannelLaw::fit(&samples, cfg.min_samples).map(|l| (l.exponent, name))
+}
+
 /// Collects the scans' fitted falloff exponents.
 #[derive(Debug, Clone)]
 pub struct IntensityLawEstimator {

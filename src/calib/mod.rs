@@ -275,15 +275,24 @@ impl Calibration {
         self.frames += 1;
     }
 
-    /// Measures one lidar scan (until its measurement is held) and returns the range noise
-    /// to use: the measured, else `stated`, else [`NOISY_LIDAR`].
-    pub fn lidar_noise(&mut self, scan: &PointCloud, stated: Option<RangeNoise>) -> RangeNoise {
+    /// Measures one lidar scan (until its measurement is held): its range noise, and how
+    /// the channel `strength` reads falls with range ([`Calibration::range_compensated`]).
+    /// Returns the range noise to use: the measured, else `stated`, else [`NOISY_LIDAR`].
+    pub fn lidar_noise(
+        &mut self,
+        scan: &PointCloud,
+        stated: Option<RangeNoise>,
+        strength: &crate::cues::ReflectivityConfig,
+    ) -> RangeNoise {
         let held =
             self.held || (self.lidar_frames >= Self::FRAMES && self.lidar_estimate.is_some());
         if !held {
             self.lidar.observe(scan);
             self.lidar_frames += 1;
             self.lidar_estimate = self.lidar.estimate();
+            if let Some((e, channel)) = lidar::scan_falloff(scan, strength) {
+                self.intensity_falloff(e, channel);
+            }
         }
         let r = resolve(
             "lidar range noise σ0 (m)",
@@ -316,16 +325,22 @@ impl Calibration {
         }
     }
 
+    /// Whether the lidar's strength channel is range-compensated, as measured (`None`
+    /// before a scan's ground could be fitted).
+    pub fn range_compensated(&self) -> Option<bool> {
+        self.law.estimate().map(|l| l.range_compensated)
+    }
+
     /// Adds one scan's fitted intensity falloff, read from `channel`.
-    pub fn intensity_falloff(&mut self, exponent: f64, channel: &'static str) {
+    fn intensity_falloff(&mut self, exponent: f64, channel: &'static str) {
         self.law.observe(exponent, channel);
         let law = self.law.estimate();
         let warning = law.as_ref().and_then(|l| {
             let named_compensated = l.channel == "reflectivity";
             (named_compensated != l.range_compensated).then(|| {
                 format!(
-                    "lidar channel `{}` falls as r^{:.2} over the ground: it behaves as {} \
-                     (the reflectivity cue fits each scan's own law, so it reads it as it is)",
+                    "lidar channel `{}` falls as r^{:.2} over the ground: it behaves as {}, \
+                     and is read as such",
                     l.channel,
                     l.falloff_exponent,
                     if l.range_compensated {
@@ -337,9 +352,10 @@ impl Calibration {
             })
         });
         set_warning(&mut self.report.warnings, "lidar channel", warning);
-        if let Some(l) = self.report.lidar.as_mut() {
-            l.intensity_law = law;
-        }
+        self.report
+            .lidar
+            .get_or_insert_with(Default::default)
+            .intensity_law = law;
     }
 
     /// Measures one stereo cloud (against `lidar`, the frame's scan, when there is one) and

@@ -41,9 +41,6 @@ pub struct FrameCuesReport {
     pub lidar: Option<LidarCueStats>,
     /// What happened to the lidar cloud's points when fused.
     pub lidar_ingest: Option<IngestStats>,
-    /// How the scan's strength channel fell with range over its ground, when the
-    /// reflectivity cue ran.
-    pub reflectivity_law: Option<super::reflectivity::ChannelLaw>,
     /// Stereo reflection runs confirmed.
     pub stereo_runs: usize,
     /// Stereo points found to be reflections.
@@ -147,7 +144,6 @@ impl FrameCues {
             )?;
             rep.lidar_ingest = Some(grid.ingest(&out.corrected, &self.cfg.lidar_noise)?);
             rep.lidar = Some(out.stats);
-            rep.reflectivity_law = out.reflectivity_law;
             out.evidence.drain_batch_into(&mut self.batch);
             rep.evidence_cells += self.batch.len();
             rep.evidence_dropped += grid.apply_evidence(&self.batch);

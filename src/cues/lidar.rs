@@ -488,6 +488,14 @@ impl LidarCueModel {
         self
     }
 
+    /// Sets whether the strength channel is range-compensated, as measured from the log
+    /// ([`ReflectivityConfig::range_compensated`]; `None`: by the channel's name).
+    pub fn set_range_compensated(&mut self, compensated: Option<bool>) {
+        if let Some(r) = self.reflectivity.as_mut() {
+            r.range_compensated = compensated;
+        }
+    }
+
     /// Sets the range noise of the returns in place ([`LidarCueModel::with_range_noise`]).
     pub fn set_range_noise(&mut self, noise: RangeNoise) {
         self.noise = noise;

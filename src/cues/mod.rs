@@ -44,7 +44,7 @@ pub use lidar::{
     estimate_sensor_height, BeamModel, DryReach, LidarCueConfig, LidarCueModel, LidarCues,
     ScanSurface,
 };
-pub use reflectivity::{normalised_reflectivity, ReflectivityConfig};
+pub use reflectivity::{normalised_reflectivity, ChannelLaw, ReflectivityConfig};
 pub use stereo::{
     stereo_reflections, stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig,
     StereoCues, StereoSeen,

@@ -48,6 +48,11 @@ pub struct ReflectivityConfig {
     pub min_cos_incidence: f64,
     /// Fewest ground returns a scan needs to set its reference.
     pub min_samples: usize,
+    /// Whether the channel read is range-compensated. Absent: by its name (`reflectivity`
+    /// is, `intensity` is not). The mapper sets it from how the channel falls with range
+    /// over the log's ground ([`crate::calib::IntensityLaw`]), whatever its name says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range_compensated: Option<bool>,
 }
 
 impl Default for ReflectivityConfig {
@@ -59,6 +64,7 @@ impl Default for ReflectivityConfig {
             max_range_m: 40.0,
             min_cos_incidence: 0.05,
             min_samples: 50,
+            range_compensated: None,
         }
     }
 }
@@ -120,7 +126,7 @@ pub fn normalised_reflectivity(
     if !(range >= cfg.min_range_m && range <= cfg.max_range_m && cos_inc >= cfg.min_cos_incidence) {
         return None;
     }
-    let (v, calibrated) = channel_value(cloud, slot, cfg.channel)?;
+    let (v, calibrated) = channel_value(cloud, slot, cfg)?;
     Some(if calibrated {
         v / cos_inc
     } else {
@@ -207,10 +213,14 @@ impl ChannelLaw {
     }
 }
 
-/// The value of `slot`'s strength channel and whether it is range-corrected; `None`
-/// without a usable value.
-fn channel_value(cloud: &PointCloud, slot: usize, channel: Channel) -> Option<(f64, bool)> {
-    let (v, calibrated) = match channel {
+/// The value of `slot`'s strength channel and whether it is range-corrected (the config's
+/// `range_compensated`, else by the channel's name); `None` without a usable value.
+pub(crate) fn channel_value(
+    cloud: &PointCloud,
+    slot: usize,
+    cfg: &ReflectivityConfig,
+) -> Option<(f64, bool)> {
+    let (v, by_name) = match cfg.channel {
         Channel::Reflectivity => (cloud.reflectivity.as_ref()?[slot], true),
         Channel::Intensity => (cloud.intensity.as_ref()?[slot], false),
         Channel::Auto => match (&cloud.reflectivity, &cloud.intensity) {
@@ -220,7 +230,16 @@ fn channel_value(cloud: &PointCloud, slot: usize, channel: Channel) -> Option<(f
         },
     };
     let v = v as f64;
-    (v.is_finite() && v > 0.0).then_some((v, calibrated))
+    (v.is_finite() && v > 0.0).then_some((v, cfg.range_compensated.unwrap_or(by_name)))
+}
+
+/// The name of the channel `cfg` reads from `cloud`, when it has one.
+pub fn channel_name(cloud: &PointCloud, cfg: &ReflectivityConfig) -> Option<&'static str> {
+    match (cfg.channel, &cloud.reflectivity, &cloud.intensity) {
+        (Channel::Reflectivity | Channel::Auto, Some(_), _) => Some("reflectivity"),
+        (Channel::Intensity, _, Some(_)) | (Channel::Auto, None, Some(_)) => Some("intensity"),
+        _ => None,
+    }
 }
 
 /// Sets the scan's reference and adds dark/lit counts to the cells: a return is dark when
@@ -241,7 +260,7 @@ pub(crate) fn apply(
         .iter()
         .enumerate()
         .filter(|(_, s)| in_band(s))
-        .filter_map(|(k, s)| channel_value(cloud, s.slot, cfg.channel).map(|(v, c)| (k, v, c)))
+        .filter_map(|(k, s)| channel_value(cloud, s.slot, cfg).map(|(v, c)| (k, v, c)))
         .collect();
     if raw.len() < cfg.min_samples.max(1) {
         return None;

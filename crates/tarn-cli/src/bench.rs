@@ -406,7 +406,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     // The noise the mapper would have measured by this frame (the frame alone).
     let mut calib = tarn::calib::Calibration::default();
     let lidar_noise = match (&mcfg.lidar, lidar) {
-        (Some(l), Some(c)) => calib.lidar_noise(c, l.noise),
+        (Some(l), Some(c)) => calib.lidar_noise(c, l.noise, &l.reflectivity_cue),
         _ => fc.lidar_noise,
     };
     let stereo_noise = match (&mcfg.stereo, stereo) {
