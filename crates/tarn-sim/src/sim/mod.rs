@@ -69,7 +69,7 @@ pub enum LogCalibration {
     Full,
     /// No `/camera_right/camera_info`: no baseline in the log.
     NoRightInfo,
-    /// The right `CameraInfo` with P[0][3] = 0 (a zero baseline, as RELLIS-3D ships it).
+    /// The right `CameraInfo` with `P[0][3] = 0` (a zero baseline, as RELLIS-3D ships it).
     ZeroBaseline,
     /// The lidar's raw intensity (falling as 1/r²) written as `reflectivity`.
     RawAsReflectivity,
