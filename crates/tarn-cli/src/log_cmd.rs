@@ -187,8 +187,11 @@ pub fn print_calibration(c: &tarn::calib::CalibrationReport) {
         Source::Measured => "measured",
         Source::Default => "assumed (noisy end)",
     };
-    let opt =
-        |v: Option<f64>, unit: &str| v.map_or("—".to_string(), |v| format!("{v:.4} {unit}"));
+    let opt = |v: Option<f64>, unit: &str| {
+        v.map_or("—".to_string(), |v| {
+            format!("{v:.4} {unit}").trim_end().to_string()
+        })
+    };
     println!("  calibration:");
     if let Some(s) = &c.stereo {
         println!(
