@@ -132,6 +132,28 @@ def accuracy():
             tl = " | ".join(num(b.get("terrain_lidar_rms_m")) for b in bs)
             print(f"| {scene} | {rec} | {fw} | {ter} | {tl} |")
         print()
+    print("## The map's own uncertainty, by range band")
+    print()
+    print("Of the dry cells `tarn eval` scores for terrain, the share whose error is within 1σ and")
+    print("3σ of the map's `elevation_std` (a Gaussian puts 68.3 and 99.7 % there), and the terrain")
+    print("RMS over the cells whose σ is at most 5 cm; then the water probability's reliability over")
+    print("5–30 m: the largest gap between a decile's mean probability and the share of its cells")
+    print("that are water, over the deciles with at least 200 cells.")
+    print()
+    print("| scene | rig | within 1σ 5–10 | 10–20 | 20–30 | within 3σ 5–10 | 10–20 | 20–30 | RMS σ ≤ 5 cm 5–10 | 10–20 | 20–30 | reliability gap |")
+    print("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for scene in scenes:
+        for rig in rigs:
+            e = load(rig, scene, "eval")
+            bs = [band(e, n) for n in ("5-10", "10-20", "20-30")]
+            frac = lambda b, k: (b.get("terrain_within_sigma_frac") or [None] * 3)[k]
+            one = " | ".join(pct(frac(b, 0)) for b in bs)
+            three = " | ".join(pct(frac(b, 2)) for b in bs)
+            conf = " | ".join(num(b.get("terrain_confident_rms_m")) for b in bs)
+            rel = [r for r in band(e, "5-30").get("water_reliability") or [] if r["cells"] >= 200]
+            gap = max((abs(r["water_fraction"] - r["mean_p"]) for r in rel), default=None)
+            print(f"| {scene} | {rig} | {one} | {three} | {conf} | {num(gap, 2)} |")
+    print()
     print("## What each build used")
     print()
     print("| scene | rig | frames | cues | labels | lidar height (m) | no-return interval (m) | build s |")
