@@ -328,7 +328,8 @@ impl Calibration {
     /// Whether the lidar's strength channel is range-compensated, as measured (`None`
     /// before a scan's ground could be fitted).
     pub fn range_compensated(&self) -> Option<bool> {
-        self.law.estimate().map(|l| l.range_compensated)
+        let law = self.report.lidar.as_ref()?.intensity_law.as_ref()?;
+        Some(law.range_compensated)
     }
 
     /// Adds one scan's fitted intensity falloff, read from `channel`.
@@ -372,10 +373,12 @@ impl Calibration {
         if !held {
             self.stereo.observe(cloud, lidar);
             self.stereo_frames += 1;
-            self.stereo_estimate = self.stereo.estimate();
+            // Each method once; the lidar's is preferred ([`stereo::StereoNoiseEstimator::estimate`]).
+            let (by_lidar, by_planes) = (self.stereo.by_lidar(), self.stereo.by_planes());
+            self.stereo_estimate = by_lidar.or(by_planes);
             let s = self.report.stereo.get_or_insert_with(Default::default);
-            s.measured_by_lidar_per_m2 = self.stereo.by_lidar().map(|m| m.per_m2);
-            s.measured_by_planes_per_m2 = self.stereo.by_planes().map(|m| m.per_m2);
+            s.measured_by_lidar_per_m2 = by_lidar.map(|m| m.per_m2);
+            s.measured_by_planes_per_m2 = by_planes.map(|m| m.per_m2);
         }
         let stated_c = stated.per_m2();
         let r = resolve(

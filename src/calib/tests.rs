@@ -29,6 +29,16 @@ fn ground(slope: f64, x: f64) -> f64 {
     slope * x
 }
 
+/// Where `o + t·d` meets that ground, for `0 < t < max`: o.z + t·d.z = slope·(o.x + t·d.x).
+fn ground_hit(o: &Vector3<f64>, d: &Vector3<f64>, slope: f64, max: f64) -> Option<f64> {
+    let den = d.z - slope * d.x;
+    if den >= -1e-6 {
+        return None;
+    }
+    let t = (ground(slope, o.x) - o.z) / den;
+    (t > 0.0 && t < max).then_some(t)
+}
+
 /// The left camera's optical frame in the map: at `at`, 1.6 m up, looking along +x,
 /// pitched down 10°.
 fn camera_pose(at: [f64; 2]) -> Pose {
@@ -65,16 +75,9 @@ fn stereo_cloud(
         for col in 0..w {
             let i = r * w + col;
             let ray = Vector3::new((col as f64 - 80.0) / f, (r as f64 - 60.0) / f, 1.0);
-            let d = pose.rotation * ray;
-            // o + t·d meets z = slope·x: o.z + t·d.z = slope·(o.x + t·d.x).
-            let den = d.z - slope * d.x;
-            if den >= -1e-6 {
+            let Some(t) = ground_hit(&o, &(pose.rotation * ray), slope, 80.0) else {
                 continue;
-            }
-            let t = (ground(slope, o.x) - o.z) / den;
-            if !(t > 0.0 && t < 80.0) {
-                continue;
-            }
+            };
             let mut inv = 1.0 / t + c * normal(seed, i as u64);
             if outlier_every > 0
                 && (normal(seed ^ 0xA5, i as u64).abs() * 1e6) as usize % outlier_every == 0
@@ -104,14 +107,9 @@ fn lidar_scan(seed: u64, sigma_r: f64, slope: f64, at: [f64; 2]) -> PointCloud {
         for c in 0..cols {
             let az = (c as f64 / cols as f64) * std::f64::consts::TAU;
             let d = Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-            let den = d.z - slope * d.x;
-            if den >= -1e-6 {
+            let Some(t) = ground_hit(&o, &d, slope, 60.0) else {
                 continue;
-            }
-            let t = (ground(slope, o.x) - o.z) / den;
-            if !(t > 0.0 && t < 60.0) {
-                continue;
-            }
+            };
             let i = r * cols + c;
             let p = d * (t + sigma_r * normal(seed ^ 0x55, i as u64));
             xyz[i] = [p.x as f32, p.y as f32, p.z as f32];
