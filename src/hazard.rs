@@ -340,7 +340,10 @@ pub fn terrain_hazard(
 /// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
 /// slope tests.
 fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<(f64, f64)> {
-    let sz = c.elevation_std_m().filter(|s| s.is_finite()).unwrap_or(0.0);
+    let sz = c
+        .range_bound_std_m()
+        .filter(|s| s.is_finite())
+        .unwrap_or(0.0);
     Some((c.mean_mm().map(|m| z_ref + m * 1e-3)?, sz))
 }
 

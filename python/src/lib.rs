@@ -290,7 +290,7 @@ impl TileSet {
         py.detach(|| t.merge(o)).map_err(err)
     }
 
-    /// The tile set format of `docs/distributed.md` (magic `TARNTILE`, version 1, CRC).
+    /// The tile set format of `docs/distributed.md` (magic `TARNTILE`, version 2, CRC).
     fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
         let b = py.detach(|| self.tiles.to_bytes());
         PyBytes::new(py, &b)

@@ -16,6 +16,21 @@ pub const SIGMA_REF_M: f64 = 0.01;
 pub const W_UNIT: f64 = 65536.0;
 /// Largest quantized weight (σ ≈ 0.6 mm); smaller σ are clamped to it.
 pub const W_MAX: u32 = 1 << 24;
+/// Scale of a point's vertical weight `q = w·s²·V_SCALE` ([`vertical_weight`]).
+pub const V_SCALE: f64 = 64.0;
+
+/// Quantized `w·s²` of a point of weight `w` whose range noise reaches its height by the
+/// share `s` (0..1): what its noise adds to the variance of an inverse-variance mean,
+/// in units of `1/V_SCALE` of a weight. At least 1, so that no point's noise vanishes.
+#[inline]
+pub fn vertical_weight(w: u32, share: f64) -> u32 {
+    let q = f64::from(w) * share * share * V_SCALE + 0.5;
+    if q.is_nan() || q < 1.0 {
+        return 1;
+    }
+    // At most W_MAX · V_SCALE = 2³⁰.
+    (q as u64).min(u64::from(W_MAX) * V_SCALE as u64) as u32
+}
 
 /// Quantized inverse-variance weight of a measurement with standard deviation `sigma_m`.
 #[inline]
@@ -52,6 +67,8 @@ pub struct CellStats {
     pub below: u32,
     /// Σ w (quantized weights).
     pub sw: u64,
+    /// Σ q, the points' vertical weights ([`vertical_weight`]).
+    pub swv: u64,
     /// Σ w·z (z in mm).
     pub swz: i128,
     /// Σ w·z² (z in mm).
@@ -70,6 +87,7 @@ impl Default for CellStats {
             hits: 0,
             below: 0,
             sw: 0,
+            swv: 0,
             swz: 0,
             swzz: 0,
             zmin: i32::MAX,
@@ -87,11 +105,17 @@ impl CellStats {
         self.hits == 0 && self.below == 0 && self.ev.is_empty()
     }
 
-    /// Fuses one quantized measurement.
+    /// Fuses one quantized measurement whose noise is all vertical.
     #[inline]
     pub fn add(&mut self, z_mm: i32, w: u32) {
+        self.add_sample(z_mm, w, vertical_weight(w, 1.0));
+    }
+
+    /// Fuses one quantized measurement of weight `w` and vertical weight `q`.
+    #[inline]
+    pub fn add_sample(&mut self, z_mm: i32, w: u32, q: u32) {
         let mut e = Elev::of(self);
-        e.add(z_mm, w);
+        e.add(z_mm, w, q);
         e.write_to(self);
     }
 
@@ -117,11 +141,28 @@ impl CellStats {
         Some((self.swzz as f64 / self.sw as f64 - m * m).max(0.0))
     }
 
-    /// Standard deviation of the elevation estimate, metres: the inverse-variance standard
-    /// error, or the empirical standard error when the points disagree more than their
-    /// noise model says.
+    /// Standard deviation of the elevation estimate, metres: the standard error of the
+    /// weighted mean from the vertical part of each point's noise (a range sensor errs
+    /// along its ray, so a grazing return's height is far better known than its range),
+    /// or the empirical standard error when the points disagree more than that. What the
+    /// map publishes as `elevation_std`.
     pub fn elevation_std_m(&self) -> Option<f64> {
-        let model_var = (SIGMA_REF_M * SIGMA_REF_M) * W_UNIT / self.sw as f64;
+        let sw = self.sw as f64;
+        let model_var =
+            (SIGMA_REF_M * SIGMA_REF_M) * W_UNIT * (self.swv as f64 / V_SCALE) / (sw * sw);
+        self.with_spread(model_var)
+    }
+
+    /// [`Self::elevation_std_m`] as if every point's range error were vertical: a bound
+    /// that holds on any slope (on a bank facing the sensor the range error moves the
+    /// height at a fixed place fully), which the map's own quality gates use (the ray
+    /// march's holes, the water's shore cells, the step test).
+    pub fn range_bound_std_m(&self) -> Option<f64> {
+        self.with_spread((SIGMA_REF_M * SIGMA_REF_M) * W_UNIT / self.sw as f64)
+    }
+
+    /// `model_var` (m²), or the empirical variance of the mean where that is larger.
+    fn with_spread(&self, model_var: f64) -> Option<f64> {
         let emp_var = self.spread_var_mm2()? * 1e-6 / self.hits as f64;
         Some(model_var.max(emp_var).sqrt())
     }

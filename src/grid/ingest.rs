@@ -1,7 +1,8 @@
 //! Fusing point clouds into the rolling grid.
 //!
 //! One call to [`RollingGrid::ingest`] is one batch (a scan, a stereo frame, a chunk of a
-//! file). Points are range-weighted (σ grows with range, [`RangeNoise`]) and fused as exact
+//! file). Points are range-weighted (σ grows with range, [`RangeNoise`]), each with the
+//! share of its range noise that reaches its height (`vertical_share`), and fused as exact
 //! integer sums in two passes: classify the points (in parallel over contiguous chunks of
 //! the cloud) into buckets of cells, then fuse each bucket (in parallel over buckets: a
 //! bucket's samples sorted by cell, each cell's one-line record read and written once).
@@ -29,7 +30,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::cell::{quantize_mm, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
+use super::cell::{quantize_mm, vertical_weight, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
 use super::{Elev, Layers, RollingGrid};
 use crate::error::{Error, Result};
 use crate::geom::{cell_coord, floor_i64, PointCloud};
@@ -164,6 +165,7 @@ struct Acc {
     zmin: i32,
     zmax: i32,
     sw: u64,
+    swv: u64,
     /// Points at or above this height (mm) are fused without evaluating the gate (it is
     /// the gate with the point's own noise left out, which can only be nearer); `i32::MIN`
     /// when the prior cannot gate. Set when the cell is first touched in a batch.
@@ -182,6 +184,7 @@ impl Default for Acc {
             zmin: i32::MAX,
             zmax: i32::MIN,
             sw: 0,
+            swv: 0,
             gate_fast: i32::MIN,
             group: u32::MAX,
             swz: 0,
@@ -199,11 +202,12 @@ impl Acc {
     /// [`Elev::add`]'s arithmetic, repeated: an `Acc` holding an `Elev` would take two
     /// cache lines, since `gate_fast` and `group` sit where `Elev` has its padding.
     #[inline]
-    fn add(&mut self, z_mm: i32, w: u32) {
+    fn add(&mut self, z_mm: i32, w: u32, q: u32) {
         // |w·z| < 2^55 fits i64; the square needs one widening multiply.
         let wz = w as i64 * z_mm as i64;
         self.hits += 1;
         self.sw += w as u64;
+        self.swv += q as u64;
         self.swz += wz as i128;
         self.swzz += wz as i128 * z_mm as i128;
         self.zmin = self.zmin.min(z_mm);
@@ -219,6 +223,7 @@ impl Acc {
             zmin: self.zmin,
             zmax: self.zmax,
             sw: self.sw,
+            swv: self.swv,
             swz: self.swz,
             swzz: self.swzz,
         }
@@ -376,6 +381,8 @@ struct Sample {
     idx: u32,
     z_mm: i32,
     w: u32,
+    /// The vertical weight ([`super::cell::vertical_weight`]).
+    q: u32,
     sigma_mm: f32,
 }
 
@@ -385,6 +392,7 @@ impl Sample {
         idx: 0,
         z_mm: 0,
         w: 0,
+        q: 0,
         sigma_mm: 0.0,
     };
 }
@@ -401,6 +409,8 @@ struct Ctx<'a> {
     rot: [[f64; 3]; 3],
     t: [f64; 3],
     so: [f32; 3],
+    /// The sensor origin's height in the map.
+    so_z_map: f64,
     res: f64,
     inv_res: f64,
     z_ref: f64,
@@ -420,6 +430,7 @@ struct Lanes {
     idx: [u32; LANES],
     z_mm: [i32; LANES],
     w: [u32; LANES],
+    q: [u32; LANES],
     sigma_mm: [f32; LANES],
 }
 
@@ -435,6 +446,7 @@ impl Default for Lanes {
             idx: [0; LANES],
             z_mm: [0; LANES],
             w: [0; LANES],
+            q: [0; LANES],
             sigma_mm: [0.0; LANES],
         }
     }
@@ -528,6 +540,7 @@ impl Ctx<'_> {
                 1.0
             };
             l.w[j] = floor_small(wr).1 as u32;
+            l.q[j] = vertical_weight(l.w[j], vertical_share(wz - self.so_z_map, range));
             l.sigma_mm[j] = (sigma * 1000.0) as f32;
         }
     }
@@ -568,13 +581,32 @@ impl Ctx<'_> {
         let (ex, ey, ez) = (x - self.so[0], y - self.so[1], z - self.so[2]);
         let range = ((ex * ex + ey * ey + ez * ez) as f64).sqrt();
         let sigma = self.noise.sigma(range);
+        let w = weight_of(sigma);
         Classified::Sample(Sample {
             idx: (by * self.n + bx) as u32,
             z_mm,
-            w: weight_of(sigma),
+            w,
+            q: vertical_weight(w, vertical_share(wz - self.so_z_map, range)),
             sigma_mm: (sigma * 1000.0) as f32,
         })
     }
+}
+
+/// Smallest share of a point's range noise that reaches its height: the sine of the
+/// most grazing ray (about 3°) whose vertical error is still taken from its range error.
+/// Below it, the beam's footprint and the ground's roughness across it, not the range
+/// noise, decide the height, and they do not shrink with the angle.
+const MIN_VERTICAL_SHARE: f64 = 0.05;
+
+/// The share of a point's range noise that reaches its height: a range sensor errs along
+/// its ray, so a point `dz` metres above or below the sensor at `range` is `|dz|/range`
+/// of its range error off in height (at least [`MIN_VERTICAL_SHARE`]). A grazing lidar
+/// return at 20 m is a few millimetres off in height although its range is centimetres
+/// off; a point straight below the sensor carries all of it.
+#[inline]
+fn vertical_share(dz: f64, range: f64) -> f64 {
+    let share = if range > 0.0 { dz.abs() / range } else { 1.0 };
+    share.clamp(MIN_VERTICAL_SHARE, 1.0)
 }
 
 /// Gate distance (mm) below a surface of spread `var_mm2` for a point of noise `sigma_mm`.
@@ -612,6 +644,7 @@ impl RollingGrid {
                 cloud.sensor_origin.y as f32,
                 cloud.sensor_origin.z as f32,
             ],
+            so_z_map: cloud.sensor_origin_in_map().z,
             res: self.cfg.resolution,
             inv_res: 1.0 / self.cfg.resolution,
             z_ref: self.cfg.z_ref,
@@ -799,6 +832,7 @@ fn bin_chunk_impl(ctx: &Ctx, range: std::ops::Range<usize>, nbuckets: usize, p: 
                     idx: l.idx[j],
                     z_mm: l.z_mm[j],
                     w: l.w[j],
+                    q: l.q[j],
                     sigma_mm: l.sigma_mm[j],
                 })),
                 LANE_OUTSIDE => emit(Classified::Outside),
@@ -893,7 +927,7 @@ fn fuse_bucket(
         // again through the gate.
         let mut a = Elev::default();
         for s in run.iter() {
-            a.add(s.z_mm, s.w);
+            a.add(s.z_mm, s.w, s.q);
         }
         fused += a.hits as u64;
         if never_below(&lay.elev[l], support, min_mm).is_some_and(|h| (a.zmin as f64) < h) {
@@ -906,7 +940,7 @@ fn fuse_bucket(
                     below += 1;
                     continue;
                 }
-                a.add(s.z_mm, s.w);
+                a.add(s.z_mm, s.w, s.q);
                 fused += 1;
             }
         }
@@ -954,7 +988,7 @@ fn fuse_dense(
             below += 1;
             continue;
         }
-        a.add(s.z_mm, s.w);
+        a.add(s.z_mm, s.w, s.q);
         fused += 1;
     }
 
@@ -1023,7 +1057,7 @@ fn is_below(prior: &ElevMut, i: usize, support: u32, s: &Sample, k: f64, min_mm:
 /// surface cluster and everything above it, and the number of points below it.
 fn split_cell(pts: &mut [Sample], k: f64, min_mm: f64) -> (CellStats, u32) {
     // A total order on what a sample holds, so ties cannot depend on arrival order.
-    pts.sort_unstable_by_key(|s| (s.z_mm, s.w, s.sigma_mm.to_bits()));
+    pts.sort_unstable_by_key(|s| (s.z_mm, s.w, s.q, s.sigma_mm.to_bits()));
     // Cluster boundaries: a gap wider than the gate of the two points on either side.
     let mut starts = vec![0usize];
     for j in 1..pts.len() {
@@ -1057,7 +1091,7 @@ fn split_cell(pts: &mut [Sample], k: f64, min_mm: f64) -> (CellStats, u32) {
     let first_kept = bounds[surface].0;
     let mut c = CellStats::default();
     for s in &pts[first_kept..] {
-        c.add(s.z_mm, s.w);
+        c.add_sample(s.z_mm, s.w, s.q);
     }
     (c, first_kept as u32)
 }
@@ -1069,8 +1103,8 @@ mod tests {
     use crate::grid::GridConfig;
     use proptest::prelude::*;
 
-    /// A sample as (idx, z_mm, w, σ bits).
-    type Bits = (u32, i32, u32, u32);
+    /// A sample as (idx, z_mm, w, q, σ bits).
+    type Bits = (u32, i32, u32, u32, u32);
 
     /// Everything a binning produced, comparable (σ by its bits).
     fn outcome(p: &Binned) -> (IngestStats, Vec<Vec<Bits>>) {
@@ -1079,7 +1113,7 @@ mod tests {
             .iter()
             .map(|v| {
                 v.iter()
-                    .map(|s| (s.idx, s.z_mm, s.w, s.sigma_mm.to_bits()))
+                    .map(|s| (s.idx, s.z_mm, s.w, s.q, s.sigma_mm.to_bits()))
                     .collect()
             })
             .collect();

@@ -170,6 +170,7 @@ pub(crate) struct Elev {
     pub zmin: i32,
     pub zmax: i32,
     pub sw: u64,
+    pub swv: u64,
     pub swz: i128,
     pub swzz: i128,
 }
@@ -190,6 +191,7 @@ impl Elev {
             zmin: c.zmin,
             zmax: c.zmax,
             sw: c.sw,
+            swv: c.swv,
             swz: c.swz,
             swzz: c.swzz,
         }
@@ -209,6 +211,7 @@ impl Elev {
         c.hits = self.hits;
         c.below = self.below;
         c.sw = self.sw;
+        c.swv = self.swv;
         c.swz = self.swz;
         c.swzz = self.swzz;
         c.zmin = self.zmin;
@@ -217,11 +220,12 @@ impl Elev {
 
     /// Fuses one quantized measurement (the arithmetic behind [`CellStats::add`]).
     #[inline]
-    pub fn add(&mut self, z_mm: i32, w: u32) {
+    pub fn add(&mut self, z_mm: i32, w: u32, q: u32) {
         // |w·z| < 2^55 fits i64; the square needs one widening multiply.
         let wz = w as i64 * z_mm as i64;
         self.hits += 1;
         self.sw += w as u64;
+        self.swv += q as u64;
         self.swz += wz as i128;
         self.swzz += wz as i128 * z_mm as i128;
         self.zmin = self.zmin.min(z_mm);
@@ -234,6 +238,7 @@ impl Elev {
         self.hits += o.hits;
         self.below += o.below;
         self.sw += o.sw;
+        self.swv += o.swv;
         self.swz += o.swz;
         self.swzz += o.swzz;
         self.zmin = self.zmin.min(o.zmin);
@@ -323,7 +328,8 @@ impl Layers {
     }
 
     /// The elevation statistics of cell `i` only (no evidence, no extremes): all that
-    /// [`CellStats::mean_mm`] and [`CellStats::elevation_std_m`] read.
+    /// [`CellStats::mean_mm`], [`CellStats::elevation_std_m`] and
+    /// [`CellStats::range_bound_std_m`] read.
     #[inline]
     pub fn elevation_stats(&self, i: usize) -> CellStats {
         let e = &self.elev[i];
@@ -331,6 +337,7 @@ impl Layers {
             hits: e.hits,
             below: e.below,
             sw: e.sw,
+            swv: e.swv,
             swz: e.swz,
             swzz: e.swzz,
             ..CellStats::default()

@@ -579,3 +579,55 @@ proptest! {
         }
     }
 }
+
+/// A range sensor errs along its ray: the published σ of level ground seen at grazing
+/// incidence is the vertical part of the range noise, and is what the cells' errors show
+/// (about 68 % within 1σ, 99.7 % within 3σ); the range bound keeps every error vertical.
+#[test]
+fn elevation_std_follows_the_vertical_part_of_range_noise() {
+    let (sigma, height, per_cell) = (0.03, 2.0, 4);
+    let mut rng = TestRng(7);
+    let mut pts = Vec::new();
+    // Cells along y = 0.05, 5–25 m out, each hit by `per_cell` rays.
+    let cells: Vec<f64> = (50..250).map(|i| i as f64 * 0.1 + 0.05).collect();
+    for &x in &cells {
+        for _ in 0..per_cell {
+            let (tx, ty) = (
+                x + (rng.uniform() - 0.5) * 0.08,
+                0.05 + (rng.uniform() - 0.5) * 0.08,
+            );
+            let d = nalgebra::Vector3::new(tx, ty, -height);
+            let r = d.norm();
+            let p = d * ((r + sigma * rng.normal()) / r);
+            pts.push([p.x as f32, p.y as f32, (height + p.z) as f32]);
+        }
+    }
+    let mut cloud = PointCloud::unorganized(pts);
+    cloud.sensor_origin = nalgebra::Point3::new(0.0, 0.0, height);
+    let mut g = grid(600);
+    g.ingest(&cloud, &RangeNoise::constant(sigma)).unwrap();
+    let (mut within1, mut within3, mut ratio) = (0, 0, 0.0);
+    for &x in &cells {
+        let c = g.cell_at(x, 0.05).unwrap();
+        let (z, s, bound) = (
+            c.mean_mm().unwrap() * 1e-3,
+            c.elevation_std_m().unwrap(),
+            c.range_bound_std_m().unwrap(),
+        );
+        // The vertical share at x is height / range: at most 0.37 here.
+        ratio += s / bound / (height / x.hypot(height));
+        assert!(bound >= sigma / f64::from(c.hits).sqrt() - 1e-4, "{bound}");
+        within1 += (z.abs() <= s) as usize;
+        within3 += (z.abs() <= 3.0 * s) as usize;
+    }
+    let n = cells.len() as f64;
+    let (f1, f3) = (within1 as f64 / n, within3 as f64 / n);
+    // The published σ is the bound times the share (more where the points' spread says so).
+    assert!(
+        (0.9..1.4).contains(&(ratio / n)),
+        "σ / bound / share {}",
+        ratio / n
+    );
+    assert!((0.58..0.78).contains(&f1), "{f1} within 1σ");
+    assert!(f3 >= 0.98, "{f3} within 3σ");
+}

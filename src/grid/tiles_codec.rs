@@ -1,12 +1,12 @@
 //! The tile set file format: a [`TileMap`] as compact, versioned bytes, for moving partial
 //! maps between processes (one log's tiles built on one machine, merged on another).
 //!
-//! Everything is little-endian. Version 1:
+//! Everything is little-endian. Version 2:
 //!
 //! | bytes | field |
 //! | --- | --- |
 //! | 8 | magic `TARNTILE` |
-//! | 4 | version, `u32` = 1 |
+//! | 4 | version, `u32` = 2 |
 //! | 4 | cells per tile side, `u32` = [`TILE_CELLS`] |
 //! | 8 | resolution (m), `f64` |
 //! | 8 | reference height `z_ref` (m), `f64` |
@@ -18,8 +18,8 @@
 //! increasing index (`cy · 64 + cx`). A cell: `index: u16`, `flags: u8`, then the blocks
 //! the flags name, in this order:
 //!
-//! - bit 0, elevation (52 bytes): `hits: u32`, `sw: u64`, `swz: i128`, `swzz: i128`,
-//!   `zmin: i32`, `zmax: i32`;
+//! - bit 0, elevation (60 bytes): `hits: u32`, `sw: u64`, `swv: u64`, `swz: i128`,
+//!   `swzz: i128`, `zmin: i32`, `zmax: i32`;
 //! - bit 1, below-surface points: `below: u32`;
 //! - bit 2, water evidence (54 bytes): the 11 `u16` event counts in
 //!   [`Evidence::counts`] order, `level_n: u32`, `level_sum_mm: i64`, `depth_n: u32`,
@@ -27,7 +27,7 @@
 //!
 //! A block is written exactly when its part of the cell is not empty (not its default), so
 //! the encoding is canonical: equal maps give equal bytes, whatever order their cells were
-//! merged in. A dry cell costs 55–59 bytes, a cell with water evidence 109–113.
+//! merged in. A dry cell costs 63–67 bytes, a cell with water evidence 117–121.
 //!
 //! Reading checks everything: the magic, the version, the CRC, every length against the
 //! bytes that remain (so a corrupt count cannot make it allocate more than the input's
@@ -41,7 +41,7 @@ use crate::grid::{CellStats, Evidence, EVIDENCE_COUNTS};
 /// The first eight bytes of a tile set.
 pub const TILESET_MAGIC: &[u8; 8] = b"TARNTILE";
 /// The version written, and the only one read.
-pub const TILESET_VERSION: u32 = 1;
+pub const TILESET_VERSION: u32 = 2;
 
 const HEADER: usize = 8 + 4 + 4 + 8 + 8 + 8;
 const TILE_HEADER: usize = 8 + 8 + 4;
@@ -75,6 +75,7 @@ fn write_cell(out: &mut Vec<u8>, index: usize, c: &CellStats) {
     if has_elevation {
         out.extend_from_slice(&c.hits.to_le_bytes());
         out.extend_from_slice(&c.sw.to_le_bytes());
+        out.extend_from_slice(&c.swv.to_le_bytes());
         out.extend_from_slice(&c.swz.to_le_bytes());
         out.extend_from_slice(&c.swzz.to_le_bytes());
         out.extend_from_slice(&c.zmin.to_le_bytes());
@@ -175,6 +176,7 @@ impl<'a> ByteReader<'a> {
         if flags & ELEVATION != 0 {
             c.hits = self.u32("hits")?;
             c.sw = self.u64("sw")?;
+            c.swv = self.u64("swv")?;
             c.swz = self.i128("swz")?;
             c.swzz = self.i128("swzz")?;
             c.zmin = self.i32("zmin")?;
@@ -517,7 +519,7 @@ mod tests {
             c
         });
         let bytes = m.to_bytes();
-        assert_eq!(bytes.len(), HEADER + TILE_HEADER + 3 + 52 + 4);
+        assert_eq!(bytes.len(), HEADER + TILE_HEADER + 3 + 60 + 4);
         let e = TileMap::from_bytes(b"PLY\n").unwrap_err().to_string();
         assert!(e.contains("shorter than a tile set's header"), "{e}");
         let mut v = bytes.clone();
@@ -525,9 +527,9 @@ mod tests {
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
         assert!(e.contains("magic"), "{e}");
         let mut v = bytes.clone();
-        v[8] = 2;
+        v[8] = 3;
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
-        assert!(e.contains("version 2"), "{e}");
+        assert!(e.contains("version 3"), "{e}");
         // A tile count of 2^40 with a valid CRC: refused before any allocation.
         let mut v = bytes[..bytes.len() - 4].to_vec();
         v[32..40].copy_from_slice(&(1u64 << 40).to_le_bytes());

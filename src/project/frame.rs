@@ -67,7 +67,7 @@ pub struct FrameLabelConfig {
     /// (σ = z² σ_d / (f B): 2.9 m at 20 m for the simulated 320 px, 12 cm-baseline rig), so a
     /// single far point is a worse place for a vote than the map, which averages many.
     pub stereo_max_range: f64,
-    /// Cells whose elevation σ exceeds this (metres) are holes to the ray march
+    /// Cells whose elevation σ bound exceeds this (metres) are holes to the ray march
     /// ([`GridSurface::from_grid_gated`]); infinity keeps every observed cell.
     pub surface_max_std: f64,
     /// Check colour water against the sky it would reflect ([`reflection_check`]), reading
@@ -193,7 +193,8 @@ pub struct LabelsConfig {
     pub wide_rows: bool,
     /// Pixels whose hit is farther than this do not vote (m).
     pub max_range_m: f64,
-    /// Cells whose elevation σ exceeds this are holes to the ray march (m).
+    /// Cells whose elevation σ bound (`CellStats::range_bound_std_m`) exceeds this are
+    /// holes to the ray march (m).
     pub surface_max_std_m: f64,
     /// Veto colour water that is brighter than a reflection of the sky it faces could be
     /// ([`reflection_check`]).

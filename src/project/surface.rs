@@ -72,8 +72,8 @@ impl GridSurface {
         Self::from_grid_gated(grid, f64::INFINITY)
     }
 
-    /// As [`Self::from_grid`], but a cell whose elevation standard deviation
-    /// ([`crate::grid::CellStats::elevation_std_m`]) exceeds `max_std_m` counts as
+    /// As [`Self::from_grid`], but a cell whose elevation σ bound
+    /// ([`crate::grid::CellStats::range_bound_std_m`]) exceeds `max_std_m` counts as
     /// unobserved: a cell seen only by a few far stereo points (σ grows with range²) holds
     /// an elevation that may belong to a cell metres nearer, and would stop rays short.
     pub fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
@@ -94,7 +94,7 @@ impl GridSurface {
                 for (dx, i) in grid.observed_in_row(dy) {
                     let c = grid.layers.elevation_stats(i);
                     let Some(m) = c.mean_mm() else { continue };
-                    if c.elevation_std_m().is_some_and(|sd| sd <= max_std_m) {
+                    if c.range_bound_std_m().is_some_and(|sd| sd <= max_std_m) {
                         row[dx] = (z_ref + m * 1e-3) as f32;
                     }
                 }

@@ -91,7 +91,8 @@
 //! body's outer shore does.
 //!
 //! Only reliably measured shore cells count when there are at least `min_shore_samples`
-//! of them: a cell whose elevation σ exceeds `shore_max_std_m` (5 cm; far cells seen by a
+//! of them: a cell whose elevation σ bound (every point's range error taken as vertical,
+//! `CellStats::range_bound_std_m`) exceeds `shore_max_std_m` (5 cm; far cells seen by a
 //! few stereo points, whose range noise grows with the square of the range) is left out.
 //! On the default scene 59 of the pond's 65 shore cells had σ > 0.3 m and lifted the level
 //! by 13 cm; the 6 reliable ones put it within 1.5 cm of the truth. With fewer reliable
@@ -228,8 +229,8 @@ pub struct WaterConfig {
     pub max_surface_slope: f64,
     /// Shore samples the spill test compares within this distance (m).
     pub spill_radius_m: f64,
-    /// Shore cells whose elevation σ exceeds this are left out when enough others remain
-    /// (m).
+    /// Shore cells whose elevation σ bound ([`crate::grid::CellStats::range_bound_std_m`])
+    /// exceeds this are left out when enough others remain (m).
     pub shore_max_std_m: f64,
     /// Fewer kept shore samples than this: use the cues' water-level samples.
     pub min_shore_samples: usize,
@@ -705,7 +706,7 @@ impl Info {
             p_without_bottom,
             bottom_counts: true,
             elevation: c.mean_mm().map(|m| z_ref + m * 1e-3),
-            std: c.elevation_std_m().filter(|s| s.is_finite()),
+            std: c.range_bound_std_m().filter(|s| s.is_finite()),
             level: c.ev.level_mm().map(|mm| z_ref + mm * 1e-3),
             depth: Bottom::of(&c.ev, z_ref),
         }
