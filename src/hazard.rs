@@ -337,6 +337,23 @@ pub fn terrain_hazard(
     }
 }
 
+/// The σ of a dry cell's elevation as the elevation of its centre: the points' mean lies
+/// where they fell in the cell, not at its centre, so on terrain of gradient g (from the
+/// neighbours' elevations, central differences where both sides are dry) the mean is
+/// off by g times an offset spread over the cell, variance `g²·res²/12` along each axis;
+/// and the elevations are whole millimetres (variance 1/12 mm²).
+fn centre_std(sd: f64, nb: &Neighbourhood, res: f64) -> f64 {
+    let z = |j: usize| nb[j].0;
+    let grad = |lo: usize, hi: usize| match (z(lo).is_nan(), z(hi).is_nan()) {
+        (false, false) => (z(hi) - z(lo)) / (2.0 * res),
+        (true, false) => (z(hi) - z(4)) / res,
+        (false, true) => (z(4) - z(lo)) / res,
+        (true, true) => 0.0,
+    };
+    let (gx, gy) = (grad(3, 5), grad(1, 7));
+    (sd * sd + (gx * gx + gy * gy) * res * res / 12.0 + 1e-6 / 12.0).sqrt()
+}
+
 /// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
 /// slope tests.
 fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<(f64, f64)> {
@@ -402,13 +419,13 @@ impl<'a> CellRule<'a> {
     #[inline]
     fn record(&self, c: Seen, level_mm: impl FnOnce() -> Option<f64>) -> Option<MapCell> {
         if let Some((z, sz)) = self.dry.get(c.key) {
-            let (class, hazard) = terrain_hazard(
-                &self.dry.neighbourhood(c.key),
-                (z, sz),
-                self.res,
-                self.max_step_m,
-                self.max_grad,
-            );
+            let nb = self.dry.neighbourhood(c.key);
+            let (class, hazard) =
+                terrain_hazard(&nb, (z, sz), self.res, self.max_step_m, self.max_grad);
+            let c = Seen {
+                elevation_std: centre_std(c.elevation_std, &nb, self.res),
+                ..c
+            };
             return Some(c.record(self.res, z, dry_depth(c.water), class, hazard));
         }
         if let Some(&(z, depth)) = self.water.get(&c.key) {
@@ -580,6 +597,22 @@ impl HazardMap {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn centre_std_adds_the_gradient_across_the_cell() {
+        let res = 0.1;
+        // A plane rising 0.5 m per metre along x, every neighbour dry and exact.
+        let nb: Neighbourhood = std::array::from_fn(|j| ((j % 3) as f64 * 0.05, 0.0));
+        let s = centre_std(0.0, &nb, res);
+        let want = (0.25f64 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
+        assert!((s - want).abs() < 1e-12, "{s} {want}");
+        // Level ground: the cell's own σ and the millimetre only; no neighbour: the same.
+        let flat: Neighbourhood = [(1.0, 0.0); 9];
+        assert!((centre_std(0.01, &flat, res) - (1e-4f64 + 1e-6 / 12.0).sqrt()).abs() < 1e-12);
+        let alone: Neighbourhood =
+            std::array::from_fn(|j| if j == 4 { (1.0, 0.0) } else { (f64::NAN, 0.0) });
+        assert_eq!(centre_std(0.01, &alone, res), centre_std(0.01, &flat, res));
+    }
     use super::*;
     use crate::grid::Evidence;
 

@@ -17,19 +17,23 @@ pub const W_UNIT: f64 = 65536.0;
 /// Largest quantized weight (σ ≈ 0.6 mm); smaller σ are clamped to it.
 pub const W_MAX: u32 = 1 << 24;
 /// Scale of a point's vertical weight `q = w·s²·V_SCALE` ([`vertical_weight`]).
-pub const V_SCALE: f64 = 64.0;
+pub const V_SCALE: f64 = 256.0;
 
-/// Quantized `w·s²` of a point of weight `w` whose range noise reaches its height by the
-/// share `s` (0..1): what its noise adds to the variance of an inverse-variance mean,
-/// in units of `1/V_SCALE` of a weight. At least 1, so that no point's noise vanishes.
+/// What a point of weight `w` and range noise `sigma_m`, of which the share `s` (0..1)
+/// reaches its height, adds to the variance of the weighted mean: `(w·s·σ)²`, in units of
+/// `SIGMA_REF_M²·W_UNIT / V_SCALE`, quantized. That is `w·s²·V_SCALE` where `w` is the
+/// point's own inverse variance, and more where `w` is clamped: a point noisier than
+/// 2.56 m (weight 1) still carries all its noise. At least 1, so that no point's noise
+/// vanishes.
 #[inline]
-pub fn vertical_weight(w: u32, share: f64) -> u32 {
-    let q = f64::from(w) * share * share * V_SCALE + 0.5;
+pub fn vertical_weight(w: u32, share: f64, sigma_m: f64) -> u32 {
+    let a = f64::from(w) * share * sigma_m / SIGMA_REF_M;
+    let q = a * a / W_UNIT * V_SCALE + 0.5;
     if q.is_nan() || q < 1.0 {
         return 1;
     }
-    // At most W_MAX · V_SCALE = 2³⁰.
-    (q as u64).min(u64::from(W_MAX) * V_SCALE as u64) as u32
+    // `as` saturates; the clamp keeps a point of absurd noise within u32.
+    (q as u64).min(u64::from(u32::MAX)) as u32
 }
 
 /// Quantized inverse-variance weight of a measurement with standard deviation `sigma_m`.
@@ -108,7 +112,11 @@ impl CellStats {
     /// Fuses one quantized measurement whose noise is all vertical.
     #[inline]
     pub fn add(&mut self, z_mm: i32, w: u32) {
-        self.add_sample(z_mm, w, vertical_weight(w, 1.0));
+        self.add_sample(
+            z_mm,
+            w,
+            (u64::from(w) * V_SCALE as u64).min(u64::from(u32::MAX)) as u32,
+        );
     }
 
     /// Fuses one quantized measurement of weight `w` and vertical weight `q`.
@@ -153,10 +161,11 @@ impl CellStats {
         self.with_spread(model_var)
     }
 
-    /// [`Self::elevation_std_m`] as if every point's range error were vertical: a bound
-    /// that holds on any slope (on a bank facing the sensor the range error moves the
-    /// height at a fixed place fully), which the map's own quality gates use (the ray
-    /// march's holes, the water's shore cells, the step test).
+    /// [`Self::elevation_std_m`] as if every point's range error were vertical (and no
+    /// point noisier than the weights' floor, σ 2.56 m): a bound that holds on any slope
+    /// (on a bank facing the sensor the range error moves the height at a fixed place
+    /// fully), which the map's own quality gates use (the ray march's holes, the water's
+    /// shore cells, the step test).
     pub fn range_bound_std_m(&self) -> Option<f64> {
         self.with_spread((SIGMA_REF_M * SIGMA_REF_M) * W_UNIT / self.sw as f64)
     }
@@ -172,6 +181,29 @@ impl CellStats {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn published_std_is_the_vertical_part_even_past_the_weight_floor() {
+        for (sigma, share) in [(0.02, 0.1), (0.02, 1.0), (5.0, 0.1), (40.0, 0.3)] {
+            let mut c = CellStats::default();
+            let w = quantize_weight(sigma);
+            for z in [-10, 0, 10, 0] {
+                c.add_sample(z, w, vertical_weight(w, share, sigma));
+            }
+            // Four points: the vertical σ over 2, whatever the weight's floor (σ 2.56 m).
+            let want = sigma * share / 2.0;
+            let got = c.elevation_std_m().unwrap();
+            assert!(
+                (got / want - 1.0).abs() < 0.02 || got * 1000.0 < 8.0,
+                "{sigma} {share}: {got}"
+            );
+            // The bound reads the weights, which stop at σ 2.56 m.
+            if sigma < 2.56 {
+                let bound = c.range_bound_std_m().unwrap();
+                assert!(bound >= got, "{bound} < {got}");
+            }
+        }
+    }
 
     #[test]
     fn weights_follow_inverse_variance() {

@@ -540,7 +540,7 @@ impl Ctx<'_> {
                 1.0
             };
             l.w[j] = floor_small(wr).1 as u32;
-            l.q[j] = vertical_weight(l.w[j], vertical_share(wz - self.so_z_map, range));
+            l.q[j] = vertical_weight(l.w[j], vertical_share(wz - self.so_z_map, range), sigma);
             l.sigma_mm[j] = (sigma * 1000.0) as f32;
         }
     }
@@ -586,7 +586,7 @@ impl Ctx<'_> {
             idx: (by * self.n + bx) as u32,
             z_mm,
             w,
-            q: vertical_weight(w, vertical_share(wz - self.so_z_map, range)),
+            q: vertical_weight(w, vertical_share(wz - self.so_z_map, range), sigma),
             sigma_mm: (sigma * 1000.0) as f32,
         })
     }
