@@ -22,7 +22,7 @@ fi
 OUT="${OUT:-out/matrix}"
 DOC="${DOC:-docs/accuracy.md}"
 CUES_DOC="${CUES_DOC:-docs/cues.md}"
-SCENES="${SCENES:-default pond_bush fig4_reflections puddles stream_slope reservoir_night snow_ice dry_decoys dry_paved vertical_scanner pond_far_shore pond_trees track_puddles}"
+SCENES="${SCENES:-default pond_bush fig4_reflections puddles stream_slope reservoir_night snow_ice dry_decoys dry_paved vertical_scanner pond_far_shore pond_deep_banks pond_trees track_puddles}"
 RIGS="${RIGS:-small wide lidar_camera stereo_camera}"
 start=$(date +%s)
 for rig in $RIGS; do
