@@ -114,7 +114,7 @@ fn build(
     r: &rellis_common::Rellis,
     cloud: &tarn::geom::PointCloud,
     labels: Option<tarn::project::LabelsConfig>,
-) -> HazardMap {
+) -> (HazardMap, Mapper) {
     let level = rellis_common::lidar_level(r);
     let mut lidar = cloud.clone();
     lidar.frame_to_map = level;
@@ -145,8 +145,19 @@ fn build(
         mwir: None,
         stereo_baseline_m: None,
     };
-    m.update(&frame).unwrap();
-    m.publish_now().unwrap().as_ref().clone()
+    let rep = m.update(&frame).unwrap();
+    if let Some(c) = rep.labels.and_then(|l| l.colour) {
+        eprintln!(
+            "  colour: {} water pixels, {} vetoed by the colour check, {} by the reflection \
+             check; {} cells voted water, {} dry",
+            c.pixels_water,
+            c.colour_check_vetoed,
+            c.reflection_vetoed,
+            c.cells_water,
+            c.cells_dry
+        );
+    }
+    (m.publish_now().unwrap().as_ref().clone(), m)
 }
 
 fn print(name: &str, s: &Score) {
@@ -180,11 +191,11 @@ fn rellis_frame_through_the_mapper() {
         })
         .collect();
 
-    let lidar_only = build(&r, &cloud, None);
+    let (lidar_only, _) = build(&r, &cloud, None);
     let s_lidar = score(&lidar_only, &points);
     print("lidar alone", &s_lidar);
 
-    let rule = build(&r, &cloud, Some(Default::default()));
+    let (rule, _) = build(&r, &cloud, Some(Default::default()));
     let s_rule = score(&rule, &points);
     print("lidar + colour (Table 1 rule)", &s_rule);
 
@@ -192,7 +203,7 @@ fn rellis_frame_through_the_mapper() {
     let model = rellis_common::train(&r, &TrainConfig::default());
     let path = std::env::temp_dir().join(format!("tarn-rellis-model-{}.json", std::process::id()));
     model.save(&path).unwrap();
-    let gmm = build(
+    let (gmm, mapper) = build(
         &r,
         &cloud,
         Some(tarn::project::LabelsConfig {
@@ -200,9 +211,38 @@ fn rellis_frame_through_the_mapper() {
             ..Default::default()
         }),
     );
-    let _ = std::fs::remove_file(Path::new(&path));
     let s_gmm = score(&gmm, &points);
     print("lidar + colour (mixture trained on the left half)", &s_gmm);
+    // How many puddle cells this one frame's colour labels voted water.
+    let grid = mapper.grid().unwrap();
+    let puddle: BTreeSet<CellKey> = points
+        .iter()
+        .filter(|(_, l)| *l == PUDDLE)
+        .map(|(p, _)| key_of(grid.resolution(), p.x, p.y))
+        .collect();
+    let voted = puddle
+        .iter()
+        .filter(|k| grid.cell(**k).is_some_and(|c| c.ev.colour_water > 0))
+        .count();
+    eprintln!("  puddle cells with a colour water vote: {voted} of {}", puddle.len());
+    // What the two colour checks take from it.
+    for (name, colour_check, reflection_check) in [
+        ("without the colour check", false, true),
+        ("without the colour and reflection checks", false, false),
+    ] {
+        let (map, _) = build(
+            &r,
+            &cloud,
+            Some(tarn::project::LabelsConfig {
+                colour_model: Some(path.clone()),
+                colour_check,
+                reflection_check,
+                ..Default::default()
+            }),
+        );
+        print(&format!("lidar + colour (mixture), {name}"), &score(&map, &points));
+    }
+    let _ = std::fs::remove_file(Path::new(&path));
 
     for s in [&s_lidar, &s_rule, &s_gmm] {
         // No water called through missing returns where the scan's returns are dry ground.

@@ -58,6 +58,6 @@ done
 cue_secs=$(( $(date +%s) - start - secs ))
 commit=$(git rev-parse --short HEAD)
 git diff --quiet HEAD -- src maps/rigs $(ls maps/*.toml) || commit="$commit (with uncommitted changes)"
-[ -n "${REUSE_SIMS:-}" ] && secs="$secs s of builds and scoring (the logs simulated earlier)"
+[ -n "${REUSE_SIMS:-}" ] && secs="$secs s of builds and scoring (reusing the logs already simulated)"
 python3 tools/matrix_table.py "$OUT" "$commit" "$secs" "$cue_secs" "$SCENES" "$RIGS" "$DOC" "$CUES_DOC"
 echo "matrix: wrote $DOC in $secs s and $CUES_DOC in $cue_secs s more" >&2
