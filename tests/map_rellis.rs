@@ -150,11 +150,7 @@ fn build(
         eprintln!(
             "  colour: {} water pixels, {} vetoed by the colour check, {} by the reflection \
              check; {} cells voted water, {} dry",
-            c.pixels_water,
-            c.colour_check_vetoed,
-            c.reflection_vetoed,
-            c.cells_water,
-            c.cells_dry
+            c.pixels_water, c.colour_check_vetoed, c.reflection_vetoed, c.cells_water, c.cells_dry
         );
     }
     (m.publish_now().unwrap().as_ref().clone(), m)
@@ -224,7 +220,10 @@ fn rellis_frame_through_the_mapper() {
         .iter()
         .filter(|k| grid.cell(**k).is_some_and(|c| c.ev.colour_water > 0))
         .count();
-    eprintln!("  puddle cells with a colour water vote: {voted} of {}", puddle.len());
+    eprintln!(
+        "  puddle cells with a colour water vote: {voted} of {}",
+        puddle.len()
+    );
     // What the two colour checks take from it.
     for (name, colour_check, reflection_check) in [
         ("without the colour check", false, true),
@@ -240,7 +239,10 @@ fn rellis_frame_through_the_mapper() {
                 ..Default::default()
             }),
         );
-        print(&format!("lidar + colour (mixture), {name}"), &score(&map, &points));
+        print(
+            &format!("lidar + colour (mixture), {name}"),
+            &score(&map, &points),
+        );
     }
     let _ = std::fs::remove_file(Path::new(&path));
 
