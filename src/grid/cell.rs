@@ -24,16 +24,16 @@ pub const V_SCALE: f64 = 256.0;
 /// `SIGMA_REF_M²·W_UNIT / V_SCALE`, quantized. That is `w·s²·V_SCALE` where `w` is the
 /// point's own inverse variance, and more where `w` is clamped: a point noisier than
 /// 2.56 m (weight 1) still carries all its noise. At least 1, so that no point's noise
-/// vanishes.
+/// vanishes (NaN gives 1), and at most `i32::MAX` (a point some 7 km off). Branch-free:
+/// ingest runs it on lanes of points.
 #[inline]
 pub fn vertical_weight(w: u32, share: f64, sigma_m: f64) -> u32 {
     let a = f64::from(w) * share * sigma_m / SIGMA_REF_M;
-    let q = a * a / W_UNIT * V_SCALE + 0.5;
-    if q.is_nan() || q < 1.0 {
-        return 1;
-    }
-    // `as` saturates; the clamp keeps a point of absurd noise within u32.
-    (q as u64).min(u64::from(u32::MAX)) as u32
+    // `f64::max` takes 1 over a NaN.
+    let q = (a * a * (V_SCALE / W_UNIT) + 0.5)
+        .max(1.0)
+        .min(i32::MAX as f64);
+    q as u32
 }
 
 /// Quantized inverse-variance weight of a measurement with standard deviation `sigma_m`.
@@ -115,7 +115,7 @@ impl CellStats {
         self.add_sample(
             z_mm,
             w,
-            (u64::from(w) * V_SCALE as u64).min(u64::from(u32::MAX)) as u32,
+            (u64::from(w) * V_SCALE as u64).min(i32::MAX as u64) as u32,
         );
     }
 

@@ -165,7 +165,6 @@ struct Acc {
     zmin: i32,
     zmax: i32,
     sw: u64,
-    swv: u64,
     /// Points at or above this height (mm) are fused without evaluating the gate (it is
     /// the gate with the point's own noise left out, which can only be nearer); `i32::MIN`
     /// when the prior cannot gate. Set when the cell is first touched in a batch.
@@ -184,7 +183,6 @@ impl Default for Acc {
             zmin: i32::MAX,
             zmax: i32::MIN,
             sw: 0,
-            swv: 0,
             gate_fast: i32::MIN,
             group: u32::MAX,
             swz: 0,
@@ -199,31 +197,30 @@ impl Acc {
         self.hits == 0 && self.below == 0
     }
 
-    /// [`Elev::add`]'s arithmetic, repeated: an `Acc` holding an `Elev` would take two
-    /// cache lines, since `gate_fast` and `group` sit where `Elev` has its padding.
+    /// [`Elev::add`]'s arithmetic, repeated (without the vertical weights, kept beside the
+    /// accumulators): an `Acc` holding an `Elev` would take two cache lines.
     #[inline]
-    fn add(&mut self, z_mm: i32, w: u32, q: u32) {
+    fn add(&mut self, z_mm: i32, w: u32) {
         // |w·z| < 2^55 fits i64; the square needs one widening multiply.
         let wz = w as i64 * z_mm as i64;
         self.hits += 1;
         self.sw += w as u64;
-        self.swv += q as u64;
         self.swz += wz as i128;
         self.swzz += wz as i128 * z_mm as i128;
         self.zmin = self.zmin.min(z_mm);
         self.zmax = self.zmax.max(z_mm);
     }
 
-    /// The statistics accumulated.
+    /// The statistics accumulated, with the vertical weights `swv` kept beside them.
     #[inline]
-    fn elev(&self) -> Elev {
+    fn elev(&self, swv: u64) -> Elev {
         Elev {
             hits: self.hits,
             below: self.below,
             zmin: self.zmin,
             zmax: self.zmax,
             sw: self.sw,
-            swv: self.swv,
+            swv,
             swz: self.swz,
             swzz: self.swzz,
         }
@@ -314,9 +311,17 @@ pub(crate) struct Scratch {
     /// The batch's samples sorted by cell, bucket after bucket (dense buckets excepted).
     sorted: Vec<Sample>,
     /// One per task of pass 2: the accumulators of the dense bucket it fuses (`BUCKET_CELLS`
-    /// of them, allocated when a task first meets a dense bucket), all `Acc::default()`
-    /// between buckets.
-    acc: Vec<Vec<Acc>>,
+    /// of them, allocated when a task first meets a dense bucket), all default between
+    /// buckets.
+    acc: Vec<Dense>,
+}
+
+/// A dense bucket's accumulators: one cache line a cell, and the cells' sums of vertical
+/// weights beside them (eight to a line), which no gate reads.
+#[derive(Debug, Clone, Default)]
+struct Dense {
+    cells: Vec<Acc>,
+    swv: Vec<u64>,
 }
 
 impl Scratch {
@@ -336,11 +341,14 @@ impl Scratch {
         self.binned.capacity() * std::mem::size_of::<Binned>()
             + buckets
             + self.sorted.capacity() * std::mem::size_of::<Sample>()
-            + self.acc.capacity() * std::mem::size_of::<Vec<Acc>>()
+            + self.acc.capacity() * std::mem::size_of::<Dense>()
             + self
                 .acc
                 .iter()
-                .map(|a| a.capacity() * std::mem::size_of::<Acc>())
+                .map(|a| {
+                    a.cells.capacity() * std::mem::size_of::<Acc>()
+                        + a.swv.capacity() * std::mem::size_of::<u64>()
+                })
                 .sum::<usize>()
     }
 }
@@ -380,19 +388,42 @@ fn split_buckets(layers: &mut Layers) -> Vec<ElevMut<'_>> {
 struct Sample {
     idx: u32,
     z_mm: i32,
-    w: u32,
-    /// The vertical weight ([`super::cell::vertical_weight`]).
-    q: u32,
+    /// The weight (low [`W_BITS`] bits) and the code of the share of the point's noise
+    /// that reaches its height (the rest, [`share_code`]): one word, so that a sample
+    /// stays 16 bytes.
+    wv: u32,
     sigma_mm: f32,
 }
 
+/// Bits of [`Sample::wv`] that hold the weight (up to [`W_MAX`] = 2²⁴).
+const W_BITS: u32 = 25;
+
+/// The vertical share `s` (0.05..1) as a 7-bit code: `round(127·√s)`, which keeps the
+/// share to 4 % and its square to 7 % at the 0.05 floor, less above it.
+#[inline]
+fn share_code(share: f64) -> u32 {
+    floor_small(127.0 * share.sqrt() + 0.5).1 as u32
+}
+
 impl Sample {
+    #[inline]
+    fn w(&self) -> u32 {
+        self.wv & ((1 << W_BITS) - 1)
+    }
+
+    /// The vertical weight ([`vertical_weight`]) from the weight, the share's code and
+    /// the range noise.
+    #[inline]
+    fn q(&self) -> u32 {
+        let c = f64::from(self.wv >> W_BITS) / 127.0;
+        vertical_weight(self.w(), c * c, f64::from(self.sigma_mm) * 1e-3)
+    }
+
     /// Filler of the sort buffer (every slot is written before it is read).
     const ZERO: Sample = Sample {
         idx: 0,
         z_mm: 0,
-        w: 0,
-        q: 0,
+        wv: 0,
         sigma_mm: 0.0,
     };
 }
@@ -430,7 +461,7 @@ struct Lanes {
     idx: [u32; LANES],
     z_mm: [i32; LANES],
     w: [u32; LANES],
-    q: [u32; LANES],
+    code: [u32; LANES],
     sigma_mm: [f32; LANES],
 }
 
@@ -446,7 +477,7 @@ impl Default for Lanes {
             idx: [0; LANES],
             z_mm: [0; LANES],
             w: [0; LANES],
-            q: [0; LANES],
+            code: [0; LANES],
             sigma_mm: [0.0; LANES],
         }
     }
@@ -540,7 +571,7 @@ impl Ctx<'_> {
                 1.0
             };
             l.w[j] = floor_small(wr).1 as u32;
-            l.q[j] = vertical_weight(l.w[j], vertical_share(wz - self.so_z_map, range), sigma);
+            l.code[j] = share_code(vertical_share(wz - self.so_z_map, range));
             l.sigma_mm[j] = (sigma * 1000.0) as f32;
         }
     }
@@ -581,12 +612,11 @@ impl Ctx<'_> {
         let (ex, ey, ez) = (x - self.so[0], y - self.so[1], z - self.so[2]);
         let range = ((ex * ex + ey * ey + ez * ez) as f64).sqrt();
         let sigma = self.noise.sigma(range);
-        let w = weight_of(sigma);
+        let code = share_code(vertical_share(wz - self.so_z_map, range));
         Classified::Sample(Sample {
             idx: (by * self.n + bx) as u32,
             z_mm,
-            w,
-            q: vertical_weight(w, vertical_share(wz - self.so_z_map, range), sigma),
+            wv: weight_of(sigma) | code << W_BITS,
             sigma_mm: (sigma * 1000.0) as f32,
         })
     }
@@ -604,9 +634,10 @@ const MIN_VERTICAL_SHARE: f64 = 0.05;
 /// return at 20 m is a few millimetres off in height although its range is centimetres
 /// off; a point straight below the sensor carries all of it.
 #[inline]
+#[allow(clippy::manual_clamp)] // `clamp` would keep a NaN
 fn vertical_share(dz: f64, range: f64) -> f64 {
-    let share = if range > 0.0 { dz.abs() / range } else { 1.0 };
-    share.clamp(MIN_VERTICAL_SHARE, 1.0)
+    // `f64::max` takes the floor over a NaN (a point at the sensor).
+    (dz.abs() / range).max(MIN_VERTICAL_SHARE).min(1.0)
 }
 
 /// Gate distance (mm) below a surface of spread `var_mm2` for a point of noise `sigma_mm`.
@@ -721,7 +752,7 @@ impl RollingGrid {
         // each with its own dense accumulators; a bucket's result does not depend on which
         // task fuses it.
         if scratch.acc.len() < chunks {
-            scratch.acc.resize_with(chunks, Vec::new);
+            scratch.acc.resize_with(chunks, Dense::default);
         }
         let mut rest = &mut scratch.sorted[..total];
         let mut tasks: Vec<Task> = (0..chunks).map(|_| Vec::new()).collect();
@@ -731,12 +762,13 @@ impl RollingGrid {
             tasks[bi % chunks].push((bi, lay, out));
         }
         let add = |a: (u64, u64), b: (u64, u64)| (a.0 + b.0, a.1 + b.1);
-        let run = |(task, acc): (Task, &mut Vec<Acc>)| {
+        let run = |(task, acc): (Task, &mut Dense)| {
             let mut sum = (0, 0);
             for (bi, mut lay, out) in task {
                 let r = if dense(counts[bi]) {
-                    if acc.is_empty() {
-                        *acc = vec![Acc::default(); BUCKET_CELLS];
+                    if acc.cells.is_empty() {
+                        acc.cells = vec![Acc::default(); BUCKET_CELLS];
+                        acc.swv = vec![0; BUCKET_CELLS];
                     }
                     fuse_dense(binned, bi, &mut lay, acc, k, min_mm, support)
                 } else {
@@ -831,8 +863,7 @@ fn bin_chunk_impl(ctx: &Ctx, range: std::ops::Range<usize>, nbuckets: usize, p: 
                 LANE_SAMPLE => emit(Classified::Sample(Sample {
                     idx: l.idx[j],
                     z_mm: l.z_mm[j],
-                    w: l.w[j],
-                    q: l.q[j],
+                    wv: l.w[j] | l.code[j] << W_BITS,
                     sigma_mm: l.sigma_mm[j],
                 })),
                 LANE_OUTSIDE => emit(Classified::Outside),
@@ -927,7 +958,7 @@ fn fuse_bucket(
         // again through the gate.
         let mut a = Elev::default();
         for s in run.iter() {
-            a.add(s.z_mm, s.w, s.q);
+            a.add(s.z_mm, s.w(), s.q());
         }
         fused += a.hits as u64;
         if never_below(&lay.elev[l], support, min_mm).is_some_and(|h| (a.zmin as f64) < h) {
@@ -940,7 +971,7 @@ fn fuse_bucket(
                     below += 1;
                     continue;
                 }
-                a.add(s.z_mm, s.w, s.q);
+                a.add(s.z_mm, s.w(), s.q());
                 fused += 1;
             }
         }
@@ -959,19 +990,20 @@ fn fuse_bucket(
     (fused, below)
 }
 
-/// Pass 2 for a dense bucket `bi`, through its accumulators `cells` (all
-/// `Acc::default()` on entry and on return): returns (fused, below) point counts. The
-/// same rules as [`fuse_bucket`], sample by sample.
+/// Pass 2 for a dense bucket `bi`, through its accumulators `acc` (all default on entry
+/// and on return): returns (fused, below) point counts. The same rules as
+/// [`fuse_bucket`], sample by sample.
 #[inline(never)]
 fn fuse_dense(
     binned: &[Binned],
     bi: usize,
     lay: &mut ElevMut,
-    cells: &mut [Acc],
+    acc: &mut Dense,
     k: f64,
     min_mm: f64,
     support: u32,
 ) -> (u64, u64) {
+    let Dense { cells, swv } = acc;
     let mask = (BUCKET_CELLS - 1) as u32;
     let samples = || binned.iter().flat_map(|p| &p.buckets[bi]);
     let mut touched: Vec<u32> = Vec::new();
@@ -988,7 +1020,8 @@ fn fuse_dense(
             below += 1;
             continue;
         }
-        a.add(s.z_mm, s.w, s.q);
+        a.add(s.z_mm, s.w());
+        swv[l] += u64::from(s.q());
         fused += 1;
     }
 
@@ -1003,8 +1036,9 @@ fn fuse_dense(
             cells[l].group = flagged.len() as u32;
             flagged.push(l as u32);
         } else {
-            lay.merge(l, &b.elev());
+            lay.merge(l, &b.elev(swv[l]));
             cells[l] = Acc::default();
+            swv[l] = 0;
         }
     }
     if !flagged.is_empty() {
@@ -1023,6 +1057,7 @@ fn fuse_dense(
             fused -= nbelow as u64;
             below += nbelow as u64;
             cells[l] = Acc::default();
+            swv[l] = 0;
         }
     }
     (fused, below)
@@ -1057,7 +1092,7 @@ fn is_below(prior: &ElevMut, i: usize, support: u32, s: &Sample, k: f64, min_mm:
 /// surface cluster and everything above it, and the number of points below it.
 fn split_cell(pts: &mut [Sample], k: f64, min_mm: f64) -> (CellStats, u32) {
     // A total order on what a sample holds, so ties cannot depend on arrival order.
-    pts.sort_unstable_by_key(|s| (s.z_mm, s.w, s.q, s.sigma_mm.to_bits()));
+    pts.sort_unstable_by_key(|s| (s.z_mm, s.wv, s.sigma_mm.to_bits()));
     // Cluster boundaries: a gap wider than the gate of the two points on either side.
     let mut starts = vec![0usize];
     for j in 1..pts.len() {
@@ -1067,7 +1102,7 @@ fn split_cell(pts: &mut [Sample], k: f64, min_mm: f64) -> (CellStats, u32) {
             starts.push(j);
         }
     }
-    let weight = |a: usize, b: usize| pts[a..b].iter().map(|s| s.w as u64).sum::<u64>();
+    let weight = |a: usize, b: usize| pts[a..b].iter().map(|s| s.w() as u64).sum::<u64>();
     let total = weight(0, pts.len());
     let bounds: Vec<(usize, usize)> = starts
         .iter()
@@ -1091,7 +1126,7 @@ fn split_cell(pts: &mut [Sample], k: f64, min_mm: f64) -> (CellStats, u32) {
     let first_kept = bounds[surface].0;
     let mut c = CellStats::default();
     for s in &pts[first_kept..] {
-        c.add_sample(s.z_mm, s.w, s.q);
+        c.add_sample(s.z_mm, s.w(), s.q());
     }
     (c, first_kept as u32)
 }
@@ -1103,8 +1138,8 @@ mod tests {
     use crate::grid::GridConfig;
     use proptest::prelude::*;
 
-    /// A sample as (idx, z_mm, w, q, σ bits).
-    type Bits = (u32, i32, u32, u32, u32);
+    /// A sample as (idx, z_mm, weight and share, σ bits).
+    type Bits = (u32, i32, u32, u32);
 
     /// Everything a binning produced, comparable (σ by its bits).
     fn outcome(p: &Binned) -> (IngestStats, Vec<Vec<Bits>>) {
@@ -1113,7 +1148,7 @@ mod tests {
             .iter()
             .map(|v| {
                 v.iter()
-                    .map(|s| (s.idx, s.z_mm, s.w, s.q, s.sigma_mm.to_bits()))
+                    .map(|s| (s.idx, s.z_mm, s.wv, s.sigma_mm.to_bits()))
                     .collect()
             })
             .collect();
@@ -1145,7 +1180,10 @@ mod tests {
         let binned = [p];
         let (k, min_mm) = (g.cfg.gate_sigma, g.cfg.gate_min_m * 1000.0);
         let support = g.cfg.min_support.max(1);
-        let mut acc = vec![Acc::default(); BUCKET_CELLS];
+        let mut acc = Dense {
+            cells: vec![Acc::default(); BUCKET_CELLS],
+            swv: vec![0; BUCKET_CELLS],
+        };
         let mut sum = (0, 0);
         for (bi, mut lay) in split_buckets(&mut g.layers).into_iter().enumerate() {
             let mut out = vec![Sample::ZERO; binned[0].buckets[bi].len()];
@@ -1162,7 +1200,11 @@ mod tests {
                     support,
                 ),
             };
-            assert!(acc.iter().all(|a| a.is_untouched() && a.group == u32::MAX));
+            assert!(acc
+                .cells
+                .iter()
+                .all(|a| a.is_untouched() && a.group == u32::MAX));
+            assert!(acc.swv.iter().all(|&v| v == 0));
             sum = (sum.0 + f, sum.1 + b);
         }
         sum
