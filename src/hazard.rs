@@ -597,24 +597,23 @@ impl HazardMap {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use crate::grid::Evidence;
 
     #[test]
     fn centre_std_adds_the_gradient_across_the_cell() {
         let res = 0.1;
         // A plane rising 0.5 m per metre along x, every neighbour dry and exact.
-        let nb: Neighbourhood = std::array::from_fn(|j| ((j % 3) as f64 * 0.05, 0.0));
-        let s = centre_std(0.0, &nb, res);
+        let s = centre_std(0.0, &plane(0.5, 0.0, res, 0.0), res);
         let want = (0.25f64 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Level ground: the cell's own σ and the millimetre only; no neighbour: the same.
-        let flat: Neighbourhood = [(1.0, 0.0); 9];
+        let flat = plane(0.0, 0.0, res, 0.0);
         assert!((centre_std(0.01, &flat, res) - (1e-4f64 + 1e-6 / 12.0).sqrt()).abs() < 1e-12);
         let alone: Neighbourhood =
-            std::array::from_fn(|j| if j == 4 { (1.0, 0.0) } else { (f64::NAN, 0.0) });
+            std::array::from_fn(|j| if j == 4 { (0.0, 0.0) } else { (f64::NAN, 0.0) });
         assert_eq!(centre_std(0.01, &alone, res), centre_std(0.01, &flat, res));
     }
-    use super::*;
-    use crate::grid::Evidence;
 
     /// The neighbourhood of a cell of a plane rising `gx`, `gy` per metre, at `res` m, all
     /// with σ `s`, the cell's own elevation 0.
