@@ -337,21 +337,42 @@ pub fn terrain_hazard(
     }
 }
 
-/// The σ of a dry cell's elevation as the elevation of its centre: the points' mean lies
-/// where they fell in the cell, not at its centre, so on terrain of gradient g (from the
-/// neighbours' elevations, central differences where both sides are dry) the mean is
-/// off by g times an offset spread over the cell, variance `g²·res²/12` along each axis;
-/// and the elevations are whole millimetres (variance 1/12 mm²).
-fn centre_std(sd: f64, nb: &Neighbourhood, res: f64) -> f64 {
+/// The σ of a dry cell's elevation as the elevation of its centre, from the cell's vertical
+/// σ `sd` ([`CellStats::elevation_std_m`]) and its range-bound σ `s_rb`
+/// ([`CellStats::range_bound_std_m`]), on terrain of gradient g read from the dry
+/// neighbours (central differences where both sides are dry):
+///
+/// * a point moved along its ray by a range error lands in the map at another place, where
+///   sloping terrain stands higher or lower: against the terrain there, the error is the
+///   range error times `s + g_r·c` (s, c the ray's vertical and horizontal shares, g_r the
+///   gradient along the ray), not times the vertical share s alone. Over the cell's points
+///   that is at most `sd + |g|·s_rb` (Cauchy–Schwarz over the points, c ≤ 1): a bank seen
+///   at grazing incidence is as uncertain as its range errors, level ground only by their
+///   vertical part. Only a slope the neighbours show beyond three σ of their own noise
+///   counts here (each axis's g² less nine times its estimate's variance, the neighbours'
+///   noise taken as the cell's own `sd`), or noisy far cells on level ground would read a
+///   slope out of their noise and multiply it by a range-bound σ of decimetres;
+/// * the points' mean lies where they fell in the cell, not at its centre: g times an
+///   offset spread over the cell, variance `g²·res²/12` along each axis;
+/// * the elevations are whole millimetres (variance 1/12 mm²).
+fn centre_std(sd: f64, s_rb: f64, nb: &Neighbourhood, res: f64) -> f64 {
     let z = |j: usize| nb[j].0;
+    // The gradient along one axis, and the variance the noise of the two elevations it
+    // differences puts into it (taken as the cell's own vertical σ: its neighbours lie at
+    // about its range and are seen alike).
+    let noise = 2.0 * sd * sd;
     let grad = |lo: usize, hi: usize| match (z(lo).is_nan(), z(hi).is_nan()) {
-        (false, false) => (z(hi) - z(lo)) / (2.0 * res),
-        (true, false) => (z(hi) - z(4)) / res,
-        (false, true) => (z(4) - z(lo)) / res,
-        (true, true) => 0.0,
+        (false, false) => ((z(hi) - z(lo)) / (2.0 * res), noise / (4.0 * res * res)),
+        (true, false) => ((z(hi) - z(4)) / res, noise / (res * res)),
+        (false, true) => ((z(4) - z(lo)) / res, noise / (res * res)),
+        (true, true) => (0.0, 0.0),
     };
-    let (gx, gy) = (grad(3, 5), grad(1, 7));
-    (sd * sd + (gx * gx + gy * gy) * res * res / 12.0 + 1e-6 / 12.0).sqrt()
+    let ((gx, vx), (gy, vy)) = (grad(3, 5), grad(1, 7));
+    let g2 = gx * gx + gy * gy;
+    // A slope the neighbours show beyond three σ of their noise.
+    let slope2 = (gx * gx - 9.0 * vx).max(0.0) + (gy * gy - 9.0 * vy).max(0.0);
+    let along_rays = sd + slope2.sqrt() * s_rb.max(sd);
+    (along_rays * along_rays + g2 * res * res / 12.0 + 1e-6 / 12.0).sqrt()
 }
 
 /// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
@@ -423,7 +444,7 @@ impl<'a> CellRule<'a> {
             let (class, hazard) =
                 terrain_hazard(&nb, (z, sz), self.res, self.max_step_m, self.max_grad);
             let c = Seen {
-                elevation_std: centre_std(c.elevation_std, &nb, self.res),
+                elevation_std: centre_std(c.elevation_std, sz, &nb, self.res),
                 ..c
             };
             return Some(c.record(self.res, z, dry_depth(c.water), class, hazard));
@@ -604,15 +625,70 @@ mod tests {
     fn centre_std_adds_the_gradient_across_the_cell() {
         let res = 0.1;
         // A plane rising 0.5 m per metre along x, every neighbour dry and exact.
-        let s = centre_std(0.0, &plane(0.5, 0.0, res, 0.0), res);
+        let s = centre_std(0.0, 0.0, &plane(0.5, 0.0, res, 0.0), res);
         let want = (0.25f64 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Level ground: the cell's own σ and the millimetre only; no neighbour: the same.
         let flat = plane(0.0, 0.0, res, 0.0);
-        assert!((centre_std(0.01, &flat, res) - (1e-4f64 + 1e-6 / 12.0).sqrt()).abs() < 1e-12);
+        let own = (1e-4f64 + 1e-6 / 12.0).sqrt();
+        assert!((centre_std(0.01, 0.05, &flat, res) - own).abs() < 1e-12);
         let alone: Neighbourhood =
             std::array::from_fn(|j| if j == 4 { (0.0, 0.0) } else { (f64::NAN, 0.0) });
-        assert_eq!(centre_std(0.01, &alone, res), centre_std(0.01, &flat, res));
+        assert_eq!(
+            centre_std(0.01, 0.05, &alone, res),
+            centre_std(0.01, 0.05, &flat, res)
+        );
+    }
+
+    /// On a slope, a range error moves a point along its ray to where the terrain stands
+    /// higher or lower: the σ takes the slope times the range-bound σ on top of the
+    /// vertical one. A bank rising 1 m per metre, seen with a vertical σ of 2 mm and a
+    /// range-bound σ of 3 cm, is uncertain by 3.2 cm, not 2 mm (the squared slope less nine
+    /// times its estimate's variance, 2·(2 mm)²/(0.2 m)²).
+    #[test]
+    fn centre_std_takes_the_range_error_along_a_slope() {
+        let res = 0.1;
+        let s = centre_std(0.002, 0.03, &plane(1.0, 0.0, res, 0.0), res);
+        let along = 0.002 + (1.0f64 - 9.0 * 8e-6 / 0.04).sqrt() * 0.03;
+        let want = (along * along + res * res / 12.0 + 1e-6 / 12.0).sqrt();
+        assert!((s - want).abs() < 1e-12, "{s} {want}");
+        // Along the other axis, the same.
+        let t = centre_std(0.002, 0.03, &plane(0.0, -1.0, res, 0.0), res);
+        assert!((t - want).abs() < 1e-12, "{t} {want}");
+    }
+
+    /// Neighbours whose elevations differ by less than three σ of their noise show no slope
+    /// along the rays: noisy far cells on level ground keep their own σ and the position
+    /// term of their raw gradient.
+    #[test]
+    fn centre_std_reads_no_slope_into_neighbours_noise() {
+        let res = 0.1;
+        // A rise of 0.3 per metre across the cell, against a cell σ of 3 cm: a central
+        // difference of σ 2.1 cm over 0.2 m, so 3σ of the gradient is 0.32.
+        let noisy = plane(0.3, 0.0, res, 0.03);
+        let want = (0.03f64 * 0.03 + 0.09 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
+        let s = centre_std(0.03, 0.3, &noisy, res);
+        assert!((s - want).abs() < 1e-12, "{s} {want}");
+        // Beyond it, the slope counts.
+        assert!(centre_std(0.03, 0.3, &plane(1.0, 0.0, res, 0.03), res) > 0.25);
+    }
+
+    proptest::proptest! {
+        /// Never below the cell's own σ, and finite for finite input, whatever the
+        /// neighbourhood (some neighbours missing, absurd but finite heights).
+        #[test]
+        fn centre_std_is_at_least_the_cells_own(
+            sd in 0.0f64..10.0,
+            rb in 0.0f64..10.0,
+            zs in proptest::array::uniform9(proptest::option::of(-1e6f64..1e6)),
+            ss in proptest::array::uniform9(0.0f64..5.0),
+        ) {
+            let nb: Neighbourhood = std::array::from_fn(|j| {
+                (if j == 4 { Some(0.0) } else { zs[j] }.unwrap_or(f64::NAN), ss[j])
+            });
+            let s = centre_std(sd, rb, &nb, 0.1);
+            proptest::prop_assert!(s.is_finite() && s >= sd, "{s} {sd}");
+        }
     }
 
     /// The neighbourhood of a cell of a plane rising `gx`, `gy` per metre, at `res` m, all
