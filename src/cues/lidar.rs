@@ -32,7 +32,10 @@
 //!   the water lay at that level; below a bank it lands too high by twice the bank's
 //!   height over the water (0.7 m on a bank 0.35 m above a pond), a raised row of cells
 //!   as consistent as real ground, and an object to the step test. The object is seen
-//!   directly by other beams.
+//!   directly by other beams. Where the scan line's higher beams instead pass through the
+//!   space above the return empty, there is no object to mirror: the return is ground
+//!   below the level (the far bank of a depression), kept in the terrain
+//!   (`mirror_refuted`).
 
 use std::collections::VecDeque;
 
@@ -272,6 +275,11 @@ pub struct LidarCueStats {
     pub specular: u64,
     /// Below-level returns neither bottom nor deep enough to be specular.
     pub unexplained: u64,
+    /// Below-level returns too deep for a bottom return whose mirror image the scan line's
+    /// own beams saw empty space at: ground below the walked level (a depression's far
+    /// bank), kept in the terrain rather than taken as specular.
+    #[serde(default)]
+    pub below_ground: u64,
     /// Ground returns darker than the scan's threshold (reflectivity cue).
     pub dark: u64,
     /// Ground returns tested for reflectivity and not dark.
@@ -648,6 +656,7 @@ impl LidarCueModel {
             match *e {
                 Event::MissingCast => stats.missing_cast += 1,
                 Event::Unexplained => stats.unexplained += 1,
+                Event::BelowGround => stats.below_ground += 1,
                 Event::NoRet { d, .. } if d > limit => {
                     stats.missing_cast += 1;
                     stats.noret_beyond_dry += 1;
@@ -873,15 +882,31 @@ impl LidarCueModel {
                     continue;
                 }
                 let below = v.z < 0.0 && o.z > level && dz < -slack && dz < -(gate() + slack);
-                if below {
-                    // Below the level: bottom or specular.
+                let ground = if below {
+                    // Below the level: bottom or specular, or ground below the level.
                     let Some((c, bottom)) = self.against_level(s, o, p, level, false) else {
                         continue;
                     };
                     if let Some(e) = bottom {
                         out.push(e);
+                        false
                     } else if level - p.z < cfg.specular_min_depth_m {
                         out.push(Event::Unexplained);
+                        false
+                    } else if mirror_refuted(
+                        &ScanLine {
+                            cloud,
+                            dirs,
+                            slots: line,
+                            o,
+                        },
+                        p,
+                        level,
+                        self.noise.sigma(range),
+                        cfg.above_gate_m,
+                    ) {
+                        out.push(Event::BelowGround);
+                        true
                     } else {
                         out.push(Event::Specular {
                             slot: s,
@@ -889,8 +914,12 @@ impl LidarCueModel {
                             cy: c.y,
                             level,
                         });
+                        false
                     }
-                } else if dz <= cfg.above_gate_m + slack {
+                } else {
+                    dz <= cfg.above_gate_m + slack
+                };
+                if ground {
                     // Ground. The slope of the recent ground, once it spans enough
                     // lookahead to measure one, clamped to what ground does.
                     if drops.len() == GATE_WINDOW {
@@ -955,6 +984,72 @@ impl LidarCueModel {
         }
         (out, far)
     }
+}
+
+/// Beams of a scan line that must see the space above a below-level return empty before
+/// it is taken for ground rather than a mirror image.
+const MIRROR_FREE_BEAMS: usize = 2;
+
+/// One scan line of an organized scan: its slots in order of lookahead, the scan, the
+/// map-frame directions of its slots and the sensor's position.
+#[derive(Clone, Copy)]
+struct ScanLine<'a> {
+    cloud: &'a PointCloud,
+    dirs: &'a [Option<Vector3<f64>>],
+    slots: &'a [u32],
+    o: Point3<f64>,
+}
+
+/// Whether the below-level return `p` of a scan `line` (walked level `level`, range noise
+/// `sigma_r`) cannot be a mirror
+/// image. A return mirrored by water at level `w` appears at the mirror image of its object
+/// about the water plane: the object stands at the return's own x, y, at height `2w − z`.
+/// The water lies between the return and the walked level, so the object lies somewhere on
+/// the vertical segment from the return up to `2·level − z`, in the same azimuth: the scan
+/// line's own higher beams cross that segment. A beam that crosses it and stops at or
+/// before the crossing (within three σ of range noise) may have met the object, and keeps
+/// the mirror. If none does, at least [`MIRROR_FREE_BEAMS`] cross it, and the lowest of
+/// them passes within `low` (the walk's above-ground gate) of the return's height (above a
+/// margin of the beam's noise, so that the far bank rising just behind the return is not
+/// taken for an object), the only object it could mirror is one lower than that crossing:
+/// one the walk would take for ground at the return's place anyway. The return is ground
+/// below the level, the far bank of a depression. Sparse rings at range that cross only
+/// high leave it a mirror.
+fn mirror_refuted(line: &ScanLine, p: Point3<f64>, level: f64, sigma_r: f64, low: f64) -> bool {
+    let ScanLine {
+        cloud,
+        dirs,
+        slots,
+        o,
+    } = *line;
+    let d = crate::geom::hypot(p.x - o.x, p.y - o.y);
+    let tol = 3.0 * sigma_r.max(0.01);
+    // Above the return by a margin, so that a beam grazing the ground just behind it (the
+    // far bank rising from the return) is not taken for an object.
+    let (lo, hi) = (p.z + tol.max(0.1), 2.0 * level - p.z);
+    let (mut free, mut lowest) = (0, f64::INFINITY);
+    for &t in slots {
+        let t = t as usize;
+        let Some(u) = dirs.get(t).copied().flatten() else {
+            continue;
+        };
+        let h = crate::geom::hypot(u.x, u.y);
+        if h <= 1e-9 {
+            continue;
+        }
+        // Where the beam reaches the return's horizontal distance.
+        let along = d / h;
+        let z = o.z + u.z * along;
+        if !(lo..=hi).contains(&z) {
+            continue;
+        }
+        if cloud.is_valid(t) && (cloud.point_in_map(t) - o).norm() <= along + tol {
+            return false;
+        }
+        free += 1;
+        lowest = lowest.min(z);
+    }
+    free >= MIRROR_FREE_BEAMS && lowest <= p.z + low
 }
 
 /// Ground returns along a scan line whose brightest bounds what the bottom of water there
@@ -1035,6 +1130,9 @@ fn below_gate(drops: &VecDeque<f64>, sigma_v: f64, ceiling: f64) -> f64 {
 enum Event {
     MissingCast,
     Unexplained,
+    /// A below-level return that the scan line saw nothing above ([`mirror_refuted`]):
+    /// ground below the walked level, kept in the terrain.
+    BelowGround,
     NoRet {
         x: f64,
         y: f64,

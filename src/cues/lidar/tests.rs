@@ -826,3 +826,87 @@ fn returns_under_a_prior_water_level_are_bottom_returns_and_dry_ground_beside_it
     assert!(few(0.02, 0.01));
     assert!(!few(0.02, 0.0));
 }
+
+/// One scan line from a sensor 2 m up towards +x, every `step_deg` from −12° to +6°,
+/// against a terrain profile `ground(x)` (the first x where the beam is at or below it,
+/// marched in 1 cm steps to 40 m; no hit: no return): the cloud, directions and slots.
+fn profile_line(
+    ground: &dyn Fn(f64) -> f64,
+    step_deg: f64,
+) -> (PointCloud, Vec<Option<Vector3<f64>>>, Vec<u32>) {
+    let o = Point3::new(0.0, 0.0, 2.0);
+    let (mut pts, mut dirs) = (Vec::new(), Vec::new());
+    let n = (18.0 / step_deg).round() as usize;
+    for k in 0..=n {
+        let a = (-12.0 + k as f64 * step_deg).to_radians();
+        let u = Vector3::new(a.cos(), 0.0, a.sin());
+        let hit = (1..4000)
+            .map(|i| o + u * (i as f64 * 0.01 / a.cos()))
+            .find(|q| q.z <= ground(q.x));
+        pts.push(hit.map_or([f32::NAN; 3], |q| [q.x as f32, q.y as f32, q.z as f32]));
+        dirs.push(Some(u));
+    }
+    let line = (0..pts.len() as u32).collect();
+    (PointCloud::unorganized(pts), dirs, line)
+}
+
+/// A return 0.7 m under the walked level (z = 0) at 15 m. Where it is the foot of a
+/// depression's far bank, rising at 45° behind it, the line's higher beams pass through
+/// the space above it and meet the bank farther on: ground. Where a wall 1 m high stands
+/// at 15 m, the object a mirror in water at the level would show there, the beams that
+/// cross above the return stop at the wall: a mirror, as when the beams cross only high.
+#[test]
+fn a_below_level_return_is_ground_only_where_the_line_sees_nothing_above_it() {
+    let o = Point3::new(0.0, 0.0, 2.0);
+    let p = Point3::new(15.0, 0.0, -0.7);
+    let bank = |x: f64| if x < 15.0 { -5.0 } else { (x - 15.7).min(0.0) };
+    let (cloud, dirs, line) = profile_line(&bank, 0.25);
+    assert!(mirror_refuted(
+        &ScanLine {
+            cloud: &cloud,
+            dirs: &dirs,
+            slots: &line,
+            o
+        },
+        p,
+        0.0,
+        0.01,
+        0.3
+    ));
+    let wall = |x: f64| if (15.0..15.1).contains(&x) { 1.0 } else { -5.0 };
+    let (cloud, dirs, line) = profile_line(&wall, 0.25);
+    assert!(!mirror_refuted(
+        &ScanLine {
+            cloud: &cloud,
+            dirs: &dirs,
+            slots: &line,
+            o
+        },
+        p,
+        0.0,
+        0.01,
+        0.3
+    ));
+    // Beams 3° apart cross the space above the return only high (about 0.8 m apart at
+    // 15 m): nothing is known of the lowest 0.3 m, where a low object would stand.
+    let (cloud, dirs, line) = profile_line(&bank, 3.0);
+    let lowest = line
+        .iter()
+        .filter_map(|&t| dirs[t as usize])
+        .map(|u| o.z + u.z * 15.0 / u.x)
+        .filter(|&z| z > p.z + 0.1)
+        .fold(f64::INFINITY, f64::min);
+    assert!(lowest > p.z + 0.3, "{lowest}");
+    assert!(!mirror_refuted(
+        &ScanLine {
+            cloud: &cloud,
+            dirs: &dirs,
+            slots: &line,
+            o
+        },
+        p,
+        0.0,
+        0.01,
+        0.3
+    ));
+}
