@@ -132,6 +132,8 @@ struct Seen {
     key: CellKey,
     /// [`CellStats::elevation_std_m`], NaN without an elevation.
     elevation_std: f64,
+    /// [`CellStats::excess_spread_var_m2`], 0 without an elevation.
+    excess_var: f64,
     hits: u32,
     below: u32,
     /// Water probability.
@@ -143,6 +145,7 @@ impl Seen {
         Seen {
             key,
             elevation_std: c.elevation_std_m().unwrap_or(f64::NAN),
+            excess_var: c.excess_spread_var_m2().unwrap_or(0.0),
             hits: c.hits,
             below: c.below,
             water,
@@ -354,8 +357,11 @@ pub fn terrain_hazard(
 ///   slope out of their noise and multiply it by a range-bound σ of decimetres;
 /// * the points' mean lies where they fell in the cell, not at its centre: g times an
 ///   offset spread over the cell, variance `g²·res²/12` along each axis;
+/// * the terrain varies within the cell beyond that plane (roughness, a kerb's edge): the
+///   centre differs from the points' mean by what their spread shows beyond their noise
+///   (`excess`, [`CellStats::excess_spread_var_m2`]) less the plane's `g²·res²/12`;
 /// * the elevations are whole millimetres (variance 1/12 mm²).
-fn centre_std(sd: f64, s_rb: f64, nb: &Neighbourhood, res: f64) -> f64 {
+fn centre_std(sd: f64, s_rb: f64, excess: f64, nb: &Neighbourhood, res: f64) -> f64 {
     let z = |j: usize| nb[j].0;
     // The gradient along one axis, and the variance the noise of the two elevations it
     // differences puts into it (taken as the cell's own vertical σ: its neighbours lie at
@@ -372,7 +378,9 @@ fn centre_std(sd: f64, s_rb: f64, nb: &Neighbourhood, res: f64) -> f64 {
     // A slope the neighbours show beyond three σ of their noise.
     let slope2 = (gx * gx - 9.0 * vx).max(0.0) + (gy * gy - 9.0 * vy).max(0.0);
     let along_rays = sd + slope2.sqrt() * s_rb.max(sd);
-    (along_rays * along_rays + g2 * res * res / 12.0 + 1e-6 / 12.0).sqrt()
+    let across = g2 * res * res / 12.0;
+    let rough = (excess - across).max(0.0);
+    (along_rays * along_rays + across + rough + 1e-6 / 12.0).sqrt()
 }
 
 /// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
@@ -444,7 +452,7 @@ impl<'a> CellRule<'a> {
             let (class, hazard) =
                 terrain_hazard(&nb, (z, sz), self.res, self.max_step_m, self.max_grad);
             let c = Seen {
-                elevation_std: centre_std(c.elevation_std, sz, &nb, self.res),
+                elevation_std: centre_std(c.elevation_std, sz, c.excess_var, &nb, self.res),
                 ..c
             };
             return Some(c.record(self.res, z, dry_depth(c.water), class, hazard));
@@ -625,18 +633,18 @@ mod tests {
     fn centre_std_adds_the_gradient_across_the_cell() {
         let res = 0.1;
         // A plane rising 0.5 m per metre along x, every neighbour dry and exact.
-        let s = centre_std(0.0, 0.0, &plane(0.5, 0.0, res, 0.0), res);
+        let s = centre_std(0.0, 0.0, 0.0, &plane(0.5, 0.0, res, 0.0), res);
         let want = (0.25f64 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Level ground: the cell's own σ and the millimetre only; no neighbour: the same.
         let flat = plane(0.0, 0.0, res, 0.0);
         let own = (1e-4f64 + 1e-6 / 12.0).sqrt();
-        assert!((centre_std(0.01, 0.05, &flat, res) - own).abs() < 1e-12);
+        assert!((centre_std(0.01, 0.05, 0.0, &flat, res) - own).abs() < 1e-12);
         let alone: Neighbourhood =
             std::array::from_fn(|j| if j == 4 { (0.0, 0.0) } else { (f64::NAN, 0.0) });
         assert_eq!(
-            centre_std(0.01, 0.05, &alone, res),
-            centre_std(0.01, 0.05, &flat, res)
+            centre_std(0.01, 0.05, 0.0, &alone, res),
+            centre_std(0.01, 0.05, 0.0, &flat, res)
         );
     }
 
@@ -648,12 +656,12 @@ mod tests {
     #[test]
     fn centre_std_takes_the_range_error_along_a_slope() {
         let res = 0.1;
-        let s = centre_std(0.002, 0.03, &plane(1.0, 0.0, res, 0.0), res);
+        let s = centre_std(0.002, 0.03, 0.0, &plane(1.0, 0.0, res, 0.0), res);
         let along = 0.002 + (1.0f64 - 9.0 * 8e-6 / 0.04).sqrt() * 0.03;
         let want = (along * along + res * res / 12.0 + 1e-6 / 12.0).sqrt();
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Along the other axis, the same.
-        let t = centre_std(0.002, 0.03, &plane(0.0, -1.0, res, 0.0), res);
+        let t = centre_std(0.002, 0.03, 0.0, &plane(0.0, -1.0, res, 0.0), res);
         assert!((t - want).abs() < 1e-12, "{t} {want}");
     }
 
@@ -667,10 +675,29 @@ mod tests {
         // difference of σ 2.1 cm over 0.2 m, so 3σ of the gradient is 0.32.
         let noisy = plane(0.3, 0.0, res, 0.03);
         let want = (0.03f64 * 0.03 + 0.09 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
-        let s = centre_std(0.03, 0.3, &noisy, res);
+        let s = centre_std(0.03, 0.3, 0.0, &noisy, res);
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Beyond it, the slope counts.
-        assert!(centre_std(0.03, 0.3, &plane(1.0, 0.0, res, 0.03), res) > 0.25);
+        assert!(centre_std(0.03, 0.3, 0.0, &plane(1.0, 0.0, res, 0.03), res) > 0.25);
+    }
+
+    /// Points that spread more than their noise explains show terrain varying within the
+    /// cell: its centre differs from their mean by that much (less what the slope across
+    /// the cell already accounts for).
+    #[test]
+    fn centre_std_takes_the_terrain_within_the_cell() {
+        let res = 0.1;
+        let flat = plane(0.0, 0.0, res, 0.0);
+        let s = centre_std(0.002, 0.01, 1e-4, &flat, res);
+        let want = (0.002f64 * 0.002 + 1e-4 + 1e-6 / 12.0).sqrt();
+        assert!((s - want).abs() < 1e-12, "{s} {want}");
+        // On a plane rising 1 per metre, a spread of res²/12 is the slope itself.
+        let slope = plane(1.0, 0.0, res, 0.0);
+        let across = res * res / 12.0;
+        assert_eq!(
+            centre_std(0.0, 0.0, across, &slope, res),
+            centre_std(0.0, 0.0, 0.0, &slope, res)
+        );
     }
 
     proptest::proptest! {
@@ -686,7 +713,7 @@ mod tests {
             let nb: Neighbourhood = std::array::from_fn(|j| {
                 (if j == 4 { Some(0.0) } else { zs[j] }.unwrap_or(f64::NAN), ss[j])
             });
-            let s = centre_std(sd, rb, &nb, 0.1);
+            let s = centre_std(sd, rb, 0.0, &nb, 0.1);
             proptest::prop_assert!(s.is_finite() && s >= sd, "{s} {sd}");
         }
     }

@@ -155,10 +155,22 @@ impl CellStats {
     /// or the empirical standard error when the points disagree more than that. What the
     /// map publishes as `elevation_std`.
     pub fn elevation_std_m(&self) -> Option<f64> {
+        self.with_spread(self.vertical_var_m2())
+    }
+
+    /// The variance of the weighted mean from the vertical part of each point's noise (m²).
+    fn vertical_var_m2(&self) -> f64 {
         let sw = self.sw as f64;
-        let model_var =
-            (SIGMA_REF_M * SIGMA_REF_M) * W_UNIT * (self.swv as f64 / V_SCALE) / (sw * sw);
-        self.with_spread(model_var)
+        (SIGMA_REF_M * SIGMA_REF_M) * W_UNIT * (self.swv as f64 / V_SCALE) / (sw * sw)
+    }
+
+    /// How much more the points spread about their mean than the vertical part of their
+    /// noise explains (m², the points taken as equally weighted): the terrain's own
+    /// variation within the cell (roughness, and a slope across it), by which one place in
+    /// the cell, its centre, differs from the mean of all of it.
+    pub fn excess_spread_var_m2(&self) -> Option<f64> {
+        let per_point = self.vertical_var_m2() * self.hits as f64;
+        Some((self.spread_var_mm2()? * 1e-6 - per_point).max(0.0))
     }
 
     /// [`Self::elevation_std_m`] as if every point's range error were vertical (and no
@@ -181,6 +193,27 @@ impl CellStats {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// Points 2 cm either side of their mean with millimetre noise spread by 2 cm more
+    /// than their noise explains; points that spread only as their noise does, not at all.
+    #[test]
+    fn excess_spread_is_the_spread_beyond_the_points_noise() {
+        let (sigma, share) = (0.01, 0.1);
+        let w = quantize_weight(sigma);
+        let mut c = CellStats::default();
+        for z in [-20, 20, -20, 20] {
+            c.add_sample(z, w, vertical_weight(w, share, sigma));
+        }
+        let e = c.excess_spread_var_m2().unwrap();
+        let want = 4e-4 - (sigma * share).powi(2);
+        assert!((e - want).abs() < 2e-6, "{e} {want}");
+        let mut quiet = CellStats::default();
+        for z in [-1, 1, -1, 1] {
+            quiet.add_sample(z, w, vertical_weight(w, 1.0, sigma));
+        }
+        assert_eq!(quiet.excess_spread_var_m2(), Some(0.0));
+        assert_eq!(CellStats::default().excess_spread_var_m2(), None);
+    }
 
     #[test]
     fn published_std_is_the_vertical_part_even_past_the_weight_floor() {
