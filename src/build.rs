@@ -802,6 +802,10 @@ pub struct CueCounts {
     pub lidar_bottom: u64,
     /// Lidar returns mirrored by the water surface: reflection evidence, left out of the terrain.
     pub lidar_specular: u64,
+    /// Lidar returns below the walked level that the scan saw nothing above: ground below
+    /// the level (a depression's far bank), kept in the terrain.
+    #[serde(default)]
+    pub lidar_below_ground: u64,
     /// Lidar ground returns darker than the scan's dark threshold (reflectivity cue).
     pub lidar_dark: u64,
     /// Stereo reflection runs confirmed.
@@ -825,6 +829,7 @@ impl CueCounts {
             self.lidar_diag_ret += l.diag_ret;
             self.lidar_bottom += l.bottom;
             self.lidar_specular += l.specular;
+            self.lidar_below_ground += l.below_ground;
             self.lidar_dark += l.dark;
         }
         self.stereo_runs += r.stereo_runs as u64;

@@ -458,9 +458,9 @@ fn print_log_summary(r: &LogBuildReport) {
         );
         let c = &r.cue_counts;
         println!(
-            "  lidar no-return {} (returned {}), bottom {}, specular {}, dark {}; stereo runs {} ({} reflected points)",
-            c.lidar_noret, c.lidar_diag_ret, c.lidar_bottom, c.lidar_specular, c.lidar_dark,
-            c.stereo_runs, c.stereo_reflected_points
+            "  lidar no-return {} (returned {}), bottom {}, specular {}, below-level ground {}, dark {}; stereo runs {} ({} reflected points)",
+            c.lidar_noret, c.lidar_diag_ret, c.lidar_bottom, c.lidar_specular, c.lidar_below_ground,
+            c.lidar_dark, c.stereo_runs, c.stereo_reflected_points
         );
     }
     print_water(&r.water);
