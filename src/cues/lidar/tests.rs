@@ -859,54 +859,29 @@ fn profile_line(
 fn a_below_level_return_is_ground_only_where_the_line_sees_nothing_above_it() {
     let o = Point3::new(0.0, 0.0, 2.0);
     let p = Point3::new(15.0, 0.0, -0.7);
+    let refuted = |(cloud, dirs, slots): (PointCloud, Vec<Option<Vector3<f64>>>, Vec<u32>)| {
+        let line = ScanLine {
+            cloud: &cloud,
+            dirs: &dirs,
+            slots: &slots,
+            o,
+        };
+        mirror_refuted(&line, p, 0.0, 0.01, 0.3)
+    };
     let bank = |x: f64| if x < 15.0 { -5.0 } else { (x - 15.7).min(0.0) };
-    let (cloud, dirs, line) = profile_line(&bank, 0.25);
-    assert!(mirror_refuted(
-        &ScanLine {
-            cloud: &cloud,
-            dirs: &dirs,
-            slots: &line,
-            o
-        },
-        p,
-        0.0,
-        0.01,
-        0.3
-    ));
+    assert!(refuted(profile_line(&bank, 0.25)));
     let wall = |x: f64| if (15.0..15.1).contains(&x) { 1.0 } else { -5.0 };
-    let (cloud, dirs, line) = profile_line(&wall, 0.25);
-    assert!(!mirror_refuted(
-        &ScanLine {
-            cloud: &cloud,
-            dirs: &dirs,
-            slots: &line,
-            o
-        },
-        p,
-        0.0,
-        0.01,
-        0.3
-    ));
+    assert!(!refuted(profile_line(&wall, 0.25)));
     // Beams 3° apart cross the space above the return only high (about 0.8 m apart at
     // 15 m): nothing is known of the lowest 0.3 m, where a low object would stand.
-    let (cloud, dirs, line) = profile_line(&bank, 3.0);
-    let lowest = line
+    let sparse = profile_line(&bank, 3.0);
+    let lowest = sparse
+        .1
         .iter()
-        .filter_map(|&t| dirs[t as usize])
+        .flatten()
         .map(|u| o.z + u.z * 15.0 / u.x)
         .filter(|&z| z > p.z + 0.1)
         .fold(f64::INFINITY, f64::min);
     assert!(lowest > p.z + 0.3, "{lowest}");
-    assert!(!mirror_refuted(
-        &ScanLine {
-            cloud: &cloud,
-            dirs: &dirs,
-            slots: &line,
-            o
-        },
-        p,
-        0.0,
-        0.01,
-        0.3
-    ));
+    assert!(!refuted(sparse));
 }
