@@ -1,14 +1,14 @@
 //! The map product: one record per observed cell, with the classes and hazards of the
 //! export contract (DESIGN.md, "Map export").
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 
 use serde::{Deserialize, Serialize};
 
 use crate::cues::BuildKeyHasher;
 use crate::error::Result;
-use crate::grid::{centre_of, CellKey, CellStats, Fusion, TileMap};
-use crate::water::{find_bodies_among, HazardConfig, Vehicle, WaterBody};
+use crate::grid::{centre_of, CellKey, CellStats, Evidence, Fusion, FusionLogs, TileMap};
+use crate::water::{find_bodies_and_void, HazardConfig, Vehicle, WaterBody};
 
 mod region;
 mod window;
@@ -476,15 +476,38 @@ impl<'a> CellRule<'a> {
     }
 }
 
+/// The water probability a map publishes for a cell with evidence `ev`: for a cell outside
+/// every body (not in `water`), without its bottom returns where the water stage found
+/// them no evidence (`void`, from [`crate::water::bodies_from`]): ground at the level of a
+/// body that stood on them alone. A cell another cue keeps in a body is water, its
+/// probability all its evidence's.
+fn published_water(
+    key: CellKey,
+    ev: &Evidence,
+    logs: &FusionLogs,
+    void: &BTreeSet<CellKey>,
+    water: &CellMap<(f64, f32)>,
+) -> f32 {
+    if ev.depth_n > 0 && void.contains(&key) && !water.contains_key(&key) {
+        let mut ev = *ev;
+        ev.depth_n = 0;
+        ev.water_probability_in(logs) as f32
+    } else {
+        ev.water_probability_in(logs) as f32
+    }
+}
+
 /// The records of the `observed` cells (unique keys, in map order) that `keep` selects,
-/// given the water cells of the map's bodies (`water`, from [`water_surface`]); the step
-/// and slope tests read the dry cells among all of `observed`. Of `tiles` only the
-/// resolution and reference height are read.
+/// given the water cells of the map's bodies (`water`, from [`water_surface`]) and the cells
+/// whose bottom returns the water stage voided (`void`); the step and slope tests read the
+/// dry cells among all of `observed`. Of `tiles` only the resolution and reference height
+/// are read.
 fn cell_records(
     tiles: &TileMap,
     observed: &[(CellKey, CellStats)],
     cfg: &HazardConfig,
     water: &CellMap<(f64, f32)>,
+    void: &BTreeSet<CellKey>,
     keep: impl Fn(CellKey) -> bool,
 ) -> Vec<MapCell> {
     let res = tiles.resolution();
@@ -502,7 +525,7 @@ fn cell_records(
         .iter()
         .filter(|(key, _)| keep(*key))
         .filter_map(|(key, c)| {
-            let p = c.ev.water_probability_in(&logs) as f32;
+            let p = published_water(*key, &c.ev, &logs, void, water);
             rule.record(Seen::of(*key, c, p), || c.ev.level_mm())
         })
         .collect()
@@ -592,10 +615,10 @@ impl HazardMap {
         cfg: &HazardConfig,
         previous: &[WaterBody],
     ) -> Result<Self> {
-        let bodies = find_bodies_among(tiles, &observed, cfg, previous)?;
+        let (bodies, void) = find_bodies_and_void(tiles, &observed, cfg, previous)?;
         let res = tiles.resolution();
         let water = water_surface(&bodies, res);
-        let cells = cell_records(tiles, &observed, cfg, &water, |_| true);
+        let cells = cell_records(tiles, &observed, cfg, &water, &void, |_| true);
         Ok(HazardMap {
             resolution: res,
             cells,
@@ -627,7 +650,6 @@ impl HazardMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::Evidence;
 
     #[test]
     fn centre_std_adds_the_gradient_across_the_cell() {

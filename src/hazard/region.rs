@@ -262,7 +262,7 @@ pub fn finish_region(
         .map(tile_of)
         .collect();
     let decided = |t: TileKey| region.contains(&t) && !undecided.contains(&t);
-    out.cells = cell_records(&sub, &observed, cfg, &water, |k| decided(tile_of(k)));
+    out.cells = cell_records(&sub, &observed, cfg, &water, &void, |k| decided(tile_of(k)));
     out.bodies = bodies
         .into_iter()
         .filter(|(first, _)| decided(tile_of(*first)))

@@ -137,8 +137,13 @@ impl HazardMap {
             grid,
             fusion: &logs,
         };
-        let bodies = bodies_from(&infos, seeds.iter().copied(), res, &cfg.water, previous);
+        let (bodies, void) = bodies_from(&infos, seeds.iter().copied(), res, &cfg.water, previous);
         let water = water_surface(&bodies, res);
+        if !void.is_empty() {
+            for (s, i) in seen.iter_mut() {
+                s.water = published_water(s.key, &l.get_ev(*i as usize), &logs, &void, &water);
+            }
+        }
         for &k in water.keys() {
             if grid.contains(k) {
                 dry[at(k)] = (f64::NAN, 0.0);

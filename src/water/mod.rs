@@ -794,6 +794,17 @@ pub(crate) fn find_bodies_among(
     cfg: &HazardConfig,
     previous: &[WaterBody],
 ) -> Result<Vec<WaterBody>> {
+    Ok(find_bodies_and_void(tiles, observed, cfg, previous)?.0)
+}
+
+/// [`find_bodies_among`], and the cells whose bottom returns the search found to be no
+/// evidence of water (see [`bodies_from`]).
+pub(crate) fn find_bodies_and_void(
+    tiles: &TileMap,
+    observed: &[(CellKey, CellStats)],
+    cfg: &HazardConfig,
+    previous: &[WaterBody],
+) -> Result<(Vec<WaterBody>, BTreeSet<CellKey>)> {
     cfg.validate()?;
     let info = infos(tiles, observed, cfg);
     let seeds = info
@@ -853,14 +864,17 @@ pub(crate) fn infos(
 /// The water bodies of `cells` at resolution `res`, grown from `seeds` (every observed
 /// cell that [seeds a body](seeds_body), in increasing key order), with ids after the
 /// `previous` bodies. Reads only cells within 2n + 1 of a cell a body can grow over, n =
-/// ⌈shore_radius / resolution⌉ (see [`find_bodies_among`]).
+/// ⌈shore_radius / resolution⌉ (see [`find_bodies_among`]). Also the cells whose bottom
+/// returns turned out to be no evidence of water (they lie no deeper than
+/// `min_bottom_depth_m` under the surface their body found): the map publishes their
+/// water probability without them.
 pub(crate) fn bodies_from(
     cells: &impl CellInfos,
     seeds: impl IntoIterator<Item = CellKey>,
     res: f64,
     cfg: &WaterConfig,
     previous: &[WaterBody],
-) -> Vec<WaterBody> {
+) -> (Vec<WaterBody>, BTreeSet<CellKey>) {
     // Bottom returns that do not lie below the surface found by more than the lidar's
     // noise are what dry ground at the water's level gives: they are no evidence (module
     // documentation, section 1). Taking them away only shrinks or splits a component, and
@@ -877,7 +891,8 @@ pub(crate) fn bodies_from(
         void: &void,
     };
     let comps: Vec<Vec<CellKey>> = comps.into_iter().map(|(_, c)| c).collect();
-    bodies_once(&cells, comps, res, cfg, previous)
+    let bodies = bodies_once(&cells, comps, res, cfg, previous);
+    (bodies, void)
 }
 
 /// Most passes of [`refine_component`].

@@ -1039,9 +1039,20 @@ fn bottom_returns_at_the_shores_level_are_not_water() {
     // Pavement behind a kerb 15 cm high: its returns are "bed" 15 cm below the kerb's top,
     // and level with the ground the body's shore finds.
     let t = ground_with_bottom_returns(0.15, 0.0, 10);
-    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    let cfg = HazardConfig::default();
+    let map = HazardMap::from_tiles(&t, &cfg).unwrap();
     assert!(map.bodies.is_empty(), "{:?}", map.bodies);
     assert!(map.cells.iter().all(|c| c.class != Class::Water));
+    // Their water probability is published without them, as the bodies were found: the
+    // cells' evidence alone gives them p ≥ 0.8.
+    let with = t
+        .observed()
+        .filter(|(_, c)| c.ev.depth_n > 0)
+        .map(|(_, c)| c.ev.water_probability(&cfg.fusion))
+        .fold(f64::INFINITY, f64::min);
+    assert!(with >= 0.8, "{with}");
+    let published = map.cells.iter().map(|c| c.water).fold(0.0f32, f32::max);
+    assert!(published <= cfg.fusion.prior as f32, "{published}");
 }
 
 #[test]
