@@ -71,7 +71,7 @@ pub struct CellStats {
     pub below: u32,
     /// Σ w (quantized weights).
     pub sw: u64,
-    /// Σ q, the points' vertical weights ([`vertical_weight`]).
+    /// Σ q, the points' vertical weights (`vertical_weight`).
     pub swv: u64,
     /// Σ w·z (z in mm).
     pub swz: i128,

@@ -783,22 +783,13 @@ pub fn find_bodies(
     previous: &[WaterBody],
 ) -> Result<Vec<WaterBody>> {
     let observed: Vec<(CellKey, CellStats)> = tiles.observed().collect();
-    find_bodies_among(tiles, &observed, cfg, previous)
+    Ok(find_bodies_and_void(tiles, &observed, cfg, previous)?.0)
 }
 
 /// [`find_bodies`] given the tile map's observed cells, collected once by a caller that
-/// reads them again (a scan of the tiles reads every cell slot, observed or not).
-pub(crate) fn find_bodies_among(
-    tiles: &TileMap,
-    observed: &[(CellKey, CellStats)],
-    cfg: &HazardConfig,
-    previous: &[WaterBody],
-) -> Result<Vec<WaterBody>> {
-    Ok(find_bodies_and_void(tiles, observed, cfg, previous)?.0)
-}
-
-/// [`find_bodies_among`], and the cells whose bottom returns the search found to be no
-/// evidence of water (see [`bodies_from`]).
+/// reads them again (a scan of the tiles reads every cell slot, observed or not), and the
+/// cells whose bottom returns the search found to be no evidence of water (see
+/// [`bodies_from`]).
 pub(crate) fn find_bodies_and_void(
     tiles: &TileMap,
     observed: &[(CellKey, CellStats)],
@@ -821,7 +812,7 @@ pub(crate) fn find_bodies_and_void(
 }
 
 /// The [`Info`] of the `observed` cells of `tiles` that the body search reads (see
-/// [`find_bodies_among`]): the cells within blocks of 2n + 2 cells next to the block of a
+/// [`find_bodies_and_void`]): the cells within blocks of 2n + 2 cells next to the block of a
 /// cell a body can grow over.
 pub(crate) fn infos(
     tiles: &TileMap,
@@ -864,7 +855,7 @@ pub(crate) fn infos(
 /// The water bodies of `cells` at resolution `res`, grown from `seeds` (every observed
 /// cell that [seeds a body](seeds_body), in increasing key order), with ids after the
 /// `previous` bodies. Reads only cells within 2n + 1 of a cell a body can grow over, n =
-/// ⌈shore_radius / resolution⌉ (see [`find_bodies_among`]). Also the cells whose bottom
+/// ⌈shore_radius / resolution⌉ (see [`find_bodies_and_void`]). Also the cells whose bottom
 /// returns turned out to be no evidence of water (they lie no deeper than
 /// `min_bottom_depth_m` under the surface their body found): the map publishes their
 /// water probability without them.
