@@ -476,25 +476,24 @@ impl<'a> CellRule<'a> {
     }
 }
 
-/// The water probability a map publishes for a cell with evidence `ev`: for a cell outside
-/// every body (not in `water`), without its bottom returns where the water stage found
-/// them no evidence (`void`, from [`crate::water::bodies_from`]): ground at the level of a
-/// body that stood on them alone. A cell another cue keeps in a body is water, its
+/// The water probability a map publishes for the cell `key` with evidence `ev` in place of
+/// its evidence's, if any: for a cell outside every body (not in `water`) whose bottom
+/// returns the water stage found to be no evidence (`void`, from
+/// [`crate::water::bodies_from`]: ground at the level of a body that stood on them alone),
+/// its probability without them. A cell another cue keeps in a body is water, its
 /// probability all its evidence's.
-fn published_water(
+fn voided_water(
     key: CellKey,
     ev: &Evidence,
     logs: &FusionLogs,
     void: &BTreeSet<CellKey>,
     water: &CellMap<(f64, f32)>,
-) -> f32 {
-    if ev.depth_n > 0 && void.contains(&key) && !water.contains_key(&key) {
+) -> Option<f32> {
+    (ev.depth_n > 0 && void.contains(&key) && !water.contains_key(&key)).then(|| {
         let mut ev = *ev;
         ev.depth_n = 0;
         ev.water_probability_in(logs) as f32
-    } else {
-        ev.water_probability_in(logs) as f32
-    }
+    })
 }
 
 /// The records of the `observed` cells (unique keys, in map order) that `keep` selects,
@@ -525,7 +524,8 @@ fn cell_records(
         .iter()
         .filter(|(key, _)| keep(*key))
         .filter_map(|(key, c)| {
-            let p = published_water(*key, &c.ev, &logs, void, water);
+            let p = voided_water(*key, &c.ev, &logs, void, water)
+                .unwrap_or_else(|| c.ev.water_probability_in(&logs) as f32);
             rule.record(Seen::of(*key, c, p), || c.ev.level_mm())
         })
         .collect()

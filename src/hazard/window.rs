@@ -139,11 +139,6 @@ impl HazardMap {
         };
         let (bodies, void) = bodies_from(&infos, seeds.iter().copied(), res, &cfg.water, previous);
         let water = water_surface(&bodies, res);
-        if !void.is_empty() {
-            for (s, i) in seen.iter_mut() {
-                s.water = published_water(s.key, &l.get_ev(*i as usize), &logs, &void, &water);
-            }
-        }
         for &k in water.keys() {
             if grid.contains(k) {
                 dry[at(k)] = (f64::NAN, 0.0);
@@ -160,10 +155,20 @@ impl HazardMap {
         out.clear();
         out.reserve(seen.len());
         // In parallel; a parallel extend keeps the order of `seen`.
-        out.par_extend(
-            seen.par_iter()
-                .filter_map(|&(s, i)| rule.record(s, || l.get_ev(i as usize).level_mm())),
-        );
+        out.par_extend(seen.par_iter().filter_map(|&(s, i)| {
+            let ev = || l.get_ev(i as usize);
+            // A cell whose bottom returns the water stage voided: see `voided_water`.
+            let s = if void.contains(&s.key) {
+                let w = voided_water(s.key, &ev(), &logs, &void, &water);
+                Seen {
+                    water: w.unwrap_or(s.water),
+                    ..s
+                }
+            } else {
+                s
+            };
+            rule.record(s, || ev().level_mm())
+        }));
         if let DryCells::Dense { cells, .. } = dry_cells {
             *dry = cells;
         }
