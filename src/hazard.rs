@@ -489,11 +489,8 @@ fn voided_water(
     void: &BTreeSet<CellKey>,
     water: &CellMap<(f64, f32)>,
 ) -> Option<f32> {
-    (ev.depth_n > 0 && void.contains(&key) && !water.contains_key(&key)).then(|| {
-        let mut ev = *ev;
-        ev.depth_n = 0;
-        ev.water_probability_in(logs) as f32
-    })
+    (ev.depth_n > 0 && void.contains(&key) && !water.contains_key(&key))
+        .then(|| ev.water_probability_without_bottom_in(logs) as f32)
 }
 
 /// The records of the `observed` cells (unique keys, in map order) that `keep` selects,

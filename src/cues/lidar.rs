@@ -1001,9 +1001,9 @@ struct ScanLine<'a> {
 }
 
 /// Whether the below-level return `p` of a scan `line` (walked level `level`, range noise
-/// `sigma_r`) cannot be a mirror
-/// image. A return mirrored by water at level `w` appears at the mirror image of its object
-/// about the water plane: the object stands at the return's own x, y, at height `2w − z`.
+/// `sigma_r`) cannot be a mirror image. A return mirrored by water at level `w` appears at
+/// the mirror image of its object about the water plane: the object stands at the
+/// return's own x, y, at height `2w − z`.
 /// The water lies between the return and the walked level, so the object lies somewhere on
 /// the vertical segment from the return up to `2·level − z`, in the same azimuth: the scan
 /// line's own higher beams cross that segment. A beam that crosses it and stops at or

@@ -287,6 +287,16 @@ impl Evidence {
         let l = self.water_log_odds_in(f);
         1.0 / (1.0 + (-l).exp())
     }
+
+    /// [`Self::water_probability_in`] without the bottom returns' term: what the cell's
+    /// other evidence says where the water stage found its bottom returns no evidence.
+    pub fn water_probability_without_bottom_in(&self, f: &FusionLogs) -> f64 {
+        Evidence {
+            depth_n: 0,
+            ..*self
+        }
+        .water_probability_in(f)
+    }
 }
 
 /// The logarithms of a [`Fusion`] rule: each cue's log-likelihood ratio per observation,

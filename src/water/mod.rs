@@ -695,9 +695,7 @@ impl Info {
     /// map of reference height `z_ref`.
     pub(crate) fn of(c: &CellStats, p: f64, logs: &FusionLogs, z_ref: f64) -> Info {
         let p_without_bottom = if c.ev.depth_n > 0 {
-            let mut ev = c.ev;
-            ev.depth_n = 0;
-            ev.water_probability_in(logs)
+            c.ev.water_probability_without_bottom_in(logs)
         } else {
             p
         };
