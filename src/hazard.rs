@@ -267,11 +267,25 @@ impl DryCells {
                 .unwrap_or((f64::NAN, 0.0))
         })
     }
+
+    /// The dry 5 × 5 window around `k` (row by row from its lower-left cell), as
+    /// [`Self::neighbourhood`] gives the 3 × 3 one.
+    fn window(&self, k: CellKey) -> Window {
+        std::array::from_fn(|j| {
+            let (dx, dy) = (j as i64 % 5 - 2, j as i64 / 5 - 2);
+            self.get(CellKey::new(k.x + dx, k.y + dy))
+                .unwrap_or((f64::NAN, 0.0))
+        })
+    }
 }
 
 /// The dry 3 × 3 neighbourhood of a cell (itself included), row by row from its lower-left
 /// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
 pub type Neighbourhood = [(f64, f64); 9];
+
+/// The dry 5 × 5 window around a cell (itself at index 12), laid out as a
+/// [`Neighbourhood`]: what the cell's σ reads its terrain's gradient from.
+type Window = [(f64, f64); 25];
 
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
 /// `nb`: the upper side of a step higher than `max_step` is an obstacle (class and
@@ -342,8 +356,8 @@ pub fn terrain_hazard(
 
 /// The σ of a dry cell's elevation as the elevation of its centre, from the cell's vertical
 /// σ `sd` ([`CellStats::elevation_std_m`]) and its range-bound σ `s_rb`
-/// ([`CellStats::range_bound_std_m`]), on terrain of gradient g read from the dry
-/// neighbours (central differences where both sides are dry):
+/// ([`CellStats::range_bound_std_m`]), on terrain of gradient g read from the dry cells
+/// of its 5 × 5 window ([`window_gradient`]):
 ///
 /// * a point moved along its ray by a range error lands in the map at another place, where
 ///   sloping terrain stands higher or lower: against the terrain there, the error is the
@@ -351,36 +365,77 @@ pub fn terrain_hazard(
 ///   gradient along the ray), not times the vertical share s alone. Over the cell's points
 ///   that is at most `sd + |g|·s_rb` (Cauchy–Schwarz over the points, c ≤ 1): a bank seen
 ///   at grazing incidence is as uncertain as its range errors, level ground only by their
-///   vertical part. Only a slope the neighbours show beyond three σ of their own noise
-///   counts here (each axis's g² less nine times its estimate's variance, the neighbours'
-///   noise taken as the cell's own `sd`), or noisy far cells on level ground would read a
-///   slope out of their noise and multiply it by a range-bound σ of decimetres;
+///   vertical part. Only a slope the window shows beyond three σ of its own noise counts
+///   here (each axis's g² less nine times its estimate's variance), or noisy far cells on
+///   level ground would read a slope out of their noise and multiply it by a range-bound σ
+///   of decimetres;
 /// * the points' mean lies where they fell in the cell, not at its centre: g times an
 ///   offset spread over the cell, variance `g²·res²/12` along each axis;
 /// * the terrain varies within the cell beyond that plane (roughness, a kerb's edge): the
 ///   centre differs from the points' mean by what their spread shows beyond their noise
 ///   (`excess`, [`CellStats::excess_spread_var_m2`]) less the plane's `g²·res²/12`;
 /// * the elevations are whole millimetres (variance 1/12 mm²).
-fn centre_std(sd: f64, s_rb: f64, excess: f64, nb: &Neighbourhood, res: f64) -> f64 {
-    let z = |j: usize| nb[j].0;
-    // The gradient along one axis, and the variance the noise of the two elevations it
-    // differences puts into it (taken as the cell's own vertical σ: its neighbours lie at
-    // about its range and are seen alike).
-    let noise = 2.0 * sd * sd;
-    let grad = |lo: usize, hi: usize| match (z(lo).is_nan(), z(hi).is_nan()) {
-        (false, false) => ((z(hi) - z(lo)) / (2.0 * res), noise / (4.0 * res * res)),
-        (true, false) => ((z(hi) - z(4)) / res, noise / (res * res)),
-        (false, true) => ((z(4) - z(lo)) / res, noise / (res * res)),
-        (true, true) => (0.0, 0.0),
-    };
-    let ((gx, vx), (gy, vy)) = (grad(3, 5), grad(1, 7));
-    let g2 = gx * gx + gy * gy;
-    // A slope the neighbours show beyond three σ of their noise.
-    let slope2 = (gx * gx - 9.0 * vx).max(0.0) + (gy * gy - 9.0 * vy).max(0.0);
+fn centre_std(sd: f64, s_rb: f64, excess: f64, win: &Window, res: f64) -> f64 {
+    let (g2, slope2) = window_gradient(win, res, sd);
     let along_rays = sd + slope2.sqrt() * s_rb.max(sd);
     let across = g2 * res * res / 12.0;
     let rough = (excess - across).max(0.0);
     (along_rays * along_rays + across + rough + 1e-6 / 12.0).sqrt()
+}
+
+/// The terrain's squared gradient at the centre of `win` and the part of it beyond three
+/// σ of the estimate's noise: `(|g|², Σ_axes max(0, g_a² − 9·var(g_a)))`. The gradient is
+/// the least-squares plane through the window's dry cells (the centre's own among them),
+/// whose noise is taken as the centre's vertical σ `sd` (the window lies at about the
+/// cell's range and is seen alike). A sparse scan (the rings of a far lidar, metres apart;
+/// its columns, every other cell) leaves many cells without a neighbour on some side of
+/// the 3 × 3 around them, but seldom without one in the 5 × 5. Where the window's cells
+/// lie on a line, the slope across it is not seen, and is taken as the one along it (no
+/// direction of slope preferred); with no neighbour at all there is none.
+fn window_gradient(win: &Window, res: f64, sd: f64) -> (f64, f64) {
+    let cells = || {
+        win.iter().enumerate().filter_map(|(j, &(z, _))| {
+            let (dx, dy) = ((j % 5) as f64 - 2.0, (j / 5) as f64 - 2.0);
+            (!z.is_nan()).then(|| (dx, dy, z - win[12].0))
+        })
+    };
+    let (mut n, mut sx, mut sy, mut sz) = (0.0, 0.0, 0.0, 0.0);
+    for (dx, dy, dz) in cells() {
+        n += 1.0;
+        sx += dx;
+        sy += dy;
+        sz += dz;
+    }
+    if n < 2.0 {
+        return (0.0, 0.0);
+    }
+    let (mx, my, mz) = (sx / n, sy / n, sz / n);
+    // Centred moments, with offsets in cells (the gradient per cell, scaled below).
+    let (mut xx, mut xy, mut yy, mut xz, mut yz) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (dx, dy, dz) in cells() {
+        let (dx, dy, dz) = (dx - mx, dy - my, dz - mz);
+        xx += dx * dx;
+        xy += dx * dy;
+        yy += dy * dy;
+        xz += dx * dz;
+        yz += dy * dz;
+    }
+    let var = sd * sd;
+    let beyond = |g: f64, v: f64| (g * g - 9.0 * v).max(0.0);
+    let det = xx * yy - xy * xy;
+    // n·det is the sum of the squared doubled areas of the triangles the cells make
+    // (Binet–Cauchy): a whole number, at least 1 unless they lie on a line.
+    let (g2, slope2) = if det * n > 0.5 {
+        let (gx, gy) = ((yy * xz - xy * yz) / det, (xx * yz - xy * xz) / det);
+        let (vx, vy) = (var * yy / det, var * xx / det);
+        (gx * gx + gy * gy, beyond(gx, vx) + beyond(gy, vy))
+    } else {
+        // On a line through the cells: the slope along it, taken across it too.
+        let l = xx + yy;
+        let g = (xz * xx.sqrt() + yz * xy.signum() * yy.sqrt()) / (l * l.sqrt());
+        (2.0 * g * g, 2.0 * beyond(g, var / l))
+    };
+    (g2 / (res * res), slope2 / (res * res))
 }
 
 /// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
@@ -451,8 +506,9 @@ impl<'a> CellRule<'a> {
             let nb = self.dry.neighbourhood(c.key);
             let (class, hazard) =
                 terrain_hazard(&nb, (z, sz), self.res, self.max_step_m, self.max_grad);
+            let win = self.dry.window(c.key);
             let c = Seen {
-                elevation_std: centre_std(c.elevation_std, sz, c.excess_var, &nb, self.res),
+                elevation_std: centre_std(c.elevation_std, sz, c.excess_var, &win, self.res),
                 ..c
             };
             return Some(c.record(self.res, z, dry_depth(c.water), class, hazard));
@@ -652,15 +708,15 @@ mod tests {
     fn centre_std_adds_the_gradient_across_the_cell() {
         let res = 0.1;
         // A plane rising 0.5 m per metre along x, every neighbour dry and exact.
-        let s = centre_std(0.0, 0.0, 0.0, &plane(0.5, 0.0, res, 0.0), res);
+        let s = centre_std(0.0, 0.0, 0.0, &plane5(0.5, 0.0, res, 0.0), res);
         let want = (0.25f64 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Level ground: the cell's own σ and the millimetre only; no neighbour: the same.
-        let flat = plane(0.0, 0.0, res, 0.0);
+        let flat = plane5(0.0, 0.0, res, 0.0);
         let own = (1e-4f64 + 1e-6 / 12.0).sqrt();
         assert!((centre_std(0.01, 0.05, 0.0, &flat, res) - own).abs() < 1e-12);
-        let alone: Neighbourhood =
-            std::array::from_fn(|j| if j == 4 { (0.0, 0.0) } else { (f64::NAN, 0.0) });
+        let alone: Window =
+            std::array::from_fn(|j| if j == 12 { (0.0, 0.0) } else { (f64::NAN, 0.0) });
         assert_eq!(
             centre_std(0.01, 0.05, 0.0, &alone, res),
             centre_std(0.01, 0.05, 0.0, &flat, res)
@@ -671,70 +727,112 @@ mod tests {
     /// higher or lower: the σ takes the slope times the range-bound σ on top of the
     /// vertical one. A bank rising 1 m per metre, seen with a vertical σ of 2 mm and a
     /// range-bound σ of 3 cm, is uncertain by 3.2 cm, not 2 mm (the squared slope less nine
-    /// times its estimate's variance, 2·(2 mm)²/(0.2 m)²).
+    /// times its estimate's variance, (2 mm)² over the window's Σ dx² = 50 cells²).
     #[test]
     fn centre_std_takes_the_range_error_along_a_slope() {
         let res = 0.1;
-        let s = centre_std(0.002, 0.03, 0.0, &plane(1.0, 0.0, res, 0.0), res);
-        let along = 0.002 + (1.0f64 - 9.0 * 8e-6 / 0.04).sqrt() * 0.03;
+        let s = centre_std(0.002, 0.03, 0.0, &plane5(1.0, 0.0, res, 0.0), res);
+        let along = 0.002 + (1.0f64 - 9.0 * 4e-6 / (50.0 * res * res)).sqrt() * 0.03;
         let want = (along * along + res * res / 12.0 + 1e-6 / 12.0).sqrt();
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Along the other axis, the same.
-        let t = centre_std(0.002, 0.03, 0.0, &plane(0.0, -1.0, res, 0.0), res);
+        let t = centre_std(0.002, 0.03, 0.0, &plane5(0.0, -1.0, res, 0.0), res);
         assert!((t - want).abs() < 1e-12, "{t} {want}");
     }
 
-    /// Neighbours whose elevations differ by less than three σ of their noise show no slope
+    /// A window whose cells differ by less than three σ of their noise shows no slope
     /// along the rays: noisy far cells on level ground keep their own σ and the position
     /// term of their raw gradient.
     #[test]
     fn centre_std_reads_no_slope_into_neighbours_noise() {
         let res = 0.1;
-        // A rise of 0.3 per metre across the cell, against a cell σ of 3 cm: a central
-        // difference of σ 2.1 cm over 0.2 m, so 3σ of the gradient is 0.32.
-        let noisy = plane(0.3, 0.0, res, 0.03);
-        let want = (0.03f64 * 0.03 + 0.09 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
+        // A rise of 0.1 per metre, against a cell σ of 3 cm: the window's gradient has a
+        // σ of 3 cm / √(50·res²) = 0.042, so 3σ is 0.13.
+        let noisy = plane5(0.1, 0.0, res, 0.03);
+        let want = (0.03f64 * 0.03 + 0.01 * res * res / 12.0 + 1e-6 / 12.0).sqrt();
         let s = centre_std(0.03, 0.3, 0.0, &noisy, res);
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Beyond it, the slope counts.
-        assert!(centre_std(0.03, 0.3, 0.0, &plane(1.0, 0.0, res, 0.03), res) > 0.25);
+        assert!(centre_std(0.03, 0.3, 0.0, &plane5(1.0, 0.0, res, 0.03), res) > 0.25);
     }
 
-    /// Points that spread more than their noise explains show terrain varying within the
-    /// cell: its centre differs from their mean by that much (less what the slope across
-    /// the cell already accounts for).
+    /// A far scan leaves cells apart: its columns every other cell, its rings metres
+    /// apart. The window's gradient reads the plane through whatever cells it holds; on
+    /// a line of cells (one ring) the slope along it stands for the slope across it too.
     #[test]
-    fn centre_std_takes_the_terrain_within_the_cell() {
+    fn the_gradient_is_read_from_sparse_and_collinear_cells() {
         let res = 0.1;
-        let flat = plane(0.0, 0.0, res, 0.0);
-        let s = centre_std(0.002, 0.01, 1e-4, &flat, res);
-        let want = (0.002f64 * 0.002 + 1e-4 + 1e-6 / 12.0).sqrt();
-        assert!((s - want).abs() < 1e-12, "{s} {want}");
-        // On a plane rising 1 per metre, a spread of res²/12 is the slope itself.
-        let slope = plane(1.0, 0.0, res, 0.0);
-        let across = res * res / 12.0;
-        assert_eq!(
-            centre_std(0.0, 0.0, across, &slope, res),
-            centre_std(0.0, 0.0, 0.0, &slope, res)
-        );
+        let full = plane5(0.2, -0.1, res, 0.0);
+        let every_other: Window =
+            std::array::from_fn(|j| if j % 2 == 0 { full[j] } else { (f64::NAN, 0.0) });
+        let (g2, _) = window_gradient(&every_other, res, 0.0);
+        assert!((g2 - 0.05).abs() < 1e-12, "{g2}");
+        // One ring along x through the cell, two cells either side.
+        let ring: Window =
+            std::array::from_fn(|j| if j / 5 == 2 { full[j] } else { (f64::NAN, 0.0) });
+        let (g2, slope2) = window_gradient(&ring, res, 0.0);
+        assert!((g2 - 2.0 * 0.04).abs() < 1e-12, "{g2}");
+        assert!((slope2 - 2.0 * 0.04).abs() < 1e-12, "{slope2}");
+        // A diagonal line, the same from its own slope.
+        let diag: Window =
+            std::array::from_fn(|j| if j % 6 == 0 { full[j] } else { (f64::NAN, 0.0) });
+        let g = (0.2 - 0.1) / 2f64.sqrt();
+        let (g2, _) = window_gradient(&diag, res, 0.0);
+        assert!((g2 - 2.0 * g * g).abs() < 1e-12, "{g2}");
     }
 
     proptest::proptest! {
         /// Never below the cell's own σ, and finite for finite input, whatever the
-        /// neighbourhood (some neighbours missing, absurd but finite heights).
+        /// window (some cells missing, absurd but finite heights).
         #[test]
         fn centre_std_is_at_least_the_cells_own(
             sd in 0.0f64..10.0,
             rb in 0.0f64..10.0,
-            zs in proptest::array::uniform9(proptest::option::of(-1e6f64..1e6)),
-            ss in proptest::array::uniform9(0.0f64..5.0),
+            zs in proptest::array::uniform25(proptest::option::of(-1e6f64..1e6)),
+            ss in proptest::array::uniform25(0.0f64..5.0),
         ) {
-            let nb: Neighbourhood = std::array::from_fn(|j| {
-                (if j == 4 { Some(0.0) } else { zs[j] }.unwrap_or(f64::NAN), ss[j])
+            let win: Window = std::array::from_fn(|j| {
+                (if j == 12 { Some(0.0) } else { zs[j] }.unwrap_or(f64::NAN), ss[j])
             });
-            let s = centre_std(sd, rb, 0.0, &nb, 0.1);
+            let s = centre_std(sd, rb, 0.0, &win, 0.1);
             proptest::prop_assert!(s.is_finite() && s >= sd, "{s} {sd}");
         }
+
+        /// Any three or more cells of a plane, not on one line, give its gradient.
+        #[test]
+        fn the_gradient_of_a_plane_is_exact_on_any_cells_not_on_a_line(
+            gx in -5.0f64..5.0,
+            gy in -5.0f64..5.0,
+            mask in proptest::array::uniform25(proptest::bool::ANY),
+        ) {
+            let res = 0.1;
+            let full = plane5(gx, gy, res, 0.0);
+            let win: Window = std::array::from_fn(|j| {
+                if j == 12 || mask[j] { full[j] } else { (f64::NAN, 0.0) }
+            });
+            let at: Vec<usize> = (0..25).filter(|&j| !win[j].0.is_nan()).collect();
+            let xy = |j: usize| ((j % 5) as i64, (j / 5) as i64);
+            let (x0, y0) = xy(at[0]);
+            let on_a_line = at.iter().all(|&a| {
+                at.iter().all(|&b| {
+                    let ((xa, ya), (xb, yb)) = (xy(a), xy(b));
+                    (xa - x0) * (yb - y0) == (ya - y0) * (xb - x0)
+                })
+            });
+            proptest::prop_assume!(!on_a_line);
+            let (g2, _) = window_gradient(&win, res, 0.0);
+            let want = gx * gx + gy * gy;
+            proptest::prop_assert!((g2 - want).abs() <= 1e-9 * (1.0 + want), "{g2} {want}");
+        }
+    }
+
+    /// The 5 × 5 window of a cell of a plane rising `gx`, `gy` per metre, at `res` m, all
+    /// with σ `s`, the cell's own elevation 0.
+    fn plane5(gx: f64, gy: f64, res: f64, s: f64) -> Window {
+        std::array::from_fn(|j| {
+            let (dx, dy) = ((j % 5) as f64 - 2.0, (j / 5) as f64 - 2.0);
+            ((dx * gx + dy * gy) * res, s)
+        })
     }
 
     /// The neighbourhood of a cell of a plane rising `gx`, `gy` per metre, at `res` m, all

@@ -26,8 +26,8 @@
 //! - any other component, and every cell a body can grow over that is connected through
 //!   such cells to a cell next to an unknown tile, is *open*: whether and how it is water
 //!   is not decided by this region;
-//! - a region tile is decided when none of its observed cells has an open cell in its 3 × 3
-//!   neighbourhood; its records are those of the whole map. The others are returned as
+//! - a region tile is decided when none of its observed cells has an open cell in its 5 × 5
+//!   window (what its record reads); its records are those of the whole map. The others are returned as
 //!   undecided.
 //!
 //! Bodies go to the region holding their first seed, so each is returned once. Their ids
@@ -224,7 +224,9 @@ pub fn finish_region(
         }
     }
     // Components: decided when whole and their ring known.
-    let near_region = |k: CellKey| in_region(k) || N8.iter().any(|&d| in_region(add(k, d)));
+    // Within two cells: a record reads its 5 × 5 window.
+    let near_region =
+        |k: CellKey| (-2..=2).any(|dy| (-2..=2).any(|dx| in_region(add(k, (dx, dy)))));
     let cell_area = res * res;
     let mut kept: Vec<(CellKey, Vec<CellKey>)> = Vec::new();
     // The bottom returns a whole component's refinement took out of the evidence (as the
@@ -235,7 +237,7 @@ pub fn finish_region(
             open.extend(comp);
             continue;
         }
-        // Only bodies that hold or touch a region cell matter here.
+        // Only bodies that hold a region cell or lie in a region cell's window matter here.
         if !comp.iter().any(|&k| near_region(k)) {
             continue;
         }
@@ -258,7 +260,8 @@ pub fn finish_region(
         .iter()
         .map(|(k, _)| *k)
         .filter(|&k| in_region(k))
-        .filter(|&k| open.contains(&k) || N8.iter().any(|&d| open.contains(&add(k, d))))
+        // Its record reads the dry cells of its 5 × 5 window (the σ's gradient).
+        .filter(|&k| (-2..=2).any(|dy| (-2..=2).any(|dx| open.contains(&add(k, (dx, dy))))))
         .map(tile_of)
         .collect();
     let decided = |t: TileKey| region.contains(&t) && !undecided.contains(&t);
