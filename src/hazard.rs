@@ -183,22 +183,28 @@ pub struct HazardMap {
     pub bodies: Vec<WaterBody>,
 }
 
-/// Elevation and its σ of the dry cells, looked up by key: a dense array over the cells'
-/// bounding box when that is at most four times the cells (a window), else a hash map (a
-/// sparse global map). The step and slope test asks nine cells per cell.
+/// A dry cell's elevation, its range-bound σ and its vertical σ (m; [`dry_terrain`]).
+type Dry = (f64, f64, f64);
+
+/// What [`DryCells`] holds where a cell is not dry.
+const NOT_DRY: Dry = (f64::NAN, 0.0, 0.0);
+
+/// The dry cells ([`Dry`]), looked up by key: a dense array over the cells' bounding box
+/// when that is at most four times the cells (a window), else a hash map (a sparse global
+/// map). The step and slope test asks nine cells per cell, the σ twenty-five.
 enum DryCells {
     Dense {
         lo: CellKey,
         width: i64,
         height: i64,
         /// NaN elevation: not a dry cell.
-        cells: Vec<(f64, f64)>,
+        cells: Vec<Dry>,
     },
-    Sparse(CellMap<(f64, f64)>),
+    Sparse(CellMap<Dry>),
 }
 
 impl DryCells {
-    fn new(dry: Vec<(CellKey, (f64, f64))>) -> Self {
+    fn new(dry: Vec<(CellKey, Dry)>) -> Self {
         let Some(&(first, _)) = dry.first() else {
             return DryCells::Sparse(CellMap::default());
         };
@@ -212,7 +218,7 @@ impl DryCells {
         if width.saturating_mul(height) > 4 * dry.len() as i64 {
             return DryCells::Sparse(dry.into_iter().collect());
         }
-        let mut cells = vec![(f64::NAN, 0.0); (width * height) as usize];
+        let mut cells = vec![NOT_DRY; (width * height) as usize];
         for (k, v) in dry {
             cells[((k.y - lo.y) * width + (k.x - lo.x)) as usize] = v;
         }
@@ -224,7 +230,7 @@ impl DryCells {
         }
     }
 
-    fn get(&self, k: CellKey) -> Option<(f64, f64)> {
+    fn get(&self, k: CellKey) -> Option<Dry> {
         match self {
             DryCells::Dense {
                 lo,
@@ -258,23 +264,28 @@ impl DryCells {
                 let w = (y * width + x) as usize;
                 let row = |r: usize| &cells[r - 1..r + 2];
                 let (a, b, c) = (row(w - *width as usize), row(w), row(w + *width as usize));
-                return [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+                let zs = |d: Dry| (d.0, d.1);
+                return [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]].map(zs);
             }
         }
         std::array::from_fn(|j| {
             let (dx, dy) = (j as i64 % 3 - 1, j as i64 / 3 - 1);
-            self.get(CellKey::new(k.x + dx, k.y + dy))
-                .unwrap_or((f64::NAN, 0.0))
+            let (z, sz, _) = self
+                .get(CellKey::new(k.x + dx, k.y + dy))
+                .unwrap_or(NOT_DRY);
+            (z, sz)
         })
     }
 
-    /// The dry 5 × 5 window around `k` (row by row from its lower-left cell), as
-    /// [`Self::neighbourhood`] gives the 3 × 3 one.
+    /// The dry 5 × 5 window around `k` (row by row from its lower-left cell): elevation and
+    /// vertical σ, NaN elevation where the cell is not dry.
     fn window(&self, k: CellKey) -> Window {
         std::array::from_fn(|j| {
             let (dx, dy) = (j as i64 % 5 - 2, j as i64 / 5 - 2);
-            self.get(CellKey::new(k.x + dx, k.y + dy))
-                .unwrap_or((f64::NAN, 0.0))
+            let (z, _, sv) = self
+                .get(CellKey::new(k.x + dx, k.y + dy))
+                .unwrap_or(NOT_DRY);
+            (z, sv)
         })
     }
 }
@@ -283,8 +294,9 @@ impl DryCells {
 /// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
 pub type Neighbourhood = [(f64, f64); 9];
 
-/// The dry 5 × 5 window around a cell (itself at index 12), laid out as a
-/// [`Neighbourhood`]: what the cell's σ reads its terrain's gradient from.
+/// The dry 5 × 5 window around a cell (itself at index 12), row by row from its lower-left
+/// cell: elevation and vertical σ, NaN elevation where the cell is not dry. What the cell's
+/// σ reads its terrain's gradient from.
 type Window = [(f64, f64); 25];
 
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
@@ -376,7 +388,7 @@ pub fn terrain_hazard(
 ///   (`excess`, [`CellStats::excess_spread_var_m2`]) less the plane's `g²·res²/12`;
 /// * the elevations are whole millimetres (variance 1/12 mm²).
 fn centre_std(sd: f64, s_rb: f64, excess: f64, win: &Window, res: f64) -> f64 {
-    let (g2, slope2) = window_gradient(win, res, sd);
+    let (g2, slope2) = window_gradient(win, res);
     let along_rays = sd + slope2.sqrt() * s_rb.max(sd);
     let across = g2 * res * res / 12.0;
     let rough = (excess - across).max(0.0);
@@ -386,66 +398,79 @@ fn centre_std(sd: f64, s_rb: f64, excess: f64, win: &Window, res: f64) -> f64 {
 /// The terrain's squared gradient at the centre of `win` and the part of it beyond three
 /// σ of the estimate's noise: `(|g|², Σ_axes max(0, g_a² − 9·var(g_a)))`. The gradient is
 /// the least-squares plane through the window's dry cells (the centre's own among them),
-/// whose noise is taken as the centre's vertical σ `sd` (the window lies at about the
-/// cell's range and is seen alike). A sparse scan (the rings of a far lidar, metres apart;
-/// its columns, every other cell) leaves many cells without a neighbour on some side of
-/// the 3 × 3 around them, but seldom without one in the 5 × 5. Where the window's cells
-/// lie on a line, the slope across it is not seen, and is taken as the one along it (no
-/// direction of slope preferred); with no neighbour at all there is none.
-fn window_gradient(win: &Window, res: f64, sd: f64) -> (f64, f64) {
+/// each weighted by its own vertical σ and the millimetre, so that a lidar cell amid far
+/// stereo cells reads its slope from its like and not from their noise. A sparse scan (the
+/// rings of a far lidar, metres apart; its columns, every other cell) leaves many cells
+/// without a neighbour on some side of the 3 × 3 around them, but seldom without one in the
+/// 5 × 5. Where the window's cells lie on a line, the slope across it is not seen, and is
+/// taken as the one along it (no direction of slope preferred); with no neighbour at all
+/// there is none.
+fn window_gradient(win: &Window, res: f64) -> (f64, f64) {
+    // (dx, dy) in cells, dz (m), weight 1/σ² (m⁻²).
     let cells = || {
-        win.iter().enumerate().filter_map(|(j, &(z, _))| {
+        win.iter().enumerate().filter_map(|(j, &(z, s))| {
             let (dx, dy) = ((j % 5) as f64 - 2.0, (j / 5) as f64 - 2.0);
-            (!z.is_nan()).then(|| (dx, dy, z - win[12].0))
+            (!z.is_nan()).then(|| (dx, dy, z - win[12].0, 1.0 / (s * s + 1e-6 / 12.0)))
         })
     };
-    let (mut n, mut sx, mut sy, mut sz) = (0.0, 0.0, 0.0, 0.0);
-    for (dx, dy, dz) in cells() {
+    let (mut n, mut sw, mut sx, mut sy, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (dx, dy, dz, w) in cells() {
         n += 1.0;
-        sx += dx;
-        sy += dy;
-        sz += dz;
+        sw += w;
+        sx += w * dx;
+        sy += w * dy;
+        sz += w * dz;
     }
     if n < 2.0 {
         return (0.0, 0.0);
     }
-    let (mx, my, mz) = (sx / n, sy / n, sz / n);
-    // Centred moments, with offsets in cells (the gradient per cell, scaled below).
+    let (mx, my, mz) = (sx / sw, sy / sw, sz / sw);
+    // Weighted centred moments, offsets in cells (the gradient per cell, scaled below),
+    // and the unweighted determinant of the cells' layout.
     let (mut xx, mut xy, mut yy, mut xz, mut yz) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (dx, dy, dz) in cells() {
+    let (mut ux, mut uy, mut uxx, mut uxy, mut uyy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (dx, dy, dz, w) in cells() {
+        (ux, uy, uxx, uxy, uyy) = (
+            ux + dx,
+            uy + dy,
+            uxx + dx * dx,
+            uxy + dx * dy,
+            uyy + dy * dy,
+        );
         let (dx, dy, dz) = (dx - mx, dy - my, dz - mz);
-        xx += dx * dx;
-        xy += dx * dy;
-        yy += dy * dy;
-        xz += dx * dz;
-        yz += dy * dz;
+        xx += w * dx * dx;
+        xy += w * dx * dy;
+        yy += w * dy * dy;
+        xz += w * dx * dz;
+        yz += w * dy * dz;
     }
-    let var = sd * sd;
+    // n²·det of the unweighted layout is n times the sum of the squared doubled areas of
+    // the triangles the cells make (Binet–Cauchy): at least n unless they lie on a line.
+    let layout = (n * uxx - ux * ux) * (n * uyy - uy * uy) - (n * uxy - ux * uy).powi(2);
     let beyond = |g: f64, v: f64| (g * g - 9.0 * v).max(0.0);
-    let det = xx * yy - xy * xy;
-    // n·det is the sum of the squared doubled areas of the triangles the cells make
-    // (Binet–Cauchy): a whole number, at least 1 unless they lie on a line.
-    let (g2, slope2) = if det * n > 0.5 {
+    let (g2, slope2) = if layout > 0.5 * n {
+        let det = xx * yy - xy * xy;
         let (gx, gy) = ((yy * xz - xy * yz) / det, (xx * yz - xy * xz) / det);
-        let (vx, vy) = (var * yy / det, var * xx / det);
+        let (vx, vy) = (yy / det, xx / det);
         (gx * gx + gy * gy, beyond(gx, vx) + beyond(gy, vy))
     } else {
         // On a line through the cells: the slope along it, taken across it too.
         let l = xx + yy;
         let g = (xz * xx.sqrt() + yz * xy.signum() * yy.sqrt()) / (l * l.sqrt());
-        (2.0 * g * g, 2.0 * beyond(g, var / l))
+        (2.0 * g * g, 2.0 * beyond(g, 1.0 / l))
     };
     (g2 / (res * res), slope2 / (res * res))
 }
 
-/// Elevation (m) and its σ (0 when unknown) of a cell with fused points, for the step and
-/// slope tests.
-fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<(f64, f64)> {
-    let sz = c
-        .range_bound_std_m()
-        .filter(|s| s.is_finite())
-        .unwrap_or(0.0);
-    Some((c.mean_mm().map(|m| z_ref + m * 1e-3)?, sz))
+/// Elevation (m) of a cell with fused points, its range-bound σ for the step and slope
+/// tests, and its vertical σ for its neighbours' σ (each 0 when unknown).
+fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<Dry> {
+    let finite = |s: Option<f64>| s.filter(|s| s.is_finite()).unwrap_or(0.0);
+    Some((
+        c.mean_mm().map(|m| z_ref + m * 1e-3)?,
+        finite(c.range_bound_std_m()),
+        finite(c.elevation_std_m()),
+    ))
 }
 
 /// Surface z and depth of the water cells of `bodies`.
@@ -502,7 +527,7 @@ impl<'a> CellRule<'a> {
     /// of the first two tests does not matter.)
     #[inline]
     fn record(&self, c: Seen, level_mm: impl FnOnce() -> Option<f64>) -> Option<MapCell> {
-        if let Some((z, sz)) = self.dry.get(c.key) {
+        if let Some((z, sz, _)) = self.dry.get(c.key) {
             let nb = self.dry.neighbourhood(c.key);
             let (class, hazard) =
                 terrain_hazard(&nb, (z, sz), self.res, self.max_step_m, self.max_grad);
@@ -727,16 +752,18 @@ mod tests {
     /// higher or lower: the σ takes the slope times the range-bound σ on top of the
     /// vertical one. A bank rising 1 m per metre, seen with a vertical σ of 2 mm and a
     /// range-bound σ of 3 cm, is uncertain by 3.2 cm, not 2 mm (the squared slope less nine
-    /// times its estimate's variance, (2 mm)² over the window's Σ dx² = 50 cells²).
+    /// times its estimate's variance: the cells' (2 mm)² and the millimetre's over the
+    /// window's Σ dx² = 50 cells²).
     #[test]
     fn centre_std_takes_the_range_error_along_a_slope() {
         let res = 0.1;
-        let s = centre_std(0.002, 0.03, 0.0, &plane5(1.0, 0.0, res, 0.0), res);
-        let along = 0.002 + (1.0f64 - 9.0 * 4e-6 / (50.0 * res * res)).sqrt() * 0.03;
+        let s = centre_std(0.002, 0.03, 0.0, &plane5(1.0, 0.0, res, 0.002), res);
+        let var = 4e-6 + 1e-6 / 12.0;
+        let along = 0.002 + (1.0f64 - 9.0 * var / (50.0 * res * res)).sqrt() * 0.03;
         let want = (along * along + res * res / 12.0 + 1e-6 / 12.0).sqrt();
         assert!((s - want).abs() < 1e-12, "{s} {want}");
         // Along the other axis, the same.
-        let t = centre_std(0.002, 0.03, 0.0, &plane5(0.0, -1.0, res, 0.0), res);
+        let t = centre_std(0.002, 0.03, 0.0, &plane5(0.0, -1.0, res, 0.002), res);
         assert!((t - want).abs() < 1e-12, "{t} {want}");
     }
 
@@ -765,20 +792,39 @@ mod tests {
         let full = plane5(0.2, -0.1, res, 0.0);
         let every_other: Window =
             std::array::from_fn(|j| if j % 2 == 0 { full[j] } else { (f64::NAN, 0.0) });
-        let (g2, _) = window_gradient(&every_other, res, 0.0);
+        let (g2, _) = window_gradient(&every_other, res);
         assert!((g2 - 0.05).abs() < 1e-12, "{g2}");
         // One ring along x through the cell, two cells either side.
         let ring: Window =
             std::array::from_fn(|j| if j / 5 == 2 { full[j] } else { (f64::NAN, 0.0) });
-        let (g2, slope2) = window_gradient(&ring, res, 0.0);
+        let (g2, slope2) = window_gradient(&ring, res);
         assert!((g2 - 2.0 * 0.04).abs() < 1e-12, "{g2}");
-        assert!((slope2 - 2.0 * 0.04).abs() < 1e-12, "{slope2}");
+        assert!((slope2 - 2.0 * 0.04).abs() < 1e-4, "{slope2}");
         // A diagonal line, the same from its own slope.
         let diag: Window =
             std::array::from_fn(|j| if j % 6 == 0 { full[j] } else { (f64::NAN, 0.0) });
         let g = (0.2 - 0.1) / 2f64.sqrt();
-        let (g2, _) = window_gradient(&diag, res, 0.0);
+        let (g2, _) = window_gradient(&diag, res);
         assert!((g2 - 2.0 * g * g).abs() < 1e-12, "{g2}");
+    }
+
+    /// A lidar cell amid far stereo cells: its slope is read from the lidar cells beside
+    /// it, whose σ is a millimetre, not from the stereo cells' decimetres of noise.
+    #[test]
+    fn the_gradient_weighs_each_cell_by_its_own_noise() {
+        let res = 0.1;
+        let plane = plane5(0.05, 0.0, res, 0.001);
+        let win: Window = std::array::from_fn(|j| match j {
+            11 | 12 | 13 | 17 => plane[j],
+            // The stereo cells right of the centre 0.3 m high, those left of it as low.
+            _ => (plane[j].0 + 0.3 * ((j % 5) as f64 - 2.0).signum(), 0.3),
+        });
+        let (g2, slope2) = window_gradient(&win, res);
+        assert!((g2 - 0.0025).abs() < 1e-4, "{g2}");
+        assert!(slope2 > 0.0 && slope2 <= g2, "{slope2}");
+        // Weighted alike, their noise would read as a slope of metres per metre.
+        let equal: Window = std::array::from_fn(|j| (win[j].0, 0.3));
+        assert!(window_gradient(&equal, res).0 > 1.0);
     }
 
     proptest::proptest! {
@@ -820,7 +866,7 @@ mod tests {
                 })
             });
             proptest::prop_assume!(!on_a_line);
-            let (g2, _) = window_gradient(&win, res, 0.0);
+            let (g2, _) = window_gradient(&win, res);
             let want = gx * gx + gy * gy;
             proptest::prop_assert!((g2 - want).abs() <= 1e-9 * (1.0 + want), "{g2} {want}");
         }
@@ -945,16 +991,23 @@ mod tests {
     #[test]
     fn dry_cells_dense_and_sparse_answer_alike() {
         // A compact patch (dense array) and the same patch plus a cell far away (hash map).
-        let patch: Vec<(CellKey, (f64, f64))> = (0..20)
-            .flat_map(|x| (0..10).map(move |y| (CellKey::new(x - 7, y + 3), (x as f64, y as f64))))
+        let patch: Vec<(CellKey, Dry)> = (0..20)
+            .flat_map(|x| {
+                (0..10).map(move |y| {
+                    (
+                        CellKey::new(x - 7, y + 3),
+                        (x as f64, y as f64, 0.5 * y as f64),
+                    )
+                })
+            })
             .filter(|(k, _)| (k.x + k.y) % 7 != 0)
             .collect();
         let mut far = patch.clone();
-        far.push((CellKey::new(1_000_000, -5), (1.0, 2.0)));
+        far.push((CellKey::new(1_000_000, -5), (1.0, 2.0, 3.0)));
         let (dense, sparse) = (DryCells::new(patch.clone()), DryCells::new(far));
         assert!(matches!(dense, DryCells::Dense { .. }));
         assert!(matches!(sparse, DryCells::Sparse(_)));
-        let truth: HashMap<CellKey, (f64, f64)> = patch.into_iter().collect();
+        let truth: HashMap<CellKey, Dry> = patch.into_iter().collect();
         for x in -10..16 {
             for y in 0..16 {
                 let k = CellKey::new(x, y);
@@ -962,7 +1015,10 @@ mod tests {
                 assert_eq!(sparse.get(k), truth.get(&k).copied());
             }
         }
-        assert_eq!(sparse.get(CellKey::new(1_000_000, -5)), Some((1.0, 2.0)));
+        assert_eq!(
+            sparse.get(CellKey::new(1_000_000, -5)),
+            Some((1.0, 2.0, 3.0))
+        );
         // The neighbourhoods too, inside the dense array and at its edges.
         let bits = |nb: Neighbourhood| nb.map(|(z, s)| (z.to_bits(), s.to_bits()));
         for x in -10..16 {
@@ -970,10 +1026,20 @@ mod tests {
                 let k = CellKey::new(x, y);
                 let want: Neighbourhood = std::array::from_fn(|j| {
                     let d = CellKey::new(x + j as i64 % 3 - 1, y + j as i64 / 3 - 1);
-                    truth.get(&d).copied().unwrap_or((f64::NAN, 0.0))
+                    let (z, sz, _) = truth.get(&d).copied().unwrap_or(NOT_DRY);
+                    (z, sz)
                 });
                 assert_eq!(bits(dense.neighbourhood(k)), bits(want));
                 assert_eq!(bits(sparse.neighbourhood(k)), bits(want));
+                // The 5 × 5 window: elevation and vertical σ.
+                let w = |win: Window| win.map(|(z, s)| (z.to_bits(), s.to_bits()));
+                let want: Window = std::array::from_fn(|j| {
+                    let d = CellKey::new(x + j as i64 % 5 - 2, y + j as i64 / 5 - 2);
+                    let (z, _, sv) = truth.get(&d).copied().unwrap_or(NOT_DRY);
+                    (z, sv)
+                });
+                assert_eq!(w(dense.window(k)), w(want));
+                assert_eq!(w(sparse.window(k)), w(want));
             }
         }
         assert_eq!(DryCells::new(Vec::new()).get(CellKey::new(0, 0)), None);

@@ -22,7 +22,7 @@ pub(crate) struct WindowScratch {
     seen: Vec<(Seen, u32)>,
     /// Dry terrain over the whole window, row by row from its lower-left cell: the
     /// storage of a dense [`DryCells`].
-    dry: Vec<(f64, f64)>,
+    dry: Vec<Dry>,
     /// Cells that seed a body.
     seeds: Vec<CellKey>,
     /// Storage for the next map's cells (an earlier map's, once nothing else held it).
@@ -52,7 +52,7 @@ impl WindowScratch {
 struct TileCells {
     seen: Vec<(Seen, u32)>,
     seeds: Vec<CellKey>,
-    dry: Vec<(usize, (f64, f64))>,
+    dry: Vec<(usize, Dry)>,
 }
 
 /// The observed cells of a window, looked up in its layers.
@@ -124,7 +124,7 @@ impl HazardMap {
         });
         // No dry terrain but where an observed cell has some (a sequential fill).
         dry.clear();
-        dry.resize(n * n, (f64::NAN, 0.0));
+        dry.resize(n * n, NOT_DRY);
         for t in per_tile {
             seen.extend_from_slice(&t.seen);
             seeds.extend_from_slice(&t.seeds);
@@ -141,7 +141,7 @@ impl HazardMap {
         let water = water_surface(&bodies, res);
         for &k in water.keys() {
             if grid.contains(k) {
-                dry[at(k)] = (f64::NAN, 0.0);
+                dry[at(k)] = NOT_DRY;
             }
         }
         let dry_cells = DryCells::Dense {
