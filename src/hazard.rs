@@ -183,7 +183,8 @@ pub struct HazardMap {
     pub bodies: Vec<WaterBody>,
 }
 
-/// A dry cell's elevation, its range-bound σ and its vertical σ (m; [`dry_terrain`]).
+/// A dry cell's elevation (m), its range-bound σ (m) and the weight of its elevation in its
+/// neighbours' gradient (m⁻², [`dry_terrain`]).
 type Dry = (f64, f64, f64);
 
 /// What [`DryCells`] holds where a cell is not dry.
@@ -278,14 +279,32 @@ impl DryCells {
     }
 
     /// The dry 5 × 5 window around `k` (row by row from its lower-left cell): elevation and
-    /// vertical σ, NaN elevation where the cell is not dry.
+    /// weight, NaN elevation where the cell is not dry.
     fn window(&self, k: CellKey) -> Window {
+        let zs = |d: Dry| (d.0, d.2);
+        if let DryCells::Dense {
+            lo,
+            width,
+            height,
+            cells,
+        } = self
+        {
+            let (x, y) = (k.x - lo.x, k.y - lo.y);
+            if x >= 2 && y >= 2 && x < width - 2 && y < height - 2 {
+                let w = *width as usize;
+                let row = |r: usize| {
+                    let at = (y as usize + r - 2) * w + x as usize;
+                    &cells[at - 2..at + 3]
+                };
+                let rows = [row(0), row(1), row(2), row(3), row(4)];
+                return std::array::from_fn(|j| zs(rows[j / 5][j % 5]));
+            }
+        }
         std::array::from_fn(|j| {
             let (dx, dy) = (j as i64 % 5 - 2, j as i64 / 5 - 2);
-            let (z, _, sv) = self
+            zs(self
                 .get(CellKey::new(k.x + dx, k.y + dy))
-                .unwrap_or(NOT_DRY);
-            (z, sv)
+                .unwrap_or(NOT_DRY))
         })
     }
 }
@@ -295,8 +314,9 @@ impl DryCells {
 pub type Neighbourhood = [(f64, f64); 9];
 
 /// The dry 5 × 5 window around a cell (itself at index 12), row by row from its lower-left
-/// cell: elevation and vertical σ, NaN elevation where the cell is not dry. What the cell's
-/// σ reads its terrain's gradient from.
+/// cell: elevation and weight (the inverse variance of its vertical σ and the millimetre,
+/// [`dry_terrain`]), NaN elevation where the cell is not dry. What the cell's σ reads its
+/// terrain's gradient from.
 type Window = [(f64, f64); 25];
 
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
@@ -406,15 +426,19 @@ fn centre_std(sd: f64, s_rb: f64, excess: f64, win: &Window, res: f64) -> f64 {
 /// taken as the one along it (no direction of slope preferred); with no neighbour at all
 /// there is none.
 fn window_gradient(win: &Window, res: f64) -> (f64, f64) {
-    // (dx, dy) in cells, dz (m), weight 1/σ² (m⁻²).
-    let cells = || {
-        win.iter().enumerate().filter_map(|(j, &(z, s))| {
+    // The dry cells: (dx, dy) in cells, dz (m), weight 1/σ² (m⁻²).
+    let mut at = [(0.0, 0.0, 0.0, 0.0); 25];
+    let mut len = 0;
+    for (j, &(z, w)) in win.iter().enumerate() {
+        if !z.is_nan() {
             let (dx, dy) = ((j % 5) as f64 - 2.0, (j / 5) as f64 - 2.0);
-            (!z.is_nan()).then(|| (dx, dy, z - win[12].0, 1.0 / (s * s + 1e-6 / 12.0)))
-        })
-    };
+            at[len] = (dx, dy, z - win[12].0, w);
+            len += 1;
+        }
+    }
+    let cells = &at[..len];
     let (mut n, mut sw, mut sx, mut sy, mut sz) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (dx, dy, dz, w) in cells() {
+    for &(dx, dy, dz, w) in cells {
         n += 1.0;
         sw += w;
         sx += w * dx;
@@ -429,7 +453,7 @@ fn window_gradient(win: &Window, res: f64) -> (f64, f64) {
     // and the unweighted determinant of the cells' layout.
     let (mut xx, mut xy, mut yy, mut xz, mut yz) = (0.0, 0.0, 0.0, 0.0, 0.0);
     let (mut ux, mut uy, mut uxx, mut uxy, mut uyy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (dx, dy, dz, w) in cells() {
+    for &(dx, dy, dz, w) in cells {
         (ux, uy, uxx, uxy, uyy) = (
             ux + dx,
             uy + dy,
@@ -463,14 +487,21 @@ fn window_gradient(win: &Window, res: f64) -> (f64, f64) {
 }
 
 /// Elevation (m) of a cell with fused points, its range-bound σ for the step and slope
-/// tests, and its vertical σ for its neighbours' σ (each 0 when unknown).
+/// tests (0 when unknown), and the weight its elevation has in its neighbours' gradient:
+/// the inverse of its vertical variance and the millimetre's ([`window_gradient`]).
 fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<Dry> {
     let finite = |s: Option<f64>| s.filter(|s| s.is_finite()).unwrap_or(0.0);
     Some((
         c.mean_mm().map(|m| z_ref + m * 1e-3)?,
         finite(c.range_bound_std_m()),
-        finite(c.elevation_std_m()),
+        weight(finite(c.elevation_std_m())),
     ))
+}
+
+/// The weight of an elevation of σ `s` (m) in a gradient: the inverse of its variance and
+/// the millimetre's it is stored to.
+fn weight(s: f64) -> f64 {
+    1.0 / (s * s + 1e-6 / 12.0)
 }
 
 /// Surface z and depth of the water cells of `bodies`.
@@ -817,13 +848,16 @@ mod tests {
         let win: Window = std::array::from_fn(|j| match j {
             11 | 12 | 13 | 17 => plane[j],
             // The stereo cells right of the centre 0.3 m high, those left of it as low.
-            _ => (plane[j].0 + 0.3 * ((j % 5) as f64 - 2.0).signum(), 0.3),
+            _ => (
+                plane[j].0 + 0.3 * ((j % 5) as f64 - 2.0).signum(),
+                weight(0.3),
+            ),
         });
         let (g2, slope2) = window_gradient(&win, res);
         assert!((g2 - 0.0025).abs() < 1e-4, "{g2}");
         assert!(slope2 > 0.0 && slope2 <= g2, "{slope2}");
         // Weighted alike, their noise would read as a slope of metres per metre.
-        let equal: Window = std::array::from_fn(|j| (win[j].0, 0.3));
+        let equal: Window = std::array::from_fn(|j| (win[j].0, weight(0.3)));
         assert!(window_gradient(&equal, res).0 > 1.0);
     }
 
@@ -838,7 +872,7 @@ mod tests {
             ss in proptest::array::uniform25(0.0f64..5.0),
         ) {
             let win: Window = std::array::from_fn(|j| {
-                (if j == 12 { Some(0.0) } else { zs[j] }.unwrap_or(f64::NAN), ss[j])
+                (if j == 12 { Some(0.0) } else { zs[j] }.unwrap_or(f64::NAN), weight(ss[j]))
             });
             let s = centre_std(sd, rb, 0.0, &win, 0.1);
             proptest::prop_assert!(s.is_finite() && s >= sd, "{s} {sd}");
@@ -873,11 +907,11 @@ mod tests {
     }
 
     /// The 5 × 5 window of a cell of a plane rising `gx`, `gy` per metre, at `res` m, all
-    /// with σ `s`, the cell's own elevation 0.
+    /// with σ `s` (so of [`weight`] of it), the cell's own elevation 0.
     fn plane5(gx: f64, gy: f64, res: f64, s: f64) -> Window {
         std::array::from_fn(|j| {
             let (dx, dy) = ((j % 5) as f64 - 2.0, (j / 5) as f64 - 2.0);
-            ((dx * gx + dy * gy) * res, s)
+            ((dx * gx + dy * gy) * res, weight(s))
         })
     }
 
@@ -1031,12 +1065,12 @@ mod tests {
                 });
                 assert_eq!(bits(dense.neighbourhood(k)), bits(want));
                 assert_eq!(bits(sparse.neighbourhood(k)), bits(want));
-                // The 5 × 5 window: elevation and vertical σ.
+                // The 5 × 5 window: elevation and weight.
                 let w = |win: Window| win.map(|(z, s)| (z.to_bits(), s.to_bits()));
                 let want: Window = std::array::from_fn(|j| {
                     let d = CellKey::new(x + j as i64 % 5 - 2, y + j as i64 / 5 - 2);
-                    let (z, _, sv) = truth.get(&d).copied().unwrap_or(NOT_DRY);
-                    (z, sv)
+                    let (z, _, w) = truth.get(&d).copied().unwrap_or(NOT_DRY);
+                    (z, w)
                 });
                 assert_eq!(w(dense.window(k)), w(want));
                 assert_eq!(w(sparse.window(k)), w(want));
