@@ -250,38 +250,29 @@ impl DryCells {
         }
     }
 
-    /// The dry 3 × 3 neighbourhood of `k`: three slices of the dense array inside it.
+    /// The dry 3 × 3 neighbourhood of `k`: elevation and range-bound σ.
     #[inline]
     fn neighbourhood(&self, k: CellKey) -> Neighbourhood {
-        if let DryCells::Dense {
-            lo,
-            width,
-            height,
-            cells,
-        } = self
-        {
-            let (x, y) = (k.x - lo.x, k.y - lo.y);
-            if x >= 1 && y >= 1 && x < width - 1 && y < height - 1 {
-                let w = (y * width + x) as usize;
-                let row = |r: usize| &cells[r - 1..r + 2];
-                let (a, b, c) = (row(w - *width as usize), row(w), row(w + *width as usize));
-                let zs = |d: Dry| (d.0, d.1);
-                return [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]].map(zs);
-            }
-        }
-        std::array::from_fn(|j| {
-            let (dx, dy) = (j as i64 % 3 - 1, j as i64 / 3 - 1);
-            let (z, sz, _) = self
-                .get(CellKey::new(k.x + dx, k.y + dy))
-                .unwrap_or(NOT_DRY);
-            (z, sz)
-        })
+        let mut nb = [(f64::NAN, 0.0); 9];
+        self.square(k, 1, |d| (d.0, d.1), &mut nb);
+        nb
     }
 
     /// The dry 5 × 5 window around `k` (row by row from its lower-left cell): elevation and
     /// weight, NaN elevation where the cell is not dry.
+    #[inline]
     fn window(&self, k: CellKey) -> Window {
-        let zs = |d: Dry| (d.0, d.2);
+        let mut win = [(f64::NAN, 0.0); 25];
+        self.square(k, 2, |d| (d.0, d.2), &mut win);
+        win
+    }
+
+    /// `pick` of the cells within `r` of `k` into `out` (row by row from the lower-left,
+    /// `(2r + 1)²` of them; [`NOT_DRY`] where a cell is not dry): slices of the dense array
+    /// where the square lies inside it.
+    #[inline]
+    fn square(&self, k: CellKey, r: i64, pick: impl Fn(Dry) -> (f64, f64), out: &mut [(f64, f64)]) {
+        let side = (2 * r + 1) as usize;
         if let DryCells::Dense {
             lo,
             width,
@@ -290,22 +281,23 @@ impl DryCells {
         } = self
         {
             let (x, y) = (k.x - lo.x, k.y - lo.y);
-            if x >= 2 && y >= 2 && x < width - 2 && y < height - 2 {
-                let w = *width as usize;
-                let row = |r: usize| {
-                    let at = (y as usize + r - 2) * w + x as usize;
-                    &cells[at - 2..at + 3]
-                };
-                let rows = [row(0), row(1), row(2), row(3), row(4)];
-                return std::array::from_fn(|j| zs(rows[j / 5][j % 5]));
+            if x >= r && y >= r && x < width - r && y < height - r {
+                for (i, row) in out.chunks_mut(side).enumerate() {
+                    let at = ((y - r + i as i64) * width + x - r) as usize;
+                    for (o, &d) in row.iter_mut().zip(&cells[at..at + side]) {
+                        *o = pick(d);
+                    }
+                }
+                return;
             }
         }
-        std::array::from_fn(|j| {
-            let (dx, dy) = (j as i64 % 5 - 2, j as i64 / 5 - 2);
-            zs(self
-                .get(CellKey::new(k.x + dx, k.y + dy))
-                .unwrap_or(NOT_DRY))
-        })
+        for (j, o) in out.iter_mut().enumerate() {
+            let (dx, dy) = ((j % side) as i64 - r, (j / side) as i64 - r);
+            *o = pick(
+                self.get(CellKey::new(k.x + dx, k.y + dy))
+                    .unwrap_or(NOT_DRY),
+            );
+        }
     }
 }
 
