@@ -122,9 +122,17 @@ fn exchange(_: &Path, _: &Path) -> std::io::Result<bool> {
 ///   finished set sees one.
 ///
 /// The output folder's parent is fsynced last.
+///
+/// A build killed outright (`SIGKILL`, power loss) cannot drop its staging folder. Each
+/// staging folder is therefore locked (`flock`) while its build runs, and a new build of
+/// the same output folder removes every staging folder of that name whose lock nobody
+/// holds ([`Staging::swept`]); a concurrent build's folder is locked and left alone.
 pub struct Staging {
     out: PathBuf,
     dir: Option<tempfile::TempDir>,
+    /// Holds the staging folder's lock until the commit or the drop.
+    _lock: File,
+    swept: Vec<PathBuf>,
 }
 
 impl Staging {
@@ -148,10 +156,14 @@ impl Staging {
         let name = out
             .file_name()
             .map_or("out".into(), |n| n.to_string_lossy().into_owned());
+        let prefix = format!(".{name}.tarn-stage-");
         let dir = tempfile::Builder::new()
-            .prefix(&format!(".{name}.tarn-stage-"))
+            .prefix(&prefix)
             .tempdir_in(&parent)
             .map_err(|e| Error::io(&parent, e))?;
+        let lock = File::open(dir.path()).map_err(|e| Error::io(dir.path(), e))?;
+        lock.lock().map_err(|e| Error::io(dir.path(), e))?;
+        let swept = sweep_stale(&parent, &prefix, dir.path());
         // An ordinary folder once in place (tempfile makes it owner-only).
         #[cfg(unix)]
         {
@@ -162,7 +174,15 @@ impl Staging {
         Ok(Staging {
             out: out.to_path_buf(),
             dir: Some(dir),
+            _lock: lock,
+            swept,
         })
+    }
+
+    /// Staging folders of earlier builds of the same output folder that were stopped before
+    /// they could remove them (killed outright), removed when this one was created.
+    pub fn swept(&self) -> &[PathBuf] {
+        &self.swept
     }
 
     /// Where the files of this build are written.
@@ -214,8 +234,13 @@ impl Staging {
                 aside
             };
             sync_dir(&parent)?;
-            std::fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
-            return Ok(());
+            // Unlocked now: another build of the same folder may have swept it already.
+            match std::fs::remove_dir_all(&old) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(Error::io(&old, e))
+                }
+                _ => return Ok(()),
+            }
         }
         let mut order: Vec<&std::ffi::OsString> = names.iter().collect();
         order.sort_by_key(|n| n.as_os_str() == "report.json");
@@ -227,6 +252,30 @@ impl Staging {
         drop(stage);
         sync_dir(&parent)
     }
+}
+
+/// Removes the folders in `parent` named `prefix…` (other than `own`) whose lock no build
+/// holds: staging folders of builds that were killed before they could remove them.
+/// Best effort: a folder that cannot be read, locked or removed is left where it is.
+fn sweep_stale(parent: &Path, prefix: &str, own: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return Vec::new();
+    };
+    let mut swept = Vec::new();
+    for e in entries.flatten() {
+        let path = e.path();
+        let ours = e.file_name().to_string_lossy().starts_with(prefix);
+        if !ours || path == own || !e.file_type().is_ok_and(|t| t.is_dir()) {
+            continue;
+        }
+        // Held by a running build: `WouldBlock`. Kept until the folder is gone.
+        let Ok(f) = File::open(&path) else { continue };
+        if f.try_lock().is_ok() && std::fs::remove_dir_all(&path).is_ok() {
+            swept.push(path);
+        }
+    }
+    swept.sort();
+    swept
 }
 
 const STOPPED: &str = "stop requested";
@@ -726,6 +775,37 @@ pub(crate) mod tests {
             std::fs::read_to_string(out.join("map.ply")).unwrap(),
             before
         );
+    }
+
+    #[test]
+    fn a_killed_builds_staging_folder_is_swept_and_a_running_ones_is_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        staged(&out, "one");
+        // What a build killed outright leaves: a staging folder with partial files, its
+        // lock gone with the process.
+        let dead = dir.path().join(".out.tarn-stage-AbC123");
+        std::fs::create_dir(&dead).unwrap();
+        std::fs::write(dead.join("map.ply"), "half").unwrap();
+        // Another output folder's staging, and a running build's: both stay.
+        let other = dir.path().join(".other.tarn-stage-XyZ789");
+        std::fs::create_dir(&other).unwrap();
+        let running = Staging::new(&out).unwrap();
+        assert_eq!(running.swept(), [dead.clone()]);
+        assert!(!dead.exists() && other.exists());
+        let second = Staging::new(&out).unwrap();
+        assert!(second.swept().is_empty());
+        assert!(running.path().exists());
+        std::fs::write(second.path().join("map.ply"), "two").unwrap();
+        second.commit().unwrap();
+        drop(running);
+        let mut left: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, [".other.tarn-stage-XyZ789", "out"]);
+        assert_eq!(std::fs::read_to_string(out.join("map.ply")).unwrap(), "two");
     }
 
     /// Where a binary PLY's body starts: after its `end_header` line.
