@@ -132,7 +132,7 @@ fn a_nan_quaternion_is_refused() {
     let r = report(&out);
     let errors = r["errors"].to_string();
     assert!(
-        errors.contains("/tf") && errors.contains("quaternion is not unit (norm NaN)"),
+        errors.contains("/tf") && errors.contains("its rotation is not finite"),
         "{r}"
     );
 

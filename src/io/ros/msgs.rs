@@ -142,14 +142,24 @@ impl TfMessage {
             let [x, y, z, w] = [r.f64()?, r.f64()?, r.f64()?, r.f64()?];
             let q = Quaternion::new(w, x, y, z);
             let norm = q.norm();
-            if !(norm.is_finite() && (norm - 1.0).abs() < 1e-3) || t.iter().any(|v| !v.is_finite())
-            {
+            let fault = if t.iter().any(|v| !v.is_finite()) {
+                Some(format!(
+                    "its translation is not finite ({}, {}, {})",
+                    t[0], t[1], t[2]
+                ))
+            } else if !norm.is_finite() {
+                Some(format!(
+                    "its rotation is not finite (x {x}, y {y}, z {z}, w {w})"
+                ))
+            } else if (norm - 1.0).abs() >= 1e-3 {
+                Some(format!("its quaternion is not unit (norm {norm})"))
+            } else {
+                None
+            };
+            if let Some(fault) = fault {
                 return Err(super::cdr::CdrError {
                     offset: at,
-                    message: format!(
-                        "transform {} → {child_frame_id} is not finite or its quaternion is not unit (norm {norm})",
-                        header.frame_id
-                    ),
+                    message: format!("transform {} → {child_frame_id}: {fault}", header.frame_id),
                 });
             }
             transforms.push(TransformStamped {
@@ -650,16 +660,38 @@ mod tests {
         }
     }
 
+    /// A rejected transform says what is wrong with it: its translation, its rotation's
+    /// finiteness, or its quaternion's norm.
     #[test]
-    fn tf_with_non_unit_quaternion_is_rejected() {
-        let mut w = CdrWriter::new(Endian::Little);
-        w.u32(1);
-        hdr(0, "map").write(&mut w);
-        w.string("base_link");
-        for x in [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0] {
-            w.f64(x);
+    fn a_bad_transform_is_rejected_with_what_is_wrong() {
+        let tf = |v: [f64; 7]| {
+            let mut w = CdrWriter::new(Endian::Little);
+            w.u32(1);
+            hdr(0, "map").write(&mut w);
+            w.string("base_link");
+            for x in v {
+                w.f64(x);
+            }
+            TfMessage::decode(&w.finish()).unwrap_err().message
+        };
+        let nan = f64::NAN;
+        for (v, want) in [
+            (
+                [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0],
+                "quaternion is not unit (norm 2)",
+            ),
+            (
+                [nan, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+                "translation is not finite (NaN, 0, 0)",
+            ),
+            (
+                [0.0, 0.0, 0.0, 0.0, 0.0, nan, 1.0],
+                "rotation is not finite",
+            ),
+        ] {
+            let e = tf(v);
+            assert!(e.contains(want) && e.contains("map → base_link"), "{e}");
         }
-        assert!(TfMessage::decode(&w.finish()).is_err());
     }
 
     #[test]
