@@ -219,6 +219,9 @@ pub struct LogReader {
     limit: usize,
     pending: std::collections::VecDeque<RawMessage>,
     damaged: Vec<DamagedRange>,
+    /// The file's end is not a footer record and the magic: recorded as damage once the
+    /// data section has been read whole (a file cut short is reported as truncated instead).
+    tail_damage: Option<String>,
     /// CRC of every byte read in order from the start; dropped at the first skip.
     hasher: Option<crc32fast::Hasher>,
     last_time: Option<u64>,
@@ -305,6 +308,7 @@ impl LogReader {
             limit: record_length_limit(total_bytes),
             pending: Default::default(),
             damaged: Vec::new(),
+            tail_damage: None,
             hasher: Some(crc32fast::Hasher::new()),
             last_time: None,
             open_times: Vec::new(),
@@ -390,7 +394,15 @@ impl LogReader {
             return Ok(info);
         }
         let tail = self.peek_at(total - 8 - FOOTER_LEN, (FOOTER_LEN + 8) as usize)?;
-        if &tail[FOOTER_LEN as usize..] != MAGIC || tail[0] != mcap::records::op::FOOTER {
+        let footer = tail[0] == mcap::records::op::FOOTER && u64_at(&tail, 1) == Some(20);
+        if &tail[FOOTER_LEN as usize..] != MAGIC || !footer {
+            self.tail_damage = Some(if footer {
+                "the closing magic is damaged; the summary section is not used".into()
+            } else {
+                "the file does not end with a footer record and the magic; the summary \
+                 section is not used"
+                    .into()
+            });
             return Ok(info);
         }
         let start = u64_at(&tail, 9).unwrap_or(0);
@@ -812,6 +824,10 @@ impl LogReader {
                             d.log_time_from = "unknown".into();
                         }
                     }
+                }
+                if let Some(what) = self.tail_damage.take() {
+                    let from = total.saturating_sub(8 + FOOTER_LEN).max(end);
+                    self.record_damage(from, total, what, "end");
                 }
                 Ok(Step::End)
             }

@@ -264,7 +264,12 @@ fn a_damaged_chunk_is_skipped_and_every_other_chunk_kept() {
     ] {
         let (kept, d) = messages_of(damaged.clone());
         assert_eq!(kept as usize, total - lost, "{name}: {d:?}");
-        assert_eq!(d.len(), 1, "{name}: {d:?}");
+        // The broken magic is damage of its own, after the chunk's.
+        let n = if name == "no-index" { 2 } else { 1 };
+        assert_eq!(d.len(), n, "{name}: {d:?}");
+        if n == 2 {
+            assert!(d[1].what.contains("closing magic"), "{}", d[1].what);
+        }
         assert_eq!((d[0].start_byte, d[0].end_byte), (start, end), "{name}");
         assert_eq!(d[0].resumed_by, by, "{name}");
         if by == "chunk index" {
@@ -300,6 +305,49 @@ fn a_damaged_chunk_is_skipped_and_every_other_chunk_kept() {
         assert_eq!(r["damaged"][0]["end_byte"].as_u64(), Some(end), "{name}");
         let fused = r["frames_fused"].as_u64().unwrap();
         assert!((30..39).contains(&fused), "{name}: {fused} frames");
+    }
+}
+
+/// A damaged end of the file (the closing magic, the footer record, the summary's CRC,
+/// or these together) is damage, reported the same way: every message kept, exit 3.
+#[test]
+fn a_damaged_end_of_file_is_the_same_answer_however_it_is_damaged() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("drive.mcap");
+    write_log(&log, 20);
+    let bytes = std::fs::read(&log).unwrap();
+    let (total, none) = messages_of(bytes.clone());
+    assert!(none.is_empty());
+    let n = bytes.len();
+    // Footer: opcode, length, summary start (8), summary offset start (8), CRC (4); magic.
+    let summary_start = u64::from_le_bytes(bytes[n - 8 - 20..n - 8 - 12].try_into().unwrap());
+    // Bytes flipped: the magic's last, the footer's opcode, one of the summary's records.
+    let (magic, footer, summary) = (n - 1, n - 8 - 29, summary_start as usize + 3);
+    let cases: [(&str, &[usize]); 4] = [
+        ("magic", &[magic]),
+        ("footer", &[footer]),
+        ("summary", &[summary]),
+        ("summary and magic", &[summary, magic]),
+    ];
+    for (name, flips) in cases {
+        let mut b = bytes.clone();
+        for &i in flips {
+            b[i] ^= 0xFF;
+        }
+        let (kept, d) = messages_of(b.clone());
+        assert_eq!(kept, total, "{name}");
+        assert_eq!(d.len(), 1, "{name}: {d:?}");
+        let path = dir.path().join("damaged.mcap");
+        std::fs::write(&path, &b).unwrap();
+        let out = dir.path().join(format!("map-{}", name.replace(' ', "-")));
+        let o = tarn_build(&path, &out);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(3), "{name}: {err}");
+        assert_eq!(
+            report(&out)["damaged"].as_array().unwrap().len(),
+            1,
+            "{name}"
+        );
     }
 }
 
