@@ -472,6 +472,9 @@ pub struct BuildReport {
     /// The outputs written beside the contract's files (`map.mcap`, `map.tif`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub extra_outputs: Vec<String>,
+    /// What the build noticed but could go on past.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
     /// Wall time of each step, seconds.
     pub timings_s: Timings,
 }
@@ -515,6 +518,21 @@ pub fn build_file(
     let t1 = Instant::now();
     let built = build_cloud(&cloud, cfg, progress)?;
     drop(cloud);
+    if built.tiles.observed_count() == 0 {
+        let st = built.ingest;
+        return Err(Error::format(
+            input,
+            "points",
+            format!(
+                "nothing built: none of the {} points lies within the map's domain \
+                 (|x|, |y| ≤ {:e} m): {} beyond it, {} not finite",
+                st.points,
+                crate::grid::MAX_MAP_COORD_M,
+                st.outside,
+                st.nonfinite
+            ),
+        ));
+    }
     let t_fuse = t1.elapsed().as_secs_f64();
     crate::interrupt::check("fusing the cloud")?;
     let t2 = Instant::now();
@@ -546,6 +564,7 @@ pub fn build_file(
             ]
         }),
         extra_outputs,
+        warnings: swept_warnings(&stage),
         timings_s: Timings {
             read: t_read,
             fuse: t_fuse,
@@ -557,6 +576,21 @@ pub fn build_file(
     crate::interrupt::check("writing the outputs")?;
     stage.commit()?;
     Ok(report)
+}
+
+/// One warning per staging folder of an earlier, killed build that `stage` removed.
+fn swept_warnings(stage: &export::Staging) -> Vec<String> {
+    stage
+        .swept()
+        .iter()
+        .map(|p| {
+            format!(
+                "removed {}: the staging folder of an earlier build of this output that was \
+                 killed before it finished",
+                p.display()
+            )
+        })
+        .collect()
 }
 
 /// Rejects an output directory that is an existing file.
@@ -1126,7 +1160,26 @@ pub fn build_log(
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
     let (tiles, map) = mapper.finish_map()?;
+    if map.cells.is_empty() {
+        let pts = |p: &IngestStats| {
+            format!(
+                "{} points, {} fused, {} missing, {} outside the window",
+                p.points, p.fused, p.nonfinite, p.outside
+            )
+        };
+        return Err(Error::format(
+            input,
+            format!("topic {}", log_cfg.frame_topic),
+            format!(
+                "nothing built: {frames_fused} frames read, and no cell observed (lidar: {}; \
+                 stereo: {})",
+                pts(&lidar),
+                pts(&stereo)
+            ),
+        ));
+    }
     let stage = export::Staging::new(out)?;
+    warnings.extend(swept_warnings(&stage));
     export::write_map_files_marked(
         stage.path(),
         &map,

@@ -405,6 +405,9 @@ pub fn print_summary(r: &BuildReport) {
         t.export,
         t.total
     );
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
     println!("  wrote map.ply terrain.ply water.ply map.png report.json");
 }
 

@@ -524,6 +524,48 @@ fn sigint_during_a_cloud_rebuild_keeps_the_previous_outputs_byte_for_byte() {
 }
 
 #[test]
+fn a_build_killed_outright_leaves_a_staging_folder_that_the_next_build_removes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let big = d.join("big.ply");
+    write_plane_ply(&big, 3_000_000, 300.0);
+    let out = d.join("out");
+    let mut child = tarn()
+        .args(["build", p(&big), "--out", p(&out)])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // SIGKILL as soon as the export has begun: the staging folder exists.
+    let t = std::time::Instant::now();
+    while staging_left(d).is_empty() && t.elapsed().as_secs() < 60 {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let _ = child.kill();
+    let status = child.wait().unwrap();
+    let left = staging_left(d);
+    if status.success() || left.is_empty() {
+        eprintln!("the build finished before it could be killed: nothing to check");
+        return;
+    }
+    let small = d.join("small.ply");
+    write_plane_ply(&small, 10_000, 20.0);
+    let o = run(&["build", p(&small), "--out", p(&out)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!("removed {}", d.join(&left[0]).display())),
+        "{}",
+        stderr(&o)
+    );
+    assert!(staging_left(d).is_empty(), "{:?}", files(d));
+    let report = std::fs::read_to_string(out.join("report.json")).unwrap();
+    assert!(report.contains("killed before it finished"), "{report}");
+}
+
+#[test]
 fn a_failed_build_leaves_no_output_and_no_staging_folder() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -536,13 +578,27 @@ fn a_failed_build_leaves_no_output_and_no_staging_folder() {
          property float z\nend_header\nnan 0 0\n0 nan 0\n",
     )
     .unwrap();
+    // Finite points, every one beyond the map's ±1e8 m domain: nothing to build.
+    let far = d.join("far.ply");
+    std::fs::write(
+        &far,
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+         property float z\nend_header\n2e8 0 0\n0 -3e9 1\n",
+    )
+    .unwrap();
     let good = d.join("good.ply");
     write_plane_ply(&good, 10_000, 20.0);
     let kept = d.join("kept");
     let o = run(&["build", p(&good), "--out", p(&kept)]);
     assert!(o.status.success(), "{}", stderr(&o));
     let before = snapshot(&kept);
-    for input in [&garbage, &nan] {
+    let o = run(&["build", p(&far), "--out", p(&d.join("fresh"))]);
+    assert!(
+        stderr(&o).contains("nothing built: none of the 2 points lies within the map's domain"),
+        "{}",
+        stderr(&o)
+    );
+    for input in [&garbage, &nan, &far] {
         let fresh = d.join("fresh");
         let o = run(&["build", p(input), "--out", p(&fresh)]);
         assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
