@@ -10,6 +10,7 @@ use anyhow::Context;
 use clap::Args;
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 pub struct BenchArgs {
     /// Measure this log instead of simulating the scene.
     #[arg(long)]

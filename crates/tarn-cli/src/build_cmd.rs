@@ -16,6 +16,7 @@ use tarn::project::{LabelSensor, LabelsConfig};
 use tarn_sim::sim::RigSpec;
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 pub struct BuildArgs {
     /// Input: a robot log (.mcap; rosbag2 directory or .db3; ROS 1 .bag), or a cloud in the
     /// map frame (.ply ascii/binary, KITTI .bin).

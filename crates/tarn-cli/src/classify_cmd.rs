@@ -40,6 +40,7 @@ fn parse_list<T: std::str::FromStr>(
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 pub struct TrainArgs {
     /// RGB image (PNG or JPEG).
     #[arg(long)]
@@ -206,6 +207,7 @@ fn load_camera(p: &PathBuf) -> anyhow::Result<CameraModel> {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 pub struct ClassifyArgs {
     /// RGB image (PNG or JPEG).
     image: PathBuf,

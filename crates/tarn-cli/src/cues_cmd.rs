@@ -12,6 +12,7 @@ use tarn::cues::{
 use tarn::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 pub struct CuesArgs {
     /// The scan, in the sensor frame: a column-major spinning-lidar scan (.ply or KITTI .bin).
     pub input: PathBuf,

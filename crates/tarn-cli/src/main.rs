@@ -48,7 +48,7 @@ enum Compression {
 enum Command {
     /// Build a map from a robot log (.mcap, rosbag2 directory or .db3, ROS 1 .bag: the full
     /// pipeline with water cues) or a point cloud in the map frame (.ply or KITTI .bin) and
-    /// write the contract files: map.ply, terrain.ply, map.png, report.json.
+    /// write the contract files: map.ply, terrain.ply, water.ply, map.png, report.json.
     Build(Box<BuildArgs>),
     /// Lidar propagation over water: bottom returns, maximum measurable depth, and the
     /// lookahead interval where a missing return is diagnostic of water.

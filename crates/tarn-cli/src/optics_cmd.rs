@@ -16,6 +16,7 @@ pub enum SolidAngleArg {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 #[command(group(ArgGroup::new("attenuation").required(true).args(["wavelength_nm", "attenuation_per_m"])))]
 #[command(group(ArgGroup::new("sensitivity").required(true).args(["min_power_ratio", "dry_limit_m"])))]
 pub struct LidarModelArgs {

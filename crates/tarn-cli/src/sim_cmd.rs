@@ -18,6 +18,7 @@ fn parse_calibration(s: &str) -> Result<LogCalibration, String> {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 pub struct SimulateArgs {
     /// Scene file (TOML, see maps/README.md).
     pub scene: PathBuf,
@@ -69,6 +70,7 @@ pub fn run_simulate(a: &SimulateArgs) -> anyhow::Result<()> {
 }
 
 #[derive(Args)]
+#[command(allow_negative_numbers = true)]
 pub struct EvalArgs {
     /// Map directory holding map.ply (the export contract).
     pub map_dir: PathBuf,

@@ -523,6 +523,22 @@ fn sigint_during_a_cloud_rebuild_keeps_the_previous_outputs_byte_for_byte() {
     }
 }
 
+/// A negative number is a value, and a bad one is exit 1 with the reason, not a usage error.
+#[test]
+fn a_negative_value_is_read_as_a_value_and_refused_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let cloud = dir.path().join("c.ply");
+    write_plane_ply(&cloud, 100, 2.0);
+    for flag in [["--resolution", "-1"], ["--noise-sigma", "-0.02"]] {
+        let out = dir.path().join("out");
+        let o = run(&["build", p(&cloud), "--out", p(&out), flag[0], flag[1]]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{flag:?}: {e}");
+        assert!(e.contains(flag[1]) && !e.contains("tip:"), "{flag:?}: {e}");
+        assert!(!out.exists());
+    }
+}
+
 #[test]
 fn a_build_killed_outright_leaves_a_staging_folder_that_the_next_build_removes() {
     let dir = tempfile::tempdir().unwrap();
