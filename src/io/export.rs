@@ -69,6 +69,31 @@ fn sync_dir(dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// An exclusive `flock` on `f`, waiting for it (`wait`) or failing at once when another
+/// open file holds it. Released when every descriptor of that open file is closed, so a
+/// killed process's locks go with it.
+#[cfg(unix)]
+fn flock(f: &File, wait: bool) -> std::io::Result<()> {
+    use std::os::fd::AsRawFd;
+    let op = libc::LOCK_EX | if wait { 0 } else { libc::LOCK_NB };
+    // SAFETY: a descriptor `f` owns, open for the call; no memory is passed.
+    if unsafe { libc::flock(f.as_raw_fd(), op) } == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Without `flock` no staging folder is known to be abandoned: none is swept.
+#[cfg(not(unix))]
+fn flock(_: &File, wait: bool) -> std::io::Result<()> {
+    if wait {
+        Ok(())
+    } else {
+        Err(std::io::ErrorKind::WouldBlock.into())
+    }
+}
+
 /// Atomically exchanges two directories (Linux `renameat2(RENAME_EXCHANGE)`); `Ok(false)`
 /// where the system or the file system does not offer it.
 #[cfg(target_os = "linux")]
@@ -162,7 +187,7 @@ impl Staging {
             .tempdir_in(&parent)
             .map_err(|e| Error::io(&parent, e))?;
         let lock = File::open(dir.path()).map_err(|e| Error::io(dir.path(), e))?;
-        lock.lock().map_err(|e| Error::io(dir.path(), e))?;
+        flock(&lock, true).map_err(|e| Error::io(dir.path(), e))?;
         let swept = sweep_stale(&parent, &prefix, dir.path());
         // An ordinary folder once in place (tempfile makes it owner-only).
         #[cfg(unix)]
@@ -270,7 +295,7 @@ fn sweep_stale(parent: &Path, prefix: &str, own: &Path) -> Vec<PathBuf> {
         }
         // Held by a running build: `WouldBlock`. Kept until the folder is gone.
         let Ok(f) = File::open(&path) else { continue };
-        if f.try_lock().is_ok() && std::fs::remove_dir_all(&path).is_ok() {
+        if flock(&f, false).is_ok() && std::fs::remove_dir_all(&path).is_ok() {
             swept.push(path);
         }
     }
@@ -791,7 +816,7 @@ pub(crate) mod tests {
         let other = dir.path().join(".other.tarn-stage-XyZ789");
         std::fs::create_dir(&other).unwrap();
         let running = Staging::new(&out).unwrap();
-        assert_eq!(running.swept(), [dead.clone()]);
+        assert_eq!(running.swept(), std::slice::from_ref(&dead));
         assert!(!dead.exists() && other.exists());
         let second = Staging::new(&out).unwrap();
         assert!(second.swept().is_empty());
