@@ -42,6 +42,7 @@ fn rellis_calibration_is_measured_from_the_scan() {
         swir: None,
         mwir: None,
         stereo_baseline_m: None,
+        geo: None,
     };
     m.update(&frame).unwrap();
     let cal = m.calibration();

@@ -144,6 +144,7 @@ fn build(
         swir: None,
         mwir: None,
         stereo_baseline_m: None,
+        geo: None,
     };
     let rep = m.update(&frame).unwrap();
     if let Some(c) = rep.labels.and_then(|l| l.colour) {

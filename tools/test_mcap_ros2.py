@@ -67,6 +67,12 @@ INFO_DEF = (
     "uint32 width\nbool do_rectify\n"
 )
 STRING_DEF = "string data\n"
+FIX_DEF = (
+    "std_msgs/Header header\nsensor_msgs/NavSatStatus status\nfloat64 latitude\nfloat64 longitude\n"
+    "float64 altitude\nfloat64[9] position_covariance\nuint8 position_covariance_type\n"
+    + SEP + HEADER + SEP + TIME + SEP
+    + "MSG: sensor_msgs/NavSatStatus\nint8 STATUS_NO_FIX = -1\nint8 status\nuint16 service\n"
+)
 
 T0 = 1_700_000_000 * 10**9
 
@@ -158,7 +164,7 @@ def expected_pixels(m):
 def write_python_log(path):
     """Writes the log; returns what tarn must find in it."""
     rng = np.random.default_rng(7)
-    expect = {"clouds": [], "stereo": [], "images": [], "tf": [], "infos": []}
+    expect = {"clouds": [], "stereo": [], "images": [], "tf": [], "infos": [], "fixes": []}
     with open(path, "wb") as f:
         w = Writer(f)
         s_tf = w.register_msgdef("tf2_msgs/msg/TFMessage", TF_DEF)
@@ -166,6 +172,7 @@ def write_python_log(path):
         s_im = w.register_msgdef("sensor_msgs/msg/Image", IMAGE_DEF)
         s_ci = w.register_msgdef("sensor_msgs/msg/CameraInfo", INFO_DEF)
         s_str = w.register_msgdef("std_msgs/msg/String", STRING_DEF)
+        s_fix = w.register_msgdef("sensor_msgs/msg/NavSatFix", FIX_DEF)
         statics = [transform("base_link", "lidar", T0, (0.5, 0.0, 1.8), 0.0),
                    transform("base_link", "camera_optical", T0, (0.3, 0.0, 1.5), 0.2)]
         w.write_message("/tf_static", s_tf, {"transforms": statics}, log_time=T0)
@@ -188,6 +195,8 @@ def write_python_log(path):
             events.append((T0 + i * 20_000_000, "tf", i))
         for k in range(10):
             events.append((T0 + 50_000_000 + k * 100_000_000 + 15_000_000, "scan", k))
+        for k in range(2):
+            events.append((T0 + 300_000_000 + k * 500_000_000, "fix", k))
         events.append((T0 + 500_000_000, "diag", 0))
         events.append((T0 + 600_000_000, "diag", 1))
         for log_ns, kind, k in sorted(events):
@@ -197,6 +206,14 @@ def write_python_log(path):
                 tf = [transform("map", "base_link", ns, (2.0 * t, 0.1 * t, 0.0), 0.3 * t)]
                 w.write_message("/tf", s_tf, {"transforms": tf}, log_time=log_ns)
                 expect["tf"].append(tf)
+            elif kind == "fix":
+                # The second has no fix: its position is not used, and it is no error.
+                fix = dict(header=header(log_ns, "gps"), status=dict(status=-k, service=1),
+                           latitude=34.2 + 1e-6 * k, longitude=-118.17, altitude=350.5,
+                           position_covariance=[0.5, 0, 0, 0, 0.5, 0, 0, 0, 2.0],
+                           position_covariance_type=2)
+                w.write_message("/gps/fix", s_fix, fix, log_time=log_ns)
+                expect["fixes"].append(fix)
             elif kind == "diag":
                 w.write_message("/diagnostics", s_str, {"data": "ok"}, log_time=log_ns)
             else:
@@ -290,6 +307,12 @@ def test_tarn_reads_what_python_wrote(tmp_path):
         assert (m["distortion_model"], m["d"], m["k"], m["p"]) == (
             src["distortion_model"], src["d"], src["k"], src["p"])
 
+    fixes = [m for m in msgs if m["type"] == "sensor_msgs/msg/NavSatFix"]
+    assert len(fixes) == len(expect["fixes"]) == 2
+    for m, src in zip(fixes, expect["fixes"]):
+        assert (m["status"], m["latitude"], m["longitude"], m["altitude"]) == (
+            src["status"]["status"], src["latitude"], src["longitude"], src["altitude"])
+
 
 def to_plain(v):
     """A decoded ROS message as plain Python values (bytes as lists)."""
@@ -315,7 +338,7 @@ def test_python_reads_what_tarn_wrote(tmp_path, flags):
     original = [(m.channel.topic, m.log_time_ns, to_plain(m.ros_msg))
                 for m in read_ros2_messages(str(src)) if m.channel.topic != "/diagnostics"]
     rewritten = [(m.channel.topic, m.log_time_ns, to_plain(m.ros_msg)) for m in read_ros2_messages(str(dst))]
-    assert len(rewritten) == len(original) == 1 + 2 + 51 + 10 * 6
+    assert len(rewritten) == len(original) == 1 + 2 + 51 + 10 * 6 + 2
     for a, b in zip(original, rewritten):
         assert a == b
 
@@ -331,7 +354,8 @@ def test_python_reads_what_tarn_wrote(tmp_path, flags):
             assert summary is not None and len(summary.chunk_indexes) >= 1
         schemas = {s.name: s for s in summary.schemas.values()}
         assert set(schemas) == {"tf2_msgs/msg/TFMessage", "sensor_msgs/msg/PointCloud2",
-                                "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo"}
+                                "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo",
+                                "sensor_msgs/msg/NavSatFix"}
         for s in schemas.values():
             assert s.encoding == "ros2msg"
         pc2 = schemas["sensor_msgs/msg/PointCloud2"].data.decode()

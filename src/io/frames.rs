@@ -16,7 +16,7 @@ use super::log::{canonical_type, wire_of, MessageSource};
 use super::mcap_log::{DamagedRange, LogReader, RawMessage};
 use super::ros::{
     camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, Image,
-    ImageMsg, PointCloud2Msg, TfMessage,
+    ImageMsg, NavSatFixMsg, PointCloud2Msg, TfMessage,
 };
 use super::tf::TfBuffer;
 use crate::error::{Error, Result};
@@ -50,6 +50,9 @@ pub struct LogConfig {
     pub mwir_topic: String,
     /// `CameraInfo` topic of the mid-wave infrared camera.
     pub mwir_info_topic: String,
+    /// `sensor_msgs/NavSatFix` topic: where the vehicle is on the globe (its longitude and
+    /// the stamps give the local solar time the thermal labels need).
+    pub gps_topic: String,
     /// Which cloud topic makes a frame: the lidar (default) or the stereo topic.
     pub frame_topic: String,
     /// Name of the map frame, the frame of the built map.
@@ -90,6 +93,7 @@ impl Default for LogConfig {
             swir_info_topic: "/swir/camera_info".into(),
             mwir_topic: "/mwir/image".into(),
             mwir_info_topic: "/mwir/camera_info".into(),
+            gps_topic: "/gps/fix".into(),
             frame_topic: "/lidar/points".into(),
             map_frame: "map".into(),
             base_frame: "base_link".into(),
@@ -178,6 +182,7 @@ impl LogConfig {
         let clouds = of_type(schema_name::POINT_CLOUD2);
         let images = of_type(schema_name::IMAGE);
         let infos = of_type(schema_name::CAMERA_INFO);
+        let fixes = of_type(schema_name::NAV_SAT_FIX);
         let has = |list: &[String], t: &str| list.iter().any(|x| x == t);
         let err = |msg: String| Error::format(log, "topics", msg);
         let check = |t: &Option<String>, list: &[String], opt: &str, ty: &str| -> Result<()> {
@@ -279,6 +284,10 @@ impl LogConfig {
                 }
             }
         }
+        // The GNSS fix: the configured topic, else the log's one NavSatFix topic.
+        if !has(&fixes, &c.gps_topic) && fixes.len() == 1 {
+            c.gps_topic = fixes[0].clone();
+        }
         c.frame_topic = match &named.frame {
             Some(f) => f.clone(),
             None if !has(&clouds, &c.lidar_topic) && has(&clouds, &c.stereo_topic) => {
@@ -346,6 +355,9 @@ pub struct Frame {
     /// The stereo baseline (m) from the latest right-camera `CameraInfo`, when the log has
     /// one.
     pub stereo_baseline_m: Option<f64>,
+    /// Latitude and longitude (degrees) of the latest usable GNSS fix read at or before
+    /// the frame, when the log has one.
+    pub geo: Option<(f64, f64)>,
 }
 
 /// What happened while streaming.
@@ -408,6 +420,7 @@ pub struct FrameStream {
     images: [VecDeque<Pending<Image>>; 3],
     infos: [Option<CameraModel>; 3],
     baseline_m: Option<f64>,
+    geo: Option<(f64, f64)>,
     /// Latest log time seen, ns.
     now_ns: i64,
     stats: FrameStats,
@@ -449,6 +462,7 @@ impl FrameStream {
             images: Default::default(),
             infos: Default::default(),
             baseline_m: None,
+            geo: None,
             now_ns: i64::MIN,
             stats: FrameStats::default(),
             fatal: None,
@@ -572,6 +586,19 @@ impl FrameStream {
                 let info =
                     CameraInfoMsg::decode_wire(&m.data, wire).map_err(|e| self.bad(&m, e))?;
                 self.infos[k] = Some(camera_from_info(&info).map_err(|e| self.bad(&m, e))?);
+            }
+            schema_name::NAV_SAT_FIX => {
+                if ch.topic == self.cfg.gps_topic {
+                    let fix =
+                        NavSatFixMsg::decode_wire(&m.data, wire).map_err(|e| self.bad(&m, e))?;
+                    // A receiver without a fix says so every message: not an error, and
+                    // the last good fix stands.
+                    match fix.position() {
+                        Ok(p) => self.geo = Some(p),
+                        Err(_) if fix.status < 0 => {}
+                        Err(why) => return Err(self.bad(&m, why)),
+                    }
+                }
             }
             schema_name::POINT_CLOUD2 => {
                 if !matches!(self.slot(&ch.topic), Some(Slot::Lidar | Slot::Stereo)) {
@@ -711,6 +738,7 @@ impl FrameStream {
             swir: self.matched_image(1, ns),
             mwir: self.matched_image(2, ns),
             stereo_baseline_m: self.baseline_m,
+            geo: self.geo,
         })
     }
 

@@ -96,6 +96,7 @@ pub fn canonical_type(name: &str) -> Option<&'static str> {
         "sensor_msgs/msg/PointCloud2" | "sensor_msgs/PointCloud2" => schema_name::POINT_CLOUD2,
         "sensor_msgs/msg/Image" | "sensor_msgs/Image" => schema_name::IMAGE,
         "sensor_msgs/msg/CameraInfo" | "sensor_msgs/CameraInfo" => schema_name::CAMERA_INFO,
+        "sensor_msgs/msg/NavSatFix" | "sensor_msgs/NavSatFix" => schema_name::NAV_SAT_FIX,
         _ => return None,
     })
 }

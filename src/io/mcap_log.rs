@@ -18,7 +18,7 @@ use super::ros::{
     camera_to_info, cloud_to_pointcloud2, encode_image, schema_name, schema_text, Endian, Header,
     Image, TfMessage,
 };
-use super::ros::{CameraInfoMsg, ImageMsg, PointCloud2Msg};
+use super::ros::{CameraInfoMsg, ImageMsg, NavSatFixMsg, PointCloud2Msg};
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::PointCloud;
@@ -1300,6 +1300,17 @@ impl LogWriter {
         self.write_known(topic, schema_name::CAMERA_INFO, log_time_ns, &d)
     }
 
+    /// Writes a `NavSatFix` on `topic` at log time `log_time_ns` (nanoseconds).
+    pub fn write_nav_sat_fix(
+        &mut self,
+        topic: &str,
+        msg: &NavSatFixMsg,
+        log_time_ns: u64,
+    ) -> Result<()> {
+        let d = msg.encode(self.endian);
+        self.write_known(topic, schema_name::NAV_SAT_FIX, log_time_ns, &d)
+    }
+
     /// Writes a [`CameraModel`] as a `CameraInfo` stamped with `header`.
     pub fn write_camera(
         &mut self,
@@ -1391,6 +1402,11 @@ pub fn recode(
             schema_name::CAMERA_INFO => w.write_camera_info_msg(
                 &ch.topic,
                 &CameraInfoMsg::decode_wire(&m.data, wire).map_err(bad)?,
+                m.log_time,
+            )?,
+            schema_name::NAV_SAT_FIX => w.write_nav_sat_fix(
+                &ch.topic,
+                &NavSatFixMsg::decode_wire(&m.data, wire).map_err(bad)?,
                 m.log_time,
             )?,
             _ => {

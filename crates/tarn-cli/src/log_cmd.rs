@@ -73,6 +73,14 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
                 "d": f64s(&msg.d), "k": f64s(&msg.k), "p": f64s(&msg.p)}),
             )
         }
+        schema_name::NAV_SAT_FIX => {
+            let msg = ros::NavSatFixMsg::decode_wire(&m.data, wire).with_context(at)?;
+            base(
+                json!({"stamp": stamp(&msg.header), "frame_id": msg.header.frame_id,
+                "status": msg.status, "latitude": msg.latitude, "longitude": msg.longitude,
+                "altitude": msg.altitude}),
+            )
+        }
         _ => return Ok(None),
     }))
 }

@@ -419,6 +419,7 @@ pub fn mapper_update(data: &[u8]) -> bool {
             swir: None,
             mwir: None,
             stereo_baseline_m: None,
+            geo: None,
         };
         if let Ok(r) = mapper.update(&frame) {
             fused += 1;

@@ -11,6 +11,6 @@ pub use convert::{
     organize_by_ring, pointcloud2_to_cloud, Image, Pixels,
 };
 pub use msgs::{
-    schema_name, schema_text, CameraInfoMsg, Header, ImageMsg, PointCloud2Msg, PointField,
-    TfMessage, Time, TransformStamped,
+    schema_name, schema_text, CameraInfoMsg, Header, ImageMsg, NavSatFixMsg, PointCloud2Msg,
+    PointField, TfMessage, Time, TransformStamped,
 };

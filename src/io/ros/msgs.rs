@@ -473,6 +473,75 @@ impl CameraInfoMsg {
     }
 }
 
+/// `sensor_msgs/msg/NavSatFix`: where a GNSS receiver puts the vehicle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NavSatFixMsg {
+    /// ROS field `header`: stamp and the receiver's frame.
+    pub header: Header,
+    /// Fix status (ROS field `status.status`): −1 no fix, 0 fix, 1 SBAS, 2 GBAS.
+    pub status: i8,
+    /// Satellite systems used (ROS field `status.service`, a bit mask).
+    pub service: u16,
+    /// Degrees north of the equator (ROS field `latitude`).
+    pub latitude: f64,
+    /// Degrees east of Greenwich (ROS field `longitude`).
+    pub longitude: f64,
+    /// Metres above the WGS 84 ellipsoid (ROS field `altitude`).
+    pub altitude: f64,
+    /// Position covariance, m², east-north-up, row major (ROS field `position_covariance`).
+    pub position_covariance: [f64; 9],
+    /// How the covariance is known, 0 unknown to 3 known (ROS field
+    /// `position_covariance_type`).
+    pub position_covariance_type: u8,
+}
+
+impl NavSatFixMsg {
+    /// Decodes a message serialized as `wire` (CDR, or ROS 1 from a `.bag`). Fails on a cut
+    /// or malformed payload; the values are not checked ([`Self::position`] does).
+    pub fn decode_wire(buf: &[u8], wire: Wire) -> CdrResult<Self> {
+        let mut r = CdrReader::for_wire(buf, wire)?;
+        Ok(NavSatFixMsg {
+            header: Header::read(&mut r)?,
+            status: r.u8()? as i8,
+            service: r.u16()?,
+            latitude: r.f64()?,
+            longitude: r.f64()?,
+            altitude: r.f64()?,
+            position_covariance: r.f64_array()?,
+            position_covariance_type: r.u8()?,
+        })
+    }
+
+    /// The CDR payload (encapsulation header included) in byte order `endian`.
+    pub fn encode(&self, endian: Endian) -> Vec<u8> {
+        let mut w = CdrWriter::new(endian);
+        self.header.write(&mut w);
+        w.u8(self.status as u8);
+        w.u16(self.service);
+        w.f64(self.latitude);
+        w.f64(self.longitude);
+        w.f64(self.altitude);
+        w.f64_array(&self.position_covariance);
+        w.u8(self.position_covariance_type);
+        w.finish()
+    }
+
+    /// Latitude and longitude (degrees) when the receiver has a fix and both are on the
+    /// globe; otherwise why not.
+    pub fn position(&self) -> std::result::Result<(f64, f64), String> {
+        if self.status < 0 {
+            return Err(format!("no fix (status {})", self.status));
+        }
+        let (lat, lon) = (self.latitude, self.longitude);
+        if !((-90.0..=90.0).contains(&lat) && (-180.0..=180.0).contains(&lon)) {
+            return Err(format!(
+                "latitude {lat}, longitude {lon}: not a place on the globe"
+            ));
+        }
+        Ok((lat, lon))
+    }
+}
+
 /// MCAP schema names (as `ros2 bag` writes them).
 pub mod schema_name {
     /// `tf2_msgs/msg/TFMessage`.
@@ -483,6 +552,8 @@ pub mod schema_name {
     pub const IMAGE: &str = "sensor_msgs/msg/Image";
     /// `sensor_msgs/msg/CameraInfo`.
     pub const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
+    /// `sensor_msgs/msg/NavSatFix`.
+    pub const NAV_SAT_FIX: &str = "sensor_msgs/msg/NavSatFix";
 }
 
 const SEP: &str =
@@ -553,6 +624,17 @@ pub fn schema_text(schema: &str) -> Option<String> {
                 (
                     "sensor_msgs/RegionOfInterest",
                     "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n",
+                ),
+            ],
+        ),
+        schema_name::NAV_SAT_FIX => with_deps(
+            "std_msgs/Header header\nsensor_msgs/NavSatStatus status\nfloat64 latitude\nfloat64 longitude\nfloat64 altitude\nfloat64[9] position_covariance\nuint8 COVARIANCE_TYPE_UNKNOWN = 0\nuint8 COVARIANCE_TYPE_APPROXIMATED = 1\nuint8 COVARIANCE_TYPE_DIAGONAL_KNOWN = 2\nuint8 COVARIANCE_TYPE_KNOWN = 3\nuint8 position_covariance_type\n",
+            &[
+                header,
+                time,
+                (
+                    "sensor_msgs/NavSatStatus",
+                    "int8 STATUS_NO_FIX = -1\nint8 STATUS_FIX = 0\nint8 STATUS_SBAS_FIX = 1\nint8 STATUS_GBAS_FIX = 2\nint8 status\nuint16 SERVICE_GPS = 1\nuint16 SERVICE_GLONASS = 2\nuint16 SERVICE_COMPASS = 4\nuint16 SERVICE_GALILEO = 8\nuint16 service\n",
                 ),
             ],
         ),
@@ -658,6 +740,55 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn nav_sat_fix_round_trips_and_says_where_it_is_not_usable() {
+        let m = NavSatFixMsg {
+            header: hdr(1_700_000_000_123_456_789, "gps"),
+            status: 0,
+            service: 1,
+            latitude: 34.2,
+            longitude: -118.17,
+            altitude: 350.0,
+            position_covariance: [0.5, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 2.0],
+            position_covariance_type: 2,
+        };
+        for e in [Endian::Little, Endian::Big] {
+            let d = NavSatFixMsg::decode_wire(&m.encode(e), Wire::Cdr).unwrap();
+            assert_eq!(d, m);
+            // Cut anywhere: an error, never a panic.
+            let b = m.encode(e);
+            for n in 0..b.len() {
+                assert!(
+                    NavSatFixMsg::decode_wire(&b[..n], Wire::Cdr).is_err(),
+                    "{n}"
+                );
+            }
+        }
+        assert_eq!(m.position(), Ok((34.2, -118.17)));
+        let no_fix = NavSatFixMsg {
+            status: -1,
+            ..m.clone()
+        };
+        assert!(no_fix.position().unwrap_err().contains("no fix"));
+        for (lat, lon) in [
+            (91.0, 0.0),
+            (0.0, 180.5),
+            (f64::NAN, 0.0),
+            (0.0, f64::INFINITY),
+        ] {
+            let off = NavSatFixMsg {
+                latitude: lat,
+                longitude: lon,
+                ..m.clone()
+            };
+            assert!(
+                off.position().unwrap_err().contains("not a place"),
+                "{lat} {lon}"
+            );
+        }
+        assert!(schema_text(schema_name::NAV_SAT_FIX).is_some());
     }
 
     /// A rejected transform says what is wrong with it: its translation, its rotation's
