@@ -10,6 +10,7 @@
 //!   model files; compiled into a [`lut::ColorLut`] over quantised RGB for speed.
 //! - [`horizon`]: the horizon from the camera's attitude (or a given row), and per-pixel
 //!   incidence angle and range against a level ground plane.
+//! - [`solar`]: local solar time from a UTC stamp and a longitude, for the MWIR regime.
 //! - [`thermal`]: SWIR darkness with an incidence gate, MWIR contrast against local terrain
 //!   statistics by time of day with a lookahead limit.
 //!
@@ -19,6 +20,7 @@ pub mod color;
 pub mod gmm;
 pub mod horizon;
 pub mod lut;
+pub mod solar;
 pub mod thermal;
 
 use image::ImageEncoder;
