@@ -608,6 +608,26 @@ pub fn check_output_dir(out: &Path) -> Result<()> {
 mod tests {
     use super::*;
 
+    #[test]
+    fn a_warning_repeated_in_every_frame_is_one_line() {
+        let mut w = FrameWarnings::default();
+        for (i, t) in [100.0, 100.2, 100.4].iter().enumerate() {
+            w.add(*t, &format!("{} stereo points beyond stereo.max_range_m = 132 m dropped (farthest 1.7{i}e2 m)", 150 + i));
+        }
+        w.add(
+            100.4,
+            "lidar cues cannot run: the scan is unorganized (5 points in one row)",
+        );
+        let lines: Vec<String> = w.lines().collect();
+        assert_eq!(lines.len(), 2, "{lines:?}");
+        assert_eq!(
+            lines[0],
+            "3 frames from 100.000000 s to 100.400000 s, the first: 150 stereo points beyond \
+             stereo.max_range_m = 132 m dropped (farthest 1.70e2 m)"
+        );
+        assert!(lines[1].starts_with("frame at 100.400000 s: lidar cues"));
+    }
+
     fn ramp(n: usize, side: f64) -> PointCloud {
         let mut pts = Vec::new();
         for j in 0..n {
@@ -777,8 +797,9 @@ pub struct LogBuildReport {
     pub frames: crate::io::frames::FrameStats,
     /// Messages or frames that could not be used, with where and why.
     pub errors: Vec<String>,
-    /// What the plausibility checks dropped from frames that were fused, frame by frame
-    /// (the first [`MAX_WARNINGS`]).
+    /// What the build noticed but went on past: what the plausibility checks dropped from
+    /// frames that were fused, one line per kind with the frames it happened in (the
+    /// first [`MAX_WARNINGS`] kinds), then the build's own.
     #[serde(default)]
     pub warnings: Vec<String>,
     /// Lidar and stereo points beyond their sensor's `max_range_m`, dropped.
@@ -1030,6 +1051,7 @@ pub fn build_log(
     let mut counts = CueCounts::default();
     let mut errors = Vec::new();
     let mut warnings = Vec::new();
+    let mut frame_warnings = FrameWarnings::default();
     let mut beyond = BeyondRange::default();
     let mut frames_fused = 0u64;
     let mut t_fuse = 0.0;
@@ -1089,9 +1111,7 @@ pub fn build_log(
                     beyond.lidar += r.beyond_max_range[0];
                     beyond.stereo += r.beyond_max_range[1];
                     for w in &r.warnings {
-                        if warnings.len() < MAX_WARNINGS {
-                            warnings.push(format!("frame at {:.6} s: {w}", frame.stamp));
-                        }
+                        frame_warnings.add(frame.stamp, w);
                     }
                     if let Some(s) = r.lidar_points() {
                         lidar.merge(s);
@@ -1159,6 +1179,16 @@ pub fn build_log(
     );
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
+    warnings.extend(frame_warnings.lines());
+    if let Some(m) = label_totals.and_then(|l| l.mwir) {
+        if m.frames_no_hour > 0 {
+            warnings.push(format!(
+                "mwir labels skipped in {} frames: no local solar hour (give --hour, or a \
+                 longitude: labels.longitude_deg, --longitude, or a NavSatFix in the log)",
+                m.frames_no_hour
+            ));
+        }
+    }
     let (tiles, map) = mapper.finish_map()?;
     if map.cells.is_empty() {
         let pts = |p: &IngestStats| {
@@ -1236,6 +1266,52 @@ pub fn build_log(
     crate::interrupt::check("writing the outputs")?;
     stage.commit()?;
     Ok(report)
+}
+
+/// Per-frame warnings gathered by kind (the text with its numbers left out), so that a
+/// warning repeated in every frame is one line: the first frame's text, with how many
+/// frames and which span of time.
+#[derive(Default)]
+struct FrameWarnings {
+    /// Kind → (first text, first and last stamp, frames), in order of first appearance.
+    kinds: Vec<(String, String, f64, f64, u64)>,
+}
+
+impl FrameWarnings {
+    fn kind(w: &str) -> String {
+        let mut k = String::with_capacity(w.len());
+        let mut in_number = false;
+        for c in w.chars() {
+            let numeric = c.is_ascii_digit() || (in_number && ".e+-".contains(c));
+            if numeric && !in_number {
+                k.push('#');
+            } else if !numeric {
+                k.push(c);
+            }
+            in_number = numeric;
+        }
+        k
+    }
+
+    fn add(&mut self, stamp: f64, w: &str) {
+        let kind = Self::kind(w);
+        let full = self.kinds.len() >= MAX_WARNINGS;
+        match self.kinds.iter_mut().find(|e| e.0 == kind) {
+            Some(e) => {
+                e.3 = stamp;
+                e.4 += 1;
+            }
+            None if !full => self.kinds.push((kind, w.to_string(), stamp, stamp, 1)),
+            None => {}
+        }
+    }
+
+    fn lines(&self) -> impl Iterator<Item = String> + '_ {
+        self.kinds.iter().map(|(_, w, t0, t1, n)| match n {
+            1 => format!("frame at {t0:.6} s: {w}"),
+            _ => format!("{n} frames from {t0:.6} s to {t1:.6} s, the first: {w}"),
+        })
+    }
 }
 
 /// Frames of a log's start an offline build reads to measure the sensors' noise, at most.

@@ -358,14 +358,15 @@ impl MapperConfig {
     }
 
     /// Every sensor a log may carry: the lidar and the stereo pair with every cue, and
-    /// colour and SWIR labels (MWIR labels need the log's solar hour, which a log does not
-    /// carry). A sensor the log lacks costs nothing.
+    /// colour, SWIR and MWIR labels (MWIR where each frame's local solar hour is known,
+    /// from its stamp and the log's GNSS fix). A sensor the log lacks costs nothing.
     pub fn every_sensor() -> Self {
         MapperConfig {
             labels: Some(crate::project::LabelsConfig {
                 sensors: vec![
                     crate::project::LabelSensor::Colour,
                     crate::project::LabelSensor::Swir,
+                    crate::project::LabelSensor::Mwir,
                 ],
                 ..Default::default()
             }),

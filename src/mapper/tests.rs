@@ -137,11 +137,16 @@ size_cells = 200
         s.labels.unwrap().sensors,
         [crate::project::LabelSensor::Colour]
     );
-    // MWIR labels need the hour; the error says so.
-    let e = load_str("m.toml", "[labels]\nsensors = [\"mwir\"]\n")
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("hour"), "{e}");
+    // MWIR labels without an hour take each frame's from its stamp and the longitude; a
+    // longitude off the globe is refused and named.
+    assert!(load_str("m.toml", "[labels]\nsensors = [\"mwir\"]\n").is_ok());
+    let e = load_str(
+        "m.toml",
+        "[labels]\nsensors = [\"mwir\"]\nlongitude_deg = 200.0\n",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("longitude 200"), "{e}");
 }
 
 proptest::proptest! {

@@ -34,13 +34,28 @@ use crate::grid::{CellKey, Evidence, RollingGrid};
 use crate::io::frames::{Frame, SensorImage};
 use crate::io::ros::convert::Pixels;
 
-/// MWIR labelling: the classifier's parameters and the local solar hour of the log.
+/// MWIR labelling: the classifier's parameters, and how the local solar hour of each
+/// image is known.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MwirLabelConfig {
     /// Parameters of the MWIR thermal contrast classifier.
     pub classifier: MwirConfig,
-    /// Local solar hour (0..24) the images were taken at.
-    pub hour: f64,
+    /// Local solar hour (0..24) every image was taken at; `None`: from each frame's stamp
+    /// (UTC) and the longitude ([`crate::classify::solar`]).
+    pub hour: Option<f64>,
+    /// Degrees east, for the solar hour; `None`: the log's GNSS fix ([`Frame::geo`]).
+    pub longitude_deg: Option<f64>,
+}
+
+impl MwirLabelConfig {
+    /// The local solar hour of `frame`: the given hour, or the frame's stamp at the
+    /// configured longitude or the log's; `None` when neither is known.
+    pub fn hour_of(&self, frame: &Frame) -> Option<f64> {
+        self.hour.or_else(|| {
+            let lon = self.longitude_deg.or(frame.geo.map(|g| g.1))?;
+            crate::classify::solar::local_solar_hour(frame.stamp, lon)
+        })
+    }
 }
 
 /// Which image sensors label the map, and how.
@@ -141,7 +156,15 @@ impl FrameLabelConfig {
             ));
         }
         if let Some(m) = &self.mwir {
-            m.classifier.regime(m.hour)?;
+            if let Some(h) = m.hour {
+                m.classifier.regime(h)?;
+            }
+            if let Some(l) = m.longitude_deg.filter(|l| l.is_nan() || l.abs() > 180.0) {
+                return Err(Error::invalid(
+                    "label config",
+                    format!("longitude {l}° (must be within ±180°)"),
+                ));
+            }
         }
         Ok(())
     }
@@ -185,8 +208,12 @@ pub struct LabelsConfig {
     /// A colour model (JSON from `tarn train-colour`), compiled into a 6-bit lookup table;
     /// without it the paper's Table 1 rule (its exact table over brightness and saturation).
     pub colour_model: Option<std::path::PathBuf>,
-    /// Local solar hour of the log (0..24), which the MWIR labels need.
+    /// Local solar hour of the log (0..24) for the MWIR labels; without it, each frame's
+    /// from its stamp and the longitude.
     pub hour: Option<f64>,
+    /// Degrees east of Greenwich, for the local solar hour; without it, the log's GNSS
+    /// fix (`sensor_msgs/NavSatFix`).
+    pub longitude_deg: Option<f64>,
     /// Label every n-th pixel in x and y.
     pub stride: usize,
     /// Also label every row of pixels whose ground footprint is wider than a map cell.
@@ -213,6 +240,7 @@ impl Default for LabelsConfig {
             sensors: vec![LabelSensor::Colour],
             colour_model: None,
             hour: None,
+            longitude_deg: None,
             stride: f.ray_stride,
             wide_rows: f.wide_rows,
             max_range_m: f.max_range,
@@ -226,8 +254,7 @@ impl Default for LabelsConfig {
 
 impl LabelsConfig {
     /// The classifiers and settings the mapper runs: the colour model read and compiled
-    /// (or the Table 1 rule), SWIR and MWIR with their defaults. MWIR without `hour` is an
-    /// error that says so.
+    /// (or the Table 1 rule), SWIR and MWIR with their defaults.
     pub fn compile(&self) -> Result<FrameLabelConfig> {
         self.compile_at(6, 8)
     }
@@ -262,15 +289,10 @@ impl LabelsConfig {
                 }
                 LabelSensor::Swir => cfg.swir = Some(SwirConfig::default()),
                 LabelSensor::Mwir => {
-                    let hour = self.hour.ok_or_else(|| {
-                        Error::invalid(
-                            "labels",
-                            "mwir needs the local solar hour of the log (labels.hour, --hour)",
-                        )
-                    })?;
                     cfg.mwir = Some(MwirLabelConfig {
                         classifier: MwirConfig::default(),
-                        hour,
+                        hour: self.hour,
+                        longitude_deg: self.longitude_deg,
                     })
                 }
             }
@@ -316,6 +338,10 @@ pub struct SensorLabelStats {
     /// Colour water pixels whose colour the log's lidar finds on dry ground
     /// (`ColourCheck`): no vote.
     pub colour_check_vetoed: u64,
+    /// MWIR frames skipped for want of a local solar hour (no hour given, no longitude).
+    pub frames_no_hour: u64,
+    /// MWIR frames whose solar hour came from their stamp and the longitude.
+    pub frames_hour_from_stamp: u64,
 }
 
 impl SensorLabelStats {
@@ -333,6 +359,8 @@ impl SensorLabelStats {
         self.reflection_vetoed += o.reflection_vetoed;
         self.beyond_reach += o.beyond_reach;
         self.colour_check_vetoed += o.colour_check_vetoed;
+        self.frames_no_hour += o.frames_no_hour;
+        self.frames_hour_from_stamp += o.frames_hour_from_stamp;
     }
 }
 
@@ -345,6 +373,8 @@ pub struct FrameLabelsReport {
     pub swir: Option<SensorLabelStats>,
     /// What the MWIR camera contributed (`None`: not configured).
     pub mwir: Option<SensorLabelStats>,
+    /// The earliest and latest local solar hour the MWIR images were classified at.
+    pub mwir_hours: Option<[f64; 2]>,
     /// Cell votes that fell outside the window (dropped).
     pub dropped: u64,
 }
@@ -360,6 +390,10 @@ impl FrameLabelsReport {
             if let Some(b) = b {
                 a.get_or_insert_with(Default::default).merge(b);
             }
+        }
+        if let Some([lo, hi]) = o.mwir_hours {
+            let h = self.mwir_hours.get_or_insert([lo, hi]);
+            *h = [h[0].min(lo), h[1].max(hi)];
         }
         self.dropped += o.dropped;
     }
@@ -1033,9 +1067,20 @@ impl FrameLabels {
                 (cam.width == i.image.width && cam.height == i.image.height)
                     .then_some((i, cam, pose))
             });
+            let hour = match (cue, &self.cfg.mwir) {
+                (Cue::Mwir, Some(m)) => m.hour_of(frame),
+                _ => None,
+            };
             match usable {
                 None => st.frames_skipped += 1,
+                Some(_) if cue == Cue::Mwir && hour.is_none() => st.frames_no_hour += 1,
                 Some((img, cam, pose)) => {
+                    if let Some(h) = hour {
+                        let r = rep.mwir_hours.get_or_insert([h, h]);
+                        *r = [r[0].min(h), r[1].max(h)];
+                        st.frames_hour_from_stamp +=
+                            u64::from(self.cfg.mwir.as_ref().is_some_and(|m| m.hour.is_none()));
+                    }
                     st.frames = 1;
                     let stereo = if cue == Cue::Colour {
                         frame.stereo.as_ref()
@@ -1043,7 +1088,8 @@ impl FrameLabels {
                         None
                     };
                     rep.dropped += self.run(
-                        cue, img, cam, &pose, stereo, ground_z, &surface, samples, grid, &mut st,
+                        cue, img, cam, &pose, stereo, hour, ground_z, &surface, samples, grid,
+                        &mut st,
                     )?;
                 }
             }
@@ -1065,6 +1111,7 @@ impl FrameLabels {
         camera: &CameraModel,
         cam_to_map: &Pose,
         stereo: Option<&PointCloud>,
+        hour: Option<f64>,
         ground_z: f64,
         surface: &GridSurface,
         samples: Option<&ScanSurface>,
@@ -1139,7 +1186,8 @@ impl FrameLabels {
             Cue::Mwir => {
                 let m = self.cfg.mwir.as_ref().expect("configured");
                 let g = ground_geometry(camera, map_rays, cam_to_map.translation.z, ground_z);
-                classify_mwir(&mono_of(img), &g, m.hour, &m.classifier)?
+                let hour = hour.expect("an MWIR frame without an hour is skipped");
+                classify_mwir(&mono_of(img), &g, hour, &m.classifier)?
             }
         };
         let k = stereo.and_then(|c| stereo_factor(c, w, h));

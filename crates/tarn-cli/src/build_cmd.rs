@@ -78,9 +78,14 @@ pub struct BuildArgs {
     /// table; without it the paper's Table 1 rule.
     #[arg(long)]
     pub colour_model: Option<PathBuf>,
-    /// (log) Local solar hour of the log (0..24), for the MWIR labels.
+    /// (log) Local solar hour of the log (0..24), for the MWIR labels [default: each
+    /// frame's, from its stamp (UTC) and the longitude]
     #[arg(long)]
     pub hour: Option<f64>,
+    /// (log) Degrees east of Greenwich, for the local solar hour of the MWIR labels
+    /// [default: the log's NavSatFix]
+    #[arg(long)]
+    pub longitude: Option<f64>,
     /// (log) Label every n-th pixel in x and y [default: 2].
     #[arg(long)]
     pub label_stride: Option<usize>,
@@ -134,6 +139,7 @@ impl BuildArgs {
             labels: Vec::new(),
             colour_model: None,
             hour: None,
+            longitude: None,
             label_stride: None,
             label_wide_rows: false,
             label_max_range: None,
@@ -151,6 +157,7 @@ fn apply_label_args(a: &BuildArgs, cfg: &mut MapperConfig) -> anyhow::Result<()>
     let given = !a.labels.is_empty()
         || a.colour_model.is_some()
         || a.hour.is_some()
+        || a.longitude.is_some()
         || a.label_stride.is_some()
         || a.label_wide_rows
         || a.label_max_range.is_some()
@@ -179,6 +186,9 @@ fn apply_label_args(a: &BuildArgs, cfg: &mut MapperConfig) -> anyhow::Result<()>
     }
     if let Some(h) = a.hour {
         l.hour = Some(h);
+    }
+    if let Some(lon) = a.longitude {
+        l.longitude_deg = Some(lon);
     }
     if let Some(v) = a.label_stride {
         l.stride = v;
@@ -412,6 +422,14 @@ pub fn print_summary(r: &BuildReport) {
     println!("  wrote map.ply terrain.ply water.ply map.png report.json");
 }
 
+/// The frames refused for a pose jump, as the stream named them.
+fn jumps_of(r: &LogBuildReport) -> impl Iterator<Item = &String> {
+    r.frames
+        .skip_reasons
+        .iter()
+        .filter(|s| s.contains("max_speed_mps"))
+}
+
 fn print_log_summary(r: &LogBuildReport) {
     println!(
         "tarn {}: {} -> {}",
@@ -433,11 +451,26 @@ fn print_log_summary(r: &LogBuildReport) {
     }
     if let Some(l) = &r.labels {
         for (name, s) in [("colour", &l.colour), ("swir", &l.swir), ("mwir", &l.mwir)] {
-            if let Some(s) = s {
-                println!(
-                    "  {name} labels: {} frames ({} skipped), cell votes water {} / not {}",
-                    s.frames, s.frames_skipped, s.cells_water, s.cells_dry
-                );
+            match s {
+                // Configured, and the log has no such camera: nothing to say.
+                Some(s) if s.frames == 0 && s.frames_no_hour == 0 => {}
+                Some(s) => {
+                    let hours = match l.mwir_hours.filter(|_| name == "mwir") {
+                        Some([a, b]) if s.frames_hour_from_stamp > 0 => format!(
+                            ", local solar hour {a:.2}–{b:.2} (from the stamps and longitude)"
+                        ),
+                        Some([a, _]) => format!(", local solar hour {a:.2} (given)"),
+                        None => String::new(),
+                    };
+                    println!(
+                        "  {name} labels: {} frames ({} skipped), cell votes water {} / not {}{hours}",
+                        s.frames,
+                        s.frames_skipped + s.frames_no_hour,
+                        s.cells_water,
+                        s.cells_dry
+                    );
+                }
+                None => {}
             }
         }
     }
@@ -483,18 +516,16 @@ fn print_log_summary(r: &LogBuildReport) {
         );
     }
     // What the plausibility checks refused or dropped, on stderr.
-    let jumps = r
-        .frames
-        .skip_reasons
-        .iter()
-        .filter(|s| s.contains("max_speed_mps"));
-    for w in jumps.chain(&r.warnings).take(10) {
+    let jumps = jumps_of(r);
+    let shown = jumps.chain(&r.warnings).count();
+    for w in jumps_of(r).chain(&r.warnings).take(10) {
         eprintln!("warning: {w}");
     }
-    let (nj, nw) = (r.frames.frames_refused_pose_jump, r.warnings.len());
-    if nj + nw as u64 > 10 {
+    if shown > 10 {
         eprintln!(
-            "warning: {nj} frames refused for a pose jump, {nw} frames with points dropped (report.json lists them)"
+            "warning: {} more (report.json lists them; {} frames refused for a pose jump)",
+            shown - 10,
+            r.frames.frames_refused_pose_jump
         );
     }
     println!("  wrote map.ply terrain.ply water.ply map.png report.json");

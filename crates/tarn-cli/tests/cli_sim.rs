@@ -129,3 +129,59 @@ fn bad_scene_names_file_and_key() {
     assert!(!r.status.success());
     assert!(String::from_utf8_lossy(&r.stderr).contains("map.ply"));
 }
+
+/// A log from a thermal camera: its MWIR labels run by default, at the local solar hour of
+/// each frame's stamp and the log's GNSS fix; without a fix (or a longitude, or `--hour`)
+/// they are skipped with a warning and the map is still built.
+#[test]
+fn mwir_labels_take_their_hour_from_the_log_or_are_skipped_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let mwir = "[rig.mwir]\nposition = [0.0, 0.0, 1.5]\nrpy_deg = [0.0, 10.0, 0.0]\n\
+                width = 32\nheight = 24\nhfov_deg = 50.0\n[sky]\ntime_of_day = 3.0\n";
+    let p = |x: &std::path::Path| x.to_str().unwrap().to_string();
+    for (name, gps) in [("fix", "[rig.gps]\n"), ("nofix", "")] {
+        let scene = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&scene, format!("{SCENE}{mwir}{gps}")).unwrap();
+        let sim = dir.path().join(format!("{name}-sim"));
+        let r = tarn(&["simulate", &p(&scene), "--out", &p(&sim)]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let out = dir.path().join(format!("{name}-map"));
+        let r = tarn(&["build", &p(&sim.join("log.mcap")), "--out", &p(&out)]);
+        let (so, se) = (
+            String::from_utf8_lossy(&r.stdout),
+            String::from_utf8_lossy(&r.stderr),
+        );
+        assert_eq!(r.status.code(), Some(0), "{name}: {se}");
+        let rep: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        let m = &rep["labels"]["mwir"];
+        if gps.is_empty() {
+            assert_eq!(m["frames"], 0, "{rep}");
+            assert_eq!(m["frames_no_hour"], 3, "{rep}");
+            assert!(se.contains("no local solar hour"), "{se}");
+            // A longitude given: the same log's hour from its stamps.
+            let r = tarn(&[
+                "build",
+                &p(&sim.join("log.mcap")),
+                "--out",
+                &p(&out),
+                "--labels",
+                "mwir",
+                "--longitude=-120.5",
+            ]);
+            assert!(r.status.success());
+            let rep: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                    .unwrap();
+            assert_eq!(rep["labels"]["mwir"]["frames_hour_from_stamp"], 3, "{rep}");
+        } else {
+            assert_eq!(m["frames"], 3, "{rep}");
+            assert_eq!(m["frames_hour_from_stamp"], 3, "{rep}");
+            let [a, b] = [0, 1].map(|i| rep["labels"]["mwir_hours"][i].as_f64().unwrap());
+            assert!((a - 3.0).abs() < 1e-3 && (b - 3.0).abs() < 1e-3, "{a} {b}");
+            assert!(so.contains("mwir labels: 3 frames"), "{so}");
+            assert!(!se.contains("no local solar hour"), "{se}");
+        }
+    }
+}

@@ -153,6 +153,7 @@ fn a_nan_quaternion_is_refused() {
         swir: None,
         mwir: None,
         stereo_baseline_m: None,
+        geo: None,
     };
     let e = mapper.update(&frame).unwrap_err().to_string();
     assert!(
@@ -182,7 +183,10 @@ fn far_points_in_a_log_are_dropped_and_counted() {
     );
     let r = report(&out);
     assert_eq!(r["points_beyond_max_range"]["lidar"], 18, "{r}");
-    assert_eq!(r["warnings"].as_array().unwrap().len(), 9, "{r}");
+    // One line for the nine frames that dropped points, with their span.
+    let w = r["warnings"].as_array().unwrap();
+    assert_eq!(w.len(), 1, "{r}");
+    assert!(w[0].as_str().unwrap().starts_with("9 frames from "), "{r}");
 }
 
 #[test]

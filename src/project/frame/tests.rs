@@ -93,6 +93,7 @@ fn frame() -> Frame {
         swir: None,
         mwir: None,
         stereo_baseline_m: None,
+        geo: None,
     }
 }
 
@@ -201,7 +202,8 @@ fn unconfigured_or_missing_sensors_do_nothing() {
     let bad_hour = FrameLabelConfig {
         mwir: Some(MwirLabelConfig {
             classifier: MwirConfig::default(),
-            hour: 25.0,
+            hour: Some(25.0),
+            longitude_deg: None,
         }),
         ..FrameLabelConfig::default()
     };

@@ -38,7 +38,7 @@ pub use world::{Hit, Material, Surface, Terrain, WaterBody, World};
 use crate::error::{Error, Result};
 use crate::geom::{PointCloud, Pose};
 use crate::io::mcap_log::{LogWriter, WriteOptions};
-use crate::io::ros::{Header, Image, TfMessage, Time, TransformStamped};
+use crate::io::ros::{Header, Image, NavSatFixMsg, TfMessage, Time, TransformStamped};
 
 /// Options of a simulation run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,6 +145,20 @@ pub fn trajectory(w: &World) -> Vec<TruthPose> {
 /// base_link → map of a trajectory pose.
 pub fn pose_of(p: &TruthPose) -> Pose {
     crate::geom::pose_xyz_rpy(p.x, p.y, p.z, 0.0, 0.0, p.yaw)
+}
+
+/// The longitude (degrees east, within ±180°) where local apparent solar time is `hours`
+/// at `unix_s` seconds since the epoch (UTC).
+pub fn longitude_at(unix_s: f64, hours: f64) -> f64 {
+    let utc_h = unix_s.rem_euclid(86_400.0) / 3600.0;
+    let eot_h = crate::classify::solar::equation_of_time_min(unix_s) / 60.0;
+    let lon = (15.0 * (hours - utc_h - eot_h) + 180.0).rem_euclid(360.0) - 180.0;
+    // A longitude that rounds to +180 is the same meridian as −180.
+    if lon >= 180.0 {
+        -180.0
+    } else {
+        lon
+    }
 }
 
 fn stamp_ns(t: f64) -> i64 {
@@ -315,6 +329,12 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
         statics.push(tf(start, "base_link", MWIR_FRAME, *m));
         topics.extend(["/mwir/image", "/mwir/camera_info"].map(String::from));
     }
+    let gps = rig
+        .gps
+        .map(|g| (g.latitude_deg, longitude_at(start, scene.sky.time_of_day)));
+    if gps.is_some() {
+        topics.push("/gps/fix".to_string());
+    }
     let ns0 = stamp_ns(start) as u64;
     log.write_tf(
         "/tf_static",
@@ -343,6 +363,19 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             },
             ns,
         )?;
+        if let Some((latitude, longitude)) = gps {
+            let fix = NavSatFixMsg {
+                header: header(p.stamp, "gps"),
+                status: 0,
+                service: 1,
+                latitude,
+                longitude,
+                altitude: p.z,
+                position_covariance: [4.0, 0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 16.0],
+                position_covariance_type: 2,
+            };
+            log.write_nav_sat_fix("/gps/fix", &fix, ns)?;
+        }
         write_s += tw.elapsed().as_secs_f64();
         if let Some(l) = &lidar {
             let tr = Instant::now();

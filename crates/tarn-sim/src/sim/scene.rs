@@ -444,6 +444,23 @@ pub struct RigSpec {
     pub camera: Option<CameraSpec>,
     pub swir: Option<CameraSpec>,
     pub mwir: Option<CameraSpec>,
+    /// A GNSS receiver (`/gps/fix`).
+    pub gps: Option<GpsSpec>,
+}
+
+/// A GNSS receiver: a `NavSatFix` at every pose, at the latitude given and at the longitude
+/// where the scene's local solar time (`sky.time_of_day`) falls at the log's first stamp,
+/// so that a reader finds the scene's hour from the stamps and the fix.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GpsSpec {
+    /// Degrees north.
+    #[serde(default = "d_latitude")]
+    pub latitude_deg: f64,
+}
+
+fn d_latitude() -> f64 {
+    34.2
 }
 
 /// What a lidar writes per return besides x, y, z.
@@ -1045,6 +1062,14 @@ impl RigSpec {
                 "rig.camera",
                 "the stereo pair's left camera is the colour camera: give one of stereo, camera",
             ));
+        }
+        if let Some(g) = &r.gps {
+            if g.latitude_deg.is_nan() || g.latitude_deg.abs() > 90.0 {
+                return Err(bad(
+                    "rig.gps.latitude_deg",
+                    format!("{} (must be within ±90°)", g.latitude_deg),
+                ));
+            }
         }
         for (name, c) in [("camera", &r.camera), ("swir", &r.swir), ("mwir", &r.mwir)] {
             if let Some(c) = c {

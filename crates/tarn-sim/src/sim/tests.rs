@@ -564,6 +564,41 @@ fn the_frame_stream_reads_the_log_back() {
     assert_eq!(n, r.frames);
 }
 
+/// A rig with a GNSS receiver: its fixes put the scene's local solar time at the log's
+/// stamps, and a reader of the log finds that hour from the stamps and the fix alone.
+#[test]
+fn the_gps_fix_and_the_stamps_give_the_scenes_solar_hour() {
+    for hours in [2.0, 13.5, 23.9] {
+        let dir = tempfile::tempdir().unwrap();
+        let extra = format!("[rig.gps]\nlatitude_deg = -33.9\n[sky]\ntime_of_day = {hours}\n");
+        let scene = Scene::from_toml_str(&scene_text(0.5, &extra)).unwrap();
+        simulate(&scene, dir.path(), SimOptions::default()).unwrap();
+        let fs =
+            crate::io::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default())
+                .unwrap();
+        let mwir = tarn::project::MwirLabelConfig {
+            classifier: Default::default(),
+            hour: None,
+            longitude_deg: None,
+        };
+        let mut n = 0;
+        for f in fs {
+            let f = f.unwrap();
+            let (lat, _) = f.geo.expect("a fix before every frame");
+            assert_eq!(lat, -33.9);
+            let h = mwir.hour_of(&f).unwrap();
+            // Within a second of the scene's hour, over a log of seconds.
+            let d = (h - hours + 12.0).rem_euclid(24.0) - 12.0;
+            assert!(d.abs() < 5.0 / 3600.0, "{hours}: {h}");
+            n += 1;
+        }
+        assert!(n > 0);
+    }
+    let bad = scene_text(0.5, "[rig.gps]\nlatitude_deg = 91.0\n");
+    let e = Scene::from_toml_str(&bad).unwrap_err().to_string();
+    assert!(e.contains("rig.gps.latitude_deg"), "{e}");
+}
+
 #[test]
 fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
     let (dir, _) = run_sim(2, true);
