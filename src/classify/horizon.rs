@@ -142,15 +142,24 @@ impl GroundGeometry {
                 format!("pose {cam_to_map}, ground z {ground_z} must be finite"),
             ));
         }
-        let h = cam_to_map.translation.vector.z - ground_z;
-        let n = camera.width * camera.height;
+        let rays = pixel_rays_in_map(camera, cam_to_map);
+        Ok(Self::of_rays(camera, &rays, cam_to_map, ground_z))
+    }
+
+    /// The same from the pixels' rays in the map frame (`camera`'s at `cam_to_map`), as a
+    /// caller that keeps them between frames has them.
+    pub fn of_rays(
+        camera: &CameraModel,
+        map_rays: &[Option<Vector3<f64>>],
+        cam_to_map: &Pose,
+        ground_z: f64,
+    ) -> Self {
+        let n = map_rays.len();
         let (mut incidence, mut range, mut lookahead) =
             (vec![f32::NAN; n], vec![f32::NAN; n], vec![f32::NAN; n]);
+        let h = cam_to_map.translation.vector.z - ground_z;
         if h > 0.0 {
-            for (i, r) in pixel_rays_in_map(camera, cam_to_map)
-                .into_iter()
-                .enumerate()
-            {
+            for (i, r) in map_rays.iter().enumerate() {
                 let Some(r) = r else { continue };
                 if r.z < 0.0 {
                     let t = h / -r.z;
@@ -160,13 +169,13 @@ impl GroundGeometry {
                 }
             }
         }
-        Ok(GroundGeometry {
+        GroundGeometry {
             width: camera.width,
             height: camera.height,
             incidence,
             range,
             lookahead,
-        })
+        }
     }
 }
 

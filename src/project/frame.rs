@@ -725,38 +725,6 @@ fn mono_of(img: &SensorImage) -> MonoImage {
     }
 }
 
-/// Incidence, range and lookahead of map rays against the level plane `ground_z` (the same
-/// as [`GroundGeometry::level`], from cached rays).
-fn ground_geometry(
-    camera: &CameraModel,
-    map_rays: &[Option<Vector3<f64>>],
-    cam_z: f64,
-    ground_z: f64,
-) -> GroundGeometry {
-    let n = map_rays.len();
-    let (mut incidence, mut range, mut lookahead) =
-        (vec![f32::NAN; n], vec![f32::NAN; n], vec![f32::NAN; n]);
-    let h = cam_z - ground_z;
-    if h > 0.0 {
-        for (i, r) in map_rays.iter().enumerate() {
-            let Some(r) = r else { continue };
-            if r.z < 0.0 {
-                let t = h / -r.z;
-                incidence[i] = (-r.z).clamp(0.0, 1.0).acos() as f32;
-                range[i] = t as f32;
-                lookahead[i] = (t * r.xy().norm()) as f32;
-            }
-        }
-    }
-    GroundGeometry {
-        width: camera.width,
-        height: camera.height,
-        incidence,
-        range,
-        lookahead,
-    }
-}
-
 /// One sampled pixel's hit on the map.
 #[derive(Debug, Clone, Copy)]
 struct Hit {
@@ -1175,7 +1143,7 @@ impl FrameLabels {
                 l
             }
             Cue::Swir => {
-                let g = ground_geometry(camera, map_rays, cam_to_map.translation.z, ground_z);
+                let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
                 classify_swir(
                     &mono_of(img),
                     &g,
@@ -1185,7 +1153,7 @@ impl FrameLabels {
             }
             Cue::Mwir => {
                 let m = self.cfg.mwir.as_ref().expect("configured");
-                let g = ground_geometry(camera, map_rays, cam_to_map.translation.z, ground_z);
+                let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
                 let hour = hour.expect("an MWIR frame without an hour is skipped");
                 classify_mwir(&mono_of(img), &g, hour, &m.classifier)?
             }

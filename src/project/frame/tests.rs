@@ -236,7 +236,7 @@ fn cached_horizon_equals_the_classifier_horizon() {
     assert_eq!(a, b);
     assert!(a.data.contains(&Label::Sky) && a.data.contains(&Label::Water));
     let g1 = GroundGeometry::level(&cam, &pose, 0.0).unwrap();
-    let g2 = ground_geometry(&cam, &rays, 1.5, 0.0);
+    let g2 = GroundGeometry::of_rays(&cam, &rays, &pose, 0.0);
     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&g1.incidence), bits(&g2.incidence));
     assert_eq!(bits(&g1.range), bits(&g2.range));
