@@ -24,6 +24,7 @@ mod correction;
 mod data;
 mod fresnel;
 mod lidar;
+pub mod thermal;
 
 pub use absorption::{absorption_per_m, ice_absorption_per_m, loss_distance_m, AbsorptionTable};
 pub use correction::{apparent_bottom_point, bottom_depth_gain, correct_bottom_return};

@@ -543,7 +543,12 @@ pub fn radiance(w: &World, light: &Light, o: &Point3<f64>, d: &Vector3<f64>, max
                 rgb: [0, 1, 2].map(|i| fr * refl.rgb[i] + (1.0 - fr) * body_rgb[i]),
                 // Water absorbs 1.5 µm within millimetres: only the surface reflection.
                 swir: fr * refl.swir,
-                mwir: (1.0 - fr) * t_water + fr * refl.mwir,
+                // Emission and reflection add as radiances, at the index of 3–5 µm.
+                mwir: crate::optics::thermal::apparent_temperature(
+                    crate::optics::thermal::water_reflectance_mwir(cos_i.acos()),
+                    t_water,
+                    refl.mwir,
+                ),
             }
         }
     }
