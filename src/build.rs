@@ -1041,10 +1041,10 @@ pub fn build_log(
     use crate::io::frames::FrameStream;
 
     let t0 = Instant::now();
-    let mut mapper = Mapper::new(cfg.mapper.clone())?;
-    mapper.set_publish(cfg.per_frame_maps);
     let summary = crate::io::log::summarize_quick(input)?;
     let log_cfg = frame_log_config(cfg, &summary, input)?;
+    let mut mapper = Mapper::new(sensors_of_log(&cfg.mapper, &log_cfg, &summary))?;
+    mapper.set_publish(cfg.per_frame_maps);
     calibrate_on_log(&mut mapper, input, &log_cfg)?;
     let mut stream = FrameStream::open(input, &log_cfg)?;
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
@@ -1340,6 +1340,51 @@ pub fn calibrate_on_log(
     Ok(())
 }
 
+/// `cfg` with the sensors the log has no messages of left out (its lidar, stereo cloud,
+/// colour, SWIR and MWIR images, on the topics `log` chose): a sensor the log lacks adds
+/// nothing to the map, and the report then names only what the log has and what the
+/// mapper assumed of it.
+pub fn sensors_of_log(
+    cfg: &MapperConfig,
+    log: &crate::io::frames::LogConfig,
+    summary: &crate::io::mcap_log::LogSummary,
+) -> MapperConfig {
+    use crate::project::LabelSensor;
+    let has = |t: &str| summary.topics.iter().any(|x| x.topic == t && x.count > 0);
+    let mut c = cfg.clone();
+    if !has(&log.lidar_topic) {
+        c.lidar = None;
+    }
+    if !has(&log.stereo_topic) {
+        c.stereo = None;
+    }
+    if let Some(l) = &mut c.labels {
+        l.sensors.retain(|s| match s {
+            LabelSensor::Colour => has(&log.image_topic),
+            LabelSensor::Swir => has(&log.swir_topic),
+            LabelSensor::Mwir => has(&log.mwir_topic),
+        });
+        if l.sensors.is_empty() {
+            c.labels = None;
+        }
+    }
+    if let Some(m) = &mut c.label_models {
+        if !has(&log.image_topic) {
+            m.colour = None;
+        }
+        if !has(&log.swir_topic) {
+            m.swir = None;
+        }
+        if !has(&log.mwir_topic) {
+            m.mwir = None;
+        }
+    }
+    if c.labels.is_none() {
+        c.label_models = None;
+    }
+    c
+}
+
 /// The log settings of a build: [`LogBuildConfig::log`] with its sensor topics chosen
 /// ([`crate::io::frames::LogConfig::with_topics_of`]: named ones, else by message type).
 pub fn frame_log_config(
@@ -1401,10 +1446,10 @@ pub fn build_tiles(
             ));
         }
     }
-    let mut mapper = Mapper::new(cfg.mapper.clone())?;
-    mapper.set_publish(false);
     let summary = crate::io::log::summarize_quick(input)?;
     let log_cfg = frame_log_config(cfg, &summary, input)?;
+    let mut mapper = Mapper::new(sensors_of_log(&cfg.mapper, &log_cfg, &summary))?;
+    mapper.set_publish(false);
     calibrate_on_log(&mut mapper, input, &log_cfg)?;
     let mut stream = FrameStream::open(input, &log_cfg)?;
     let (mut frames_fused, mut frames_outside) = (0u64, 0u64);

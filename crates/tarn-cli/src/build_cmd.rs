@@ -494,11 +494,22 @@ fn print_log_summary(r: &LogBuildReport) {
                 ))
         );
         let c = &r.cue_counts;
-        println!(
-            "  lidar no-return {} (returned {}), bottom {}, specular {}, below-level ground {}, dark {}; stereo runs {} ({} reflected points)",
-            c.lidar_noret, c.lidar_diag_ret, c.lidar_bottom, c.lidar_specular, c.lidar_below_ground,
-            c.lidar_dark, c.stereo_runs, c.stereo_reflected_points
-        );
+        let ran = |n: &str| r.cues.iter().any(|x| x == n);
+        let mut parts = Vec::new();
+        if ran("lidar") {
+            parts.push(format!(
+                "lidar no-return {} (returned {}), bottom {}, specular {}, below-level ground {}, dark {}",
+                c.lidar_noret, c.lidar_diag_ret, c.lidar_bottom, c.lidar_specular,
+                c.lidar_below_ground, c.lidar_dark
+            ));
+        }
+        if ran("stereo") {
+            parts.push(format!(
+                "stereo runs {} ({} reflected points)",
+                c.stereo_runs, c.stereo_reflected_points
+            ));
+        }
+        println!("  {}", parts.join("; "));
     }
     print_water(&r.water);
     crate::log_cmd::print_calibration(&r.calibration);
@@ -582,13 +593,20 @@ pub fn print_latency(r: &LogBuildReport) {
     } else {
         "– (once, at the end)".to_string()
     };
+    // The stages of the sensors the log has.
+    let mut stages = vec![format!("recentre {}", cell("recentre"))];
+    if r.lidar_points.points > 0 {
+        stages.push(format!("lidar {}", cell("lidar")));
+    }
+    if r.stereo_points.points > 0 {
+        stages.push(format!("stereo {}", cell("stereo")));
+    }
+    if r.labels.is_some() {
+        stages.push(format!("labels {}", cell("labels")));
+    }
     println!(
-        "  per frame (ms, median/p95/max): recentre {}, lidar {}, stereo {}, labels {}, water {}, total {}",
-        cell("recentre"),
-        cell("lidar"),
-        cell("stereo"),
-        cell("labels"),
-        water,
+        "  per frame (ms, median/p95/max): {}, water {water}, total {}",
+        stages.join(", "),
         cell("total")
     );
 }

@@ -97,7 +97,11 @@ pub fn info(
     let mut stream = FrameStream::open(&log, &cfg)?;
     let mut frame_errors = Vec::new();
     // The sensors' calibration as `tarn build LOG` measures it, over the first frames.
-    let mut mapper = tarn::mapper::Mapper::new(tarn::mapper::MapperConfig::every_sensor())?;
+    let mut mapper = tarn::mapper::Mapper::new(tarn::build::sensors_of_log(
+        &tarn::mapper::MapperConfig::every_sensor(),
+        &cfg,
+        &summary,
+    ))?;
     mapper.set_publish(false);
     for f in stream.by_ref() {
         match f {
@@ -155,9 +159,27 @@ pub fn info(
     for t in &summary.topics {
         println!("  {:<w$}  {:>8}  {}", t.topic, t.count, t.schema);
     }
+    // The sensors the log has, on the topics a build reads them from.
+    let has = |t: &str| summary.topics.iter().any(|x| x.topic == t && x.count > 0);
+    let sensors: Vec<String> = [
+        ("lidar", &cfg.lidar_topic),
+        ("stereo", &cfg.stereo_topic),
+        ("camera", &cfg.image_topic),
+        ("swir", &cfg.swir_topic),
+        ("mwir", &cfg.mwir_topic),
+        ("gps", &cfg.gps_topic),
+    ]
+    .into_iter()
+    .filter(|(_, t)| has(t))
+    .map(|(n, t)| format!("{n} {t}"))
+    .collect();
     println!(
-        "  lidar {}, stereo {}, camera {}",
-        cfg.lidar_topic, cfg.stereo_topic, cfg.image_topic
+        "  sensors: {}",
+        if sensors.is_empty() {
+            "none tarn reads".to_string()
+        } else {
+            sensors.join(", ")
+        }
     );
     println!(
         "  frames (from {}): {} would be built, {} skipped for want of a transform",

@@ -185,3 +185,36 @@ fn mwir_labels_take_their_hour_from_the_log_or_are_skipped_with_a_warning() {
         }
     }
 }
+
+/// A log with a lidar alone: `tarn info` and the build name the lidar and nothing the log
+/// does not carry (no stereo cues, no camera labels, no stereo datasheet value assumed).
+#[test]
+fn a_lidar_only_log_is_reported_as_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("s.toml");
+    std::fs::write(&scene, SCENE).unwrap();
+    let p = |x: &std::path::Path| x.to_str().unwrap().to_string();
+    let sim = dir.path().join("sim");
+    assert!(tarn(&["simulate", &p(&scene), "--out", &p(&sim)])
+        .status
+        .success());
+    let log = p(&sim.join("log.mcap"));
+    let info = String::from_utf8(tarn(&["info", &log]).stdout).unwrap();
+    assert!(info.contains("sensors: lidar /lidar/points\n"), "{info}");
+    let out = dir.path().join("map");
+    let r = tarn(&["build", &log, "--out", &p(&out)]);
+    assert!(r.status.success());
+    let text = String::from_utf8(r.stdout).unwrap();
+    assert!(
+        !text.contains("stereo") && !text.contains("labels"),
+        "{text}"
+    );
+    let rep: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        rep["cues"],
+        serde_json::json!(["lidar", "reflectivity"]),
+        "{rep}"
+    );
+    assert!(rep["labels"].is_null(), "{rep}");
+}
