@@ -894,6 +894,19 @@ impl CueCounts {
     }
 }
 
+/// Cells per hazard code of `map.ply` (0 to 3).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct HazardCells {
+    /// Free to drive (0).
+    pub free: usize,
+    /// Shallow water within fording depth (1).
+    pub shallow_water: usize,
+    /// Deep or unknown-depth water (2).
+    pub deep_water: usize,
+    /// A geometric obstacle (3).
+    pub obstacle: usize,
+}
+
 /// The water in a hazard map.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct WaterSummary {
@@ -907,8 +920,8 @@ pub struct WaterSummary {
     pub depth_mean_m: Option<f64>,
     /// Greatest depth of those cells, metres; `None` when no depth was measured.
     pub depth_max_m: Option<f64>,
-    /// Cells per hazard code: free, shallow water, deep or unknown-depth water, obstacle.
-    pub hazard_cells: [usize; 4],
+    /// Cells per hazard code.
+    pub hazard_cells: HazardCells,
     /// Cells with any water evidence (probability above the prior).
     pub cells_with_evidence: usize,
     /// The water bodies ([`crate::water::WaterBody::report`]): area, volume, depth, the
@@ -927,7 +940,13 @@ impl WaterSummary {
         };
         let mut depths = Vec::new();
         for c in &map.cells {
-            s.hazard_cells[c.hazard as usize] += 1;
+            let h = &mut s.hazard_cells;
+            *match c.hazard {
+                crate::hazard::Hazard::Free => &mut h.free,
+                crate::hazard::Hazard::ShallowWater => &mut h.shallow_water,
+                crate::hazard::Hazard::DeepWater => &mut h.deep_water,
+                crate::hazard::Hazard::Obstacle => &mut h.obstacle,
+            } += 1;
             if c.water as f64 > fusion.prior + 1e-6 {
                 s.cells_with_evidence += 1;
             }

@@ -444,7 +444,7 @@ fn print_log_summary(r: &LogBuildReport) {
     for (name, p) in [("lidar", &r.lidar_points), ("stereo", &r.stereo_points)] {
         if p.points > 0 {
             println!(
-                "  {name} points {}: fused {}, below surface {}, missing {}, outside the window {}",
+                "  {name} points {}: fused {}, below surface {}, non-finite (missing returns) {}, outside the window {}",
                 p.points, p.fused, p.below, p.nonfinite, p.outside
             );
         }
@@ -559,7 +559,7 @@ pub fn print_water(w: &WaterSummary) {
     let h = &w.hazard_cells;
     println!(
         "  hazards: free {}, shallow water {}, deep or unknown-depth water {}, obstacle {}",
-        h[0], h[1], h[2], h[3]
+        h.free, h.shallow_water, h.deep_water, h.obstacle
     );
     for b in w.bodies.as_array().into_iter().flatten() {
         let num = |k: &str| b[k].as_f64();
