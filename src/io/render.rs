@@ -200,7 +200,7 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
         )
     };
     let (mw, mh) = (wc * s, hc * s);
-    let legend_h = 116;
+    let legend_h = LEGEND_H;
     let width = mw.max(640);
     let mut img = RgbImage::from_pixel(width, mh + legend_h, Rgb(BG));
 
@@ -284,43 +284,53 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
     }
 
     // Body labels: "#id" and the depth, centred above the body (below it when there is no
-    // room above), so the label never hides the water it names.
+    // room above), so the label never hides the water it names; the largest bodies first,
+    // and a label that would cover another or leave the map is not drawn.
     let text_scale = if mw >= 400 { 2 } else { 1 };
-    for b in &map.bodies {
-        let n = b.cells.len().max(1) as f64;
-        // Body position in pixels (cells divided by the cells per pixel).
-        let cx = b.cells.iter().map(|k| k.x as f64).sum::<f64>() / n;
-        let top = b.cells.iter().map(|k| k.y).max().unwrap_or(hi.y);
-        let bottom = b.cells.iter().map(|k| k.y).min().unwrap_or(lo.y);
-        let rows_above = ((hi.y as i128 - top as i128) / d64) as i64;
-        let rows_below = ((hi.y as i128 - bottom as i128) / d64) as i64;
-        let depth = match (b.depth.max_m, b.depth.unknown_cells) {
-            (Some(d), 0) => format!("max {d:.2} m"),
-            (Some(d), _) => format!("max {d:.2} m+?"),
-            (None, _) => "depth ?".to_string(),
-        };
-        let px = ((cx - lo.x as f64 + 0.5) / d as f64 * s as f64) as i64;
-        let line = 9 * text_scale as i64;
-        let above = rows_above * s as i64 - 2 * line - 2;
-        let y0 = if above >= 0 {
-            above
-        } else {
-            (rows_below + 1) * s as i64 + 2
-        };
-        for (row, text) in [format!("#{}", b.id), depth].iter().enumerate() {
-            let tw = (text.len() as u32 * 8 * text_scale) as i64;
-            let x = (px - tw / 2).clamp(0, (width as i64 - tw).max(0)) as u32;
-            let y = (y0 + row as i64 * line).clamp(0, mh.saturating_sub(8) as i64) as u32;
+    let line = 9 * text_scale as i64;
+    let wanted: Vec<LabelWanted> = map
+        .bodies
+        .iter()
+        .map(|b| {
+            let n = b.cells.len().max(1) as f64;
+            let cx = b.cells.iter().map(|k| k.x as f64).sum::<f64>() / n;
+            let top = b.cells.iter().map(|k| k.y).max().unwrap_or(hi.y);
+            let bottom = b.cells.iter().map(|k| k.y).min().unwrap_or(lo.y);
+            let rows_above = ((hi.y as i128 - top as i128) / d64) as i64;
+            let rows_below = ((hi.y as i128 - bottom as i128) / d64) as i64;
+            let depth = match (b.depth.max_m, b.depth.unknown_cells) {
+                (Some(d), 0) => format!("max {d:.2} m"),
+                (Some(d), _) => format!("max {d:.2} m+?"),
+                (None, _) => "depth ?".to_string(),
+            };
+            let lines = [format!("#{}", b.id), depth];
+            let tw =
+                lines.iter().map(|t| t.len()).max().unwrap_or(0) as i64 * 8 * text_scale as i64;
+            LabelWanted {
+                size: b.cells.len(),
+                x: ((cx - lo.x as f64 + 0.5) / d as f64 * s as f64) as i64 - tw / 2,
+                above: rows_above * s as i64 - 2 * line - 2,
+                below: (rows_below + 1) * s as i64 + 2,
+                w: tw + 2,
+                h: 2 * line,
+                lines,
+            }
+        })
+        .collect();
+    for (l, x, y) in place_labels(&wanted, width as i64, mh as i64) {
+        for (row, text) in l.lines.iter().enumerate() {
+            let tw = text.len() as u32 * 8 * text_scale;
+            let y = y as u32 + row as u32 * line as u32;
             // A dark box behind the text keeps it readable on any colour.
-            fill_rect(
+            fill_rect(&mut img, x as u32, y, tw + 2, 8 * text_scale + 2, [0, 0, 0]);
+            draw_text(
                 &mut img,
-                x.saturating_sub(1),
-                y.saturating_sub(1),
-                tw as u32 + 2,
-                8 * text_scale + 2,
-                [0, 0, 0],
+                x as u32 + 1,
+                y + 1,
+                text,
+                text_scale,
+                [255, 255, 255],
             );
-            draw_text(&mut img, x, y, text, text_scale, [255, 255, 255]);
         }
     }
 
@@ -361,6 +371,12 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
     }
     if has(Hazard::Obstacle) {
         items.push((OBSTACLE, "obstacle (step/slope)".into()));
+    }
+    if !map.bodies.is_empty() {
+        items.push((
+            [0, 0, 0],
+            "#id: water body, its deepest measured cell (+?: some depth unknown)".into(),
+        ));
     }
     let (mut lx, mut ly) = (8u32, mh + 8);
     for (colour, name) in &items {
@@ -435,6 +451,46 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
     img
 }
 
+/// A water body's label as it would be drawn: two lines of text in a box `w` × `h`
+/// pixels, at column `x` and at row `above` (over the body) or `below` (under it).
+struct LabelWanted {
+    size: usize,
+    x: i64,
+    above: i64,
+    below: i64,
+    w: i64,
+    h: i64,
+    lines: [String; 2],
+}
+
+/// Where the labels go: largest bodies first, each above its body or else below it, moved
+/// sideways into the picture, and left out where it would leave the map (`width` × `mh`
+/// pixels, the legend below excluded) or cover a label already placed.
+fn place_labels(wanted: &[LabelWanted], width: i64, mh: i64) -> Vec<(&LabelWanted, i64, i64)> {
+    let mut order: Vec<&LabelWanted> = wanted.iter().collect();
+    order.sort_by_key(|l| std::cmp::Reverse(l.size));
+    let mut placed: Vec<(&LabelWanted, i64, i64)> = Vec::new();
+    for l in order {
+        let x = l.x.clamp(0, (width - l.w).max(0));
+        let free = |y: i64| {
+            y >= 0
+                && y + l.h <= mh
+                && x + l.w <= width
+                && placed.iter().all(|(o, ox, oy)| {
+                    x + l.w <= *ox || *ox + o.w <= x || y + l.h <= *oy || *oy + o.h <= y
+                })
+        };
+        if let Some(y) = [l.above, l.below].into_iter().find(|&y| free(y)) {
+            placed.push((l, x, y));
+        }
+    }
+    placed
+}
+
+/// Height of the legend under the map, pixels: three rows of swatches, the colourbar, the
+/// scale bar and the map's size.
+const LEGEND_H: u32 = 134;
+
 /// Longest side of the map part of `map.png`, pixels.
 pub const MAP_PNG_MAX_SIDE: u32 = 4096;
 
@@ -453,6 +509,44 @@ pub fn write_map_png(path: &Path, map: &HazardMap, vehicle_path: &[[f64; 2]]) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Labels never cover each other or leave the map; the largest bodies get theirs first,
+    /// and a label with no room above its body goes below it.
+    #[test]
+    fn body_labels_do_not_overlap_and_the_largest_come_first() {
+        let label = |size: usize, x: i64, above: i64| LabelWanted {
+            size,
+            x,
+            above,
+            below: above + 60,
+            w: 80,
+            h: 36,
+            lines: [format!("#{size}"), "max 0.10 m".into()],
+        };
+        // Five small bodies crowded around one spot, one large one among them, one body
+        // at the map's top edge and one past its right edge.
+        let mut wanted: Vec<LabelWanted> = (0..5)
+            .map(|i| label(10 + i, 100 + 7 * i as i64, 100))
+            .collect();
+        wanted.push(label(500, 110, 104));
+        wanted.push(label(50, 300, -20));
+        wanted.push(label(40, 900, 200));
+        let placed = place_labels(&wanted, 640, 400);
+        assert_eq!(placed[0].0.size, 500);
+        for (i, (a, ax, ay)) in placed.iter().enumerate() {
+            assert!(*ax >= 0 && ax + a.w <= 640 && *ay >= 0 && ay + a.h <= 400);
+            for (b, bx, by) in &placed[i + 1..] {
+                let apart =
+                    ax + a.w <= *bx || bx + b.w <= *ax || ay + a.h <= *by || by + b.h <= *ay;
+                assert!(apart, "#{} and #{} overlap", a.size, b.size);
+            }
+        }
+        // The top-edge body is labelled below itself; the crowd keeps one or two labels.
+        let top = placed.iter().find(|p| p.0.size == 50).unwrap();
+        assert_eq!(top.2, 40);
+        assert!(placed.iter().any(|p| p.0.size == 40 && p.1 == 560));
+        assert!(placed.len() < wanted.len());
+    }
 
     #[test]
     fn png_of_an_empty_map_is_still_a_picture() {
@@ -502,7 +596,7 @@ mod tests {
         assert_eq!(px(0, 20), PATH, "path");
         assert_ne!(px(10, 20), PATH);
         // The colourbar is in the legend.
-        let legend = (img.height() - 116)..img.height();
+        let legend = (img.height() - LEGEND_H)..img.height();
         let ramp_end = ramp(1.0);
         assert!(legend
             .into_iter()
