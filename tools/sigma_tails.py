@@ -2,12 +2,17 @@
 """Where a map's published elevation σ misses: its dry ground cells in a range band from the
 vehicle's path, against the simulator's truth, broken down by σ and by the error's sign.
 
-    .venv/bin/python tools/sigma_tails.py SIM_DIR MAP_DIR LO HI
+    .venv/bin/python tools/sigma_tails.py SIM_DIR MAP_DIR LO HI [LIDAR_MAP_DIR]
 
 SIM_DIR is what `tarn simulate` wrote (truth.ply, truth.json), MAP_DIR what `tarn build`
 wrote (map.ply). A cell counts when the truth calls it ground and the map neither calls it
 water nor lacks a σ, as `tarn eval` counts `terrain_within_sigma`. The band is the
 distance from the nearest pose of the path.
+
+LIDAR_MAP_DIR, a map of the same log built from its lidar alone (`tarn build LOG --config
+lidar.toml --labels none`, lidar.toml holding only `[lidar]`), says of the cells beyond 3σ
+how many the lidar observed, and how far its elevation lies from the truth there: what
+gating the other points against the lidar could recover.
 """
 import json
 import sys
@@ -33,7 +38,7 @@ def read_ply(path):
         return np.frombuffer(f.read(n * dt.itemsize), dtype=dt, count=n)
 
 
-def main(sim, mapdir, lo, hi):
+def main(sim, mapdir, lo, hi, lidar_dir=None):
     truth = read_ply(f"{sim}/truth.ply")
     m = read_ply(f"{mapdir}/map.ply")
     res = json.load(open(f"{sim}/truth.json"))["resolution"]
@@ -67,6 +72,18 @@ def main(sim, mapdir, lo, hi):
     if out.any():
         print(f"beyond 3 sigma: {out.sum()} cells, map above the truth in {100 * np.mean(err[out] > 0):.0f} %, "
               f"|error| median {np.median(np.abs(err[out])):.3f} m")
+    if lidar_dir is not None and out.any():
+        lm = read_ply(f"{lidar_dir}/map.ply")
+        lat = dict(zip(keys(lm).tolist(), range(len(lm))))
+        li = np.array([lat.get(k, -1) for k in keys(m[band][out]).tolist()])
+        seen = li >= 0
+        print(f"of those, the lidar alone observed {seen.sum()}", end="")
+        if seen.any():
+            le = (lm["z"][li[seen]] - t["z"][band][out][seen]).astype(np.float64)
+            print(f", its |error| there median {np.median(np.abs(le)):.3f} m, "
+                  f"within 0.1 m in {100 * np.mean(np.abs(le) < 0.1):.0f} %")
+        else:
+            print()
     print("| sigma (m) | cells | within 1 sigma | within 3 sigma | RMS error (m) |")
     print("| --- | ---: | ---: | ---: | ---: |")
     edges = [0, 0.002, 0.005, 0.01, 0.03, 0.1, 1.0, np.inf]
@@ -78,6 +95,6 @@ def main(sim, mapdir, lo, hi):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 5:
+    if len(sys.argv) not in (5, 6):
         sys.exit(__doc__)
-    main(sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4]))
+    main(sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4]), *sys.argv[5:])
