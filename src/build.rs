@@ -1212,7 +1212,7 @@ pub fn build_log(
     if map.cells.is_empty() {
         let pts = |p: &IngestStats| {
             format!(
-                "{} points, {} fused, {} missing, {} outside the window",
+                "{} points, {} fused, {} non-finite, {} outside the window",
                 p.points, p.fused, p.nonfinite, p.outside
             )
         };

@@ -339,8 +339,10 @@ pub struct SensorLabelStats {
     /// (`ColourCheck`): no vote.
     pub colour_check_vetoed: u64,
     /// MWIR frames skipped for want of a local solar hour (no hour given, no longitude).
+    #[serde(default)]
     pub frames_no_hour: u64,
     /// MWIR frames whose solar hour came from their stamp and the longitude.
+    #[serde(default)]
     pub frames_hour_from_stamp: u64,
 }
 
@@ -374,6 +376,7 @@ pub struct FrameLabelsReport {
     /// What the MWIR camera contributed (`None`: not configured).
     pub mwir: Option<SensorLabelStats>,
     /// The earliest and latest local solar hour the MWIR images were classified at.
+    #[serde(default)]
     pub mwir_hours: Option<[f64; 2]>,
     /// Cell votes that fell outside the window (dropped).
     pub dropped: u64,
