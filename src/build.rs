@@ -1369,7 +1369,7 @@ pub fn sensors_of_log(
     summary: &crate::io::mcap_log::LogSummary,
 ) -> MapperConfig {
     use crate::project::LabelSensor;
-    let has = |t: &str| summary.topics.iter().any(|x| x.topic == t && x.count > 0);
+    let has = |t: &str| summary.has_messages(t);
     let mut c = cfg.clone();
     if !has(&log.lidar_topic) {
         c.lidar = None;

@@ -970,6 +970,11 @@ pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
 }
 
 impl LogSummary {
+    /// Whether the log has a message on `topic`.
+    pub fn has_messages(&self, topic: &str) -> bool {
+        self.topics.iter().any(|t| t.topic == topic && t.count > 0)
+    }
+
     /// From the (schema, message count) of each topic and the first and last log times.
     pub(crate) fn of(
         counts: BTreeMap<String, (String, u64)>,

@@ -160,7 +160,7 @@ pub fn info(
         println!("  {:<w$}  {:>8}  {}", t.topic, t.count, t.schema);
     }
     // The sensors the log has, on the topics a build reads them from.
-    let has = |t: &str| summary.topics.iter().any(|x| x.topic == t && x.count > 0);
+    let has = |t: &str| summary.has_messages(t);
     let sensors: Vec<String> = [
         ("lidar", &cfg.lidar_topic),
         ("stereo", &cfg.stereo_topic),
