@@ -746,6 +746,79 @@ impl HazardMap {
         }
         n
     }
+
+    /// The key of the cell under map position (x, y).
+    pub fn key_at(&self, x: f64, y: f64) -> CellKey {
+        crate::grid::key_of(self.resolution, x, y)
+    }
+
+    /// The observed cell under map position (x, y), if any: one query, a scan of the
+    /// cells. A planner asking many positions takes [`HazardMap::index`] once.
+    pub fn at(&self, x: f64, y: f64) -> Option<&MapCell> {
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        let key = self.key_at(x, y);
+        self.cells.iter().find(|c| c.key == key)
+    }
+
+    /// The cells and water bodies looked up by position, built once (linear in the cells)
+    /// for a map that does not change while the index lives.
+    pub fn index(&self) -> MapIndex<'_> {
+        let cells = self
+            .cells
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (c.key, i as u32))
+            .collect();
+        let bodies = self
+            .bodies
+            .iter()
+            .enumerate()
+            .flat_map(|(b, body)| body.cells.iter().map(move |&k| (k, b as u32)))
+            .collect();
+        MapIndex {
+            map: self,
+            cells,
+            bodies,
+        }
+    }
+}
+
+/// A [`HazardMap`] looked up by position ([`HazardMap::index`]): what a planner asks of a
+/// point it may drive over.
+#[derive(Debug, Clone)]
+pub struct MapIndex<'a> {
+    map: &'a HazardMap,
+    /// Cell key → position in `map.cells`.
+    cells: CellMap<u32>,
+    /// Cell key → position in `map.bodies`.
+    bodies: CellMap<u32>,
+}
+
+impl<'a> MapIndex<'a> {
+    /// The observed cell `key`, if any.
+    pub fn cell(&self, key: CellKey) -> Option<&'a MapCell> {
+        self.cells.get(&key).map(|&i| &self.map.cells[i as usize])
+    }
+
+    /// The observed cell under map position (x, y), if any (its class, hazard, water
+    /// probability, elevation, σ and depth).
+    pub fn at(&self, x: f64, y: f64) -> Option<&'a MapCell> {
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        self.cell(self.map.key_at(x, y))
+    }
+
+    /// The water body holding the cell under map position (x, y), if any.
+    pub fn body_at(&self, x: f64, y: f64) -> Option<&'a WaterBody> {
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        let k = self.map.key_at(x, y);
+        self.bodies.get(&k).map(|&b| &self.map.bodies[b as usize])
+    }
 }
 
 #[cfg(test)]

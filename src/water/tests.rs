@@ -4,7 +4,7 @@ use proptest::prelude::*;
 
 use super::*;
 use crate::grid::{CellStats, Evidence};
-use crate::hazard::{Class, Hazard, HazardMap};
+use crate::hazard::{Class, Hazard, HazardMap, MapCell};
 
 const RES: f64 = 0.1;
 
@@ -1152,4 +1152,48 @@ fn a_surface_that_does_not_reach_over_the_body_takes_the_far_shore() {
     let rms = one_body_surface_rms(&t, &truth, SurfaceSource::ShoreAndFarShore);
     eprintln!("a stream whose shore was measured along a third of it: surface RMS {rms:.4} m");
     assert!(rms <= 0.03, "{rms}");
+}
+
+#[test]
+fn a_planner_reads_the_map_by_position() {
+    let (t, _) = scene(50, pond(3.0, Some(0.25)));
+    let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
+    let idx = map.index();
+    // The pond's centre: water, in the one body, 0.25 m deep; its bank: dry ground.
+    let c = idx.at(0.05, 0.05).unwrap();
+    assert_eq!(c.class, Class::Water);
+    assert!((c.depth - 0.25).abs() < 0.02, "{}", c.depth);
+    assert_eq!(idx.body_at(0.05, 0.05).unwrap().id, 1);
+    let bank = idx.at(4.05, 0.05).unwrap();
+    assert_eq!(bank.class, Class::Ground);
+    assert!(idx.body_at(4.05, 0.05).is_none());
+    // Outside the map, and positions that are not positions.
+    for (x, y) in [
+        (100.0, 0.0),
+        (f64::NAN, 0.0),
+        (0.0, f64::INFINITY),
+        (1e300, -1e300),
+    ] {
+        assert!(idx.at(x, y).is_none() && map.at(x, y).is_none());
+        assert!(idx.body_at(x, y).is_none());
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    #[test]
+    fn the_index_and_the_scan_agree(x in -6.0f64..6.0, y in -6.0f64..6.0) {
+        static MAP: std::sync::OnceLock<HazardMap> = std::sync::OnceLock::new();
+        let map = MAP.get_or_init(|| {
+            let (t, _) = scene(50, pond(3.0, Some(0.25)));
+            HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap()
+        });
+        let a = map.at(x, y);
+        // The same record (by identity: a water cell's σ is NaN).
+        prop_assert_eq!(a.map(|c| c as *const MapCell), map.index().at(x, y).map(|c| c as *const MapCell));
+        // The cell found is the one under the point.
+        if let Some(c) = a {
+            prop_assert!((c.x - x).abs() <= 0.5 * RES + 1e-9 && (c.y - y).abs() <= 0.5 * RES + 1e-9);
+        }
+    }
 }
