@@ -12,8 +12,8 @@ use std::path::Path;
 use crate::io::frames::{FrameStream, LogConfig};
 use crate::io::mcap_log::LogReader;
 use crate::io::ros::{
-    camera_from_info, decode_image, pointcloud2_to_cloud, CameraInfoMsg, ImageMsg, PointCloud2Msg,
-    TfMessage,
+    camera_from_info, decode_image, pointcloud2_to_cloud, CameraInfoMsg, ImageMsg, NavSatFixMsg,
+    PointCloud2Msg, TfMessage, Wire,
 };
 use crate::io::tf::TfBuffer;
 
@@ -133,15 +133,16 @@ pub fn ros1_bag(data: &[u8]) -> bool {
     ok
 }
 
-/// One CDR message; the first byte chooses the type (TFMessage, PointCloud2, Image,
-/// CameraInfo), the rest is the serialized message. Decoded messages are converted the
+/// One CDR message; the first byte chooses the type (modulo 8: 0 and 4 TFMessage, 1 and 5
+/// PointCloud2, 2 and 6 Image, 3 CameraInfo, 7 NavSatFix), the rest is the serialized
+/// message. Decoded messages are converted the
 /// way [`FrameStream`] converts them.
 pub fn cdr(data: &[u8]) -> bool {
     let Some((&kind, buf)) = data.split_first() else {
         return false;
     };
-    match kind % 4 {
-        0 => match TfMessage::decode(buf) {
+    match kind % 8 {
+        0 | 4 => match TfMessage::decode(buf) {
             Ok(m) => {
                 let mut tf = TfBuffer::new();
                 for t in &m.transforms {
@@ -158,7 +159,7 @@ pub fn cdr(data: &[u8]) -> bool {
             }
             Err(_) => false,
         },
-        1 => match PointCloud2Msg::decode(buf) {
+        1 | 5 => match PointCloud2Msg::decode(buf) {
             Ok(m) => match pointcloud2_to_cloud(&m) {
                 Ok(c) => {
                     check_cloud(&c);
@@ -168,8 +169,13 @@ pub fn cdr(data: &[u8]) -> bool {
             },
             Err(_) => false,
         },
-        2 => match ImageMsg::decode(buf) {
+        2 | 6 => match ImageMsg::decode(buf) {
             Ok(m) => decode_image(&m).is_ok(),
+            Err(_) => false,
+        },
+        7 => match NavSatFixMsg::decode_wire(buf, Wire::Cdr) {
+            // A fix that is not a place on the globe is an error the build reports.
+            Ok(m) => m.position().is_ok(),
             Err(_) => false,
         },
         _ => match CameraInfoMsg::decode(buf) {
@@ -493,4 +499,44 @@ pub fn exports(data: &[u8]) -> bool {
     };
     exports_of(&map, true);
     !map.cells.is_empty()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::ros::{Endian, Header};
+
+    /// The corpus seed of the NavSatFix kind: a fix's payload behind the kind byte 7
+    /// (`TARN_WRITE_SEED=1 cargo test -p tarn-sim --lib nav_sat_fix` writes it).
+    fn nav_sat_fix_seed() -> Vec<u8> {
+        let m = NavSatFixMsg {
+            header: Header::new("gps", 1_700_000_000_000_000_000),
+            status: 0,
+            service: 1,
+            latitude: 30.6,
+            longitude: -96.3,
+            altitude: 100.0,
+            position_covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 4.0],
+            position_covariance_type: 2,
+        };
+        let mut v = vec![7];
+        v.extend(m.encode(Endian::Little));
+        v
+    }
+
+    #[test]
+    fn the_cdr_entry_reads_a_nav_sat_fix_and_the_corpus_holds_one() {
+        let seed = nav_sat_fix_seed();
+        assert!(cdr(&seed));
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/cdr/nav_sat_fix");
+        if std::env::var_os("TARN_WRITE_SEED").is_some() {
+            std::fs::write(&path, &seed).unwrap();
+        }
+        assert_eq!(std::fs::read(&path).unwrap(), seed, "{}", path.display());
+        // Not a place on the globe: decoded, and refused.
+        let mut far = seed.clone();
+        let lat_at = far.len() - 8 * 9 - 1 - 8 * 3;
+        far[lat_at..lat_at + 8].copy_from_slice(&1e9f64.to_le_bytes());
+        assert!(!cdr(&far));
+    }
 }
