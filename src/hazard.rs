@@ -88,6 +88,18 @@ pub enum Hazard {
     Obstacle = 3,
 }
 
+impl Hazard {
+    /// The hazard's name, as `report.json`'s `hazard_cells` names it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Hazard::Free => "free",
+            Hazard::ShallowWater => "shallow_water",
+            Hazard::DeepWater => "deep_water",
+            Hazard::Obstacle => "obstacle",
+        }
+    }
+}
+
 /// One observed cell of the map.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MapCell {

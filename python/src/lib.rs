@@ -65,9 +65,18 @@ const LAYERS: [&str; 8] = [
 #[pyclass(module = "tarn", frozen)]
 struct Map {
     map: HazardMap,
+    /// Cell key → (its record, its water body), built on the first `at`.
+    index: std::sync::OnceLock<std::collections::HashMap<CellKey, (u32, Option<u32>)>>,
 }
 
 impl Map {
+    fn new(map: HazardMap) -> Self {
+        Map {
+            map,
+            index: std::sync::OnceLock::new(),
+        }
+    }
+
     /// Inclusive cell-key bounds, `(lo, hi)`; an empty map has a 0 × 0 grid at key 0.
     fn bounds(&self) -> (CellKey, CellKey) {
         self.map
@@ -178,6 +187,46 @@ impl Map {
                 )))
             }
         })
+    }
+
+    /// What the map says of map position `(x, y)`: a dict of its cell (`class` and
+    /// `hazard` by name, `water` probability, `elevation`, `sigma`, `depth`, and `body`,
+    /// the id of the water body holding it, or None), or None where no cell was observed.
+    /// The first call indexes the cells; every later one is a lookup.
+    fn at<'py>(&self, py: Python<'py>, x: f64, y: f64) -> PyResult<Option<Bound<'py, PyDict>>> {
+        if !(x.is_finite() && y.is_finite()) {
+            return Ok(None);
+        }
+        let index = self.index.get_or_init(|| {
+            let mut ix: std::collections::HashMap<CellKey, (u32, Option<u32>)> = self
+                .map
+                .cells
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (c.key, (i as u32, None)))
+                .collect();
+            for b in &self.map.bodies {
+                for k in &b.cells {
+                    if let Some(e) = ix.get_mut(k) {
+                        e.1 = Some(b.id);
+                    }
+                }
+            }
+            ix
+        });
+        let Some(&(i, body)) = index.get(&self.map.key_at(x, y)) else {
+            return Ok(None);
+        };
+        let c = &self.map.cells[i as usize];
+        let d = PyDict::new(py);
+        d.set_item("class", c.class.name())?;
+        d.set_item("hazard", c.hazard.name())?;
+        d.set_item("water", c.water)?;
+        d.set_item("elevation", c.z)?;
+        d.set_item("sigma", c.elevation_std)?;
+        d.set_item("depth", c.depth)?;
+        d.set_item("body", body)?;
+        Ok(Some(d))
     }
 
     /// The observed cells' keys, an `(N, 2)` int64 array of `(kx, ky)` in the map's order.
@@ -460,7 +509,7 @@ fn finish(py: Python<'_>, tiles: PyRef<'_, TileSet>, config: Option<PathBuf>) ->
     let cfg = config_of(config)?;
     let t = &tiles.tiles;
     let map = py.detach(|| finish_tiles(t, &cfg)).map_err(err)?;
-    Ok(Map { map })
+    Ok(Map::new(map))
 }
 
 /// The map of one log, as `tarn build LOG` makes it (the same cells, bit for bit).
@@ -486,7 +535,7 @@ fn build_many(py: Python<'_>, paths: Vec<PathBuf>, config: Option<PathBuf>) -> P
             finish_tiles(&all, &mapper)
         })
         .map_err(err)?;
-    Ok(Map { map })
+    Ok(Map::new(map))
 }
 
 /// The water stage of one region of a merged map (`finish_region`): the records and
@@ -581,7 +630,7 @@ fn finish_region(
 fn join_regions(py: Python<'_>, regions: Vec<PyRef<'_, Region>>) -> PyResult<Map> {
     let parts: Vec<RegionMap> = regions.iter().map(|r| r.region.clone()).collect();
     let map = py.detach(|| core_join_regions(parts)).map_err(err)?;
-    Ok(Map { map })
+    Ok(Map::new(map))
 }
 
 /// A map read back from a build's folder (its `map.ply`; no water bodies).
@@ -595,7 +644,7 @@ fn read_map(py: Python<'_>, dir: PathBuf) -> PyResult<Map> {
     let map = py
         .detach(|| tarn::io::mapfile::read_map_ply(&p))
         .map_err(err)?;
-    Ok(Map { map })
+    Ok(Map::new(map))
 }
 
 /// One frame of a log: the scan, the matched stereo cloud and images, with poses.
@@ -809,9 +858,7 @@ impl Mapper {
             .mapper
             .as_ref()
             .ok_or_else(|| TarnError::new_err("the mapper was finished"))?;
-        Ok(Map {
-            map: (*m.hazard_map()).clone(),
-        })
+        Ok(Map::new((*m.hazard_map()).clone()))
     }
 
     /// The cells that have left the window so far, as a `TileSet`, which the mapper then
@@ -830,7 +877,7 @@ impl Mapper {
     fn finish(&mut self, py: Python<'_>) -> PyResult<Map> {
         let m = self.take()?;
         let (_, map) = py.detach(|| m.finish_map()).map_err(err)?;
-        Ok(Map { map })
+        Ok(Map::new(map))
     }
 
     /// Ends the run: everything the mapper saw as a `TileSet`, for merging with others.

@@ -37,6 +37,9 @@ class Map:
         """A 2-D layer; unobserved cells NaN (float layers), 0 (class, hits, below), 255
         (hazard). ``hits`` and ``below`` are 0 in a map read from map.ply."""
     def keys(self) -> npt.NDArray[np.int64]: ...
+    def at(self, x: float, y: float) -> Optional[dict[str, object]]:
+        """The cell under map position (x, y): class, hazard, water, elevation, sigma,
+        depth and body (its water body's id, or None); None where nothing was observed."""
     def write(self, dir: _Path) -> None:
         """map.ply, terrain.ply, water.ply and map.png into ``dir``."""
     def ply_bytes(self) -> bytes:

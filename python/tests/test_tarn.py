@@ -111,6 +111,22 @@ def test_layers(one_process):
         m.layer("nope")
 
 
+def test_a_planner_asks_a_position(one_process):
+    m = one_process
+    keys, cls, z = m.keys(), m.layer("class"), m.layer("elevation")
+    kx, ky = m.key_origin
+    water = keys[cls[keys[:, 1] - ky, keys[:, 0] - kx] == 2][0]
+    dry = keys[cls[keys[:, 1] - ky, keys[:, 0] - kx] == 1][0]
+    for k, name in [(water, "water"), (dry, "ground")]:
+        x, y = (k + 0.5) * m.resolution
+        c = m.at(x, y)
+        assert c["class"] == name
+        assert c["elevation"] == z[k[1] - ky, k[0] - kx]
+    assert m.at(*((water + 0.5) * m.resolution))["body"] in [b["id"] for b in m.bodies]
+    assert m.at(*((dry + 0.5) * m.resolution))["body"] is None
+    assert m.at(1e12, 0.0) is None and m.at(float("nan"), 0.0) is None
+
+
 def calibrated_mapper(log):
     """A mapper that measured the sensors' noise on the log's first frames and holds it,
     as an offline build does before it maps."""
