@@ -114,7 +114,7 @@ impl CameraModel {
     }
 
     /// The plumb_bob model's fold radius ([`plumb_bob_fold_radius`]); infinite for the others.
-    fn fold_radius(&self) -> f64 {
+    pub(crate) fn fold_radius(&self) -> f64 {
         match self.distortion {
             Distortion::PlumbBob([k1, k2, _, _, k3]) => plumb_bob_fold_radius(k1, k2, k3),
             _ => f64::INFINITY,

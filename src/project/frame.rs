@@ -22,6 +22,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::surface::GridSurface;
+use super::zbuffer::ZBuffer;
 use crate::classify::horizon::GroundGeometry;
 use crate::classify::lut::ColorLut;
 use crate::classify::thermal::{classify_mwir, classify_swir, MwirConfig, SwirConfig};
@@ -85,12 +86,43 @@ pub struct FrameLabelConfig {
     /// Cells whose elevation σ bound exceeds this (metres) are holes to the ray march
     /// ([`GridSurface::from_grid_gated`]); infinity keeps every observed cell.
     pub surface_max_std: f64,
+    /// How a pixel without a stereo point finds its cell.
+    pub sampler: Sampler,
     /// Check colour water against the sky it would reflect ([`reflection_check`]), reading
     /// the image with this encoding; `None`: no check.
     pub reflection_check: Option<Encoding>,
     /// Check colour water against where the lidar found the surface dry or wet
     /// (`ColourCheck`).
     pub colour_check: bool,
+}
+
+/// How the label stage finds where a pixel's ray meets the map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Sampler {
+    /// Each sampled pixel's ray marched over the map's elevations ([`GridSurface`]) from
+    /// the camera; a water pixel crossing a hole is placed where it drops to the hole's
+    /// lower rim.
+    March,
+    /// The same march, started where a z-buffer of the map (drawn into the image once
+    /// per frame) says each ray first meets it: the same votes, a few steps per ray.
+    #[default]
+    #[serde(alias = "z_buffer")]
+    Zbuffer,
+}
+
+impl std::str::FromStr for Sampler {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim() {
+            "march" => Ok(Sampler::March),
+            "zbuffer" | "z_buffer" => Ok(Sampler::Zbuffer),
+            o => Err(Error::invalid(
+                "label sampler",
+                format!("unknown sampler {o:?} (march, zbuffer)"),
+            )),
+        }
+    }
 }
 
 /// How an 8-bit colour image encodes radiance.
@@ -130,6 +162,7 @@ impl Default for FrameLabelConfig {
             max_range: 40.0,
             stereo_max_range: 10.0,
             surface_max_std: 0.1,
+            sampler: Sampler::default(),
             reflection_check: Some(Encoding::Srgb),
             colour_check: true,
         }
@@ -223,6 +256,8 @@ pub struct LabelsConfig {
     /// Cells whose elevation σ bound (`CellStats::range_bound_std_m`) exceeds this are
     /// holes to the ray march (m).
     pub surface_max_std_m: f64,
+    /// How a pixel finds its cell: `zbuffer` (the default) or `march`; the same votes.
+    pub sampler: Sampler,
     /// Veto colour water that is brighter than a reflection of the sky it faces could be
     /// ([`reflection_check`]).
     pub reflection_check: bool,
@@ -245,6 +280,7 @@ impl Default for LabelsConfig {
             wide_rows: f.wide_rows,
             max_range_m: f.max_range,
             surface_max_std_m: f.surface_max_std,
+            sampler: f.sampler,
             reflection_check: true,
             encoding: Encoding::default(),
             colour_check: true,
@@ -275,6 +311,7 @@ impl LabelsConfig {
             wide_rows: self.wide_rows,
             max_range: self.max_range_m,
             surface_max_std: self.surface_max_std_m,
+            sampler: self.sampler,
             reflection_check: self.reflection_check.then_some(self.encoding),
             colour_check: self.colour_check,
             ..FrameLabelConfig::default()
@@ -445,6 +482,8 @@ pub struct FrameLabels {
     colour_check: ColourCheck,
     /// Per-pixel storage of the last frame, reused.
     bufs: PixelBuffers,
+    /// The z-buffer sampler's storage ([`Sampler::Zbuffer`]).
+    zbuf: ZBuffer,
 }
 
 /// The label stage's per-pixel buffers, kept from frame to frame so that a frame allocates
@@ -987,6 +1026,7 @@ impl FrameLabels {
             raster: Vec::new(),
             colour_check: ColourCheck::default(),
             bufs: PixelBuffers::default(),
+            zbuf: ZBuffer::default(),
         })
     }
 
@@ -996,6 +1036,7 @@ impl FrameLabels {
         self.tally.capacity() * std::mem::size_of::<(u32, u32, f64)>()
             + self.touched.capacity() * std::mem::size_of::<u32>()
             + self.raster.capacity() * std::mem::size_of::<f32>()
+            + self.zbuf.heap_bytes()
     }
 
     /// Classifies the frame's configured images, projects the labels and adds one vote per
@@ -1183,6 +1224,11 @@ impl FrameLabels {
         }
         let (rows, cols) = (&buf.rows, &buf.cols);
         let (nr, nc) = (rows.len(), cols.len());
+        let zbuf = (self.cfg.sampler == Sampler::Zbuffer).then(|| {
+            self.zbuf
+                .draw(surface, camera, cam_to_map, map_rays, rows, cols, max_range);
+            &self.zbuf
+        });
         // Per sampled pixel: its hit, whether it is water (`None`: no vote), and the water
         // level it gives (see `tighten_hole_levels`); rows in parallel, into the buffers
         // of the last frame.
@@ -1195,9 +1241,10 @@ impl FrameLabels {
             .par_chunks_mut(nc.max(1))
             .zip(buf.counts[..nr].par_iter_mut())
             .zip(rows.par_iter())
-            .for_each(|((out, n), &y)| {
+            .enumerate()
+            .for_each(|(r, ((out, n), &y))| {
                 // n: via point, via ray, no hit, beyond reach
-                for (slot, &x) in out.iter_mut().zip(cols) {
+                for (ci, (slot, &x)) in out.iter_mut().zip(cols).enumerate() {
                     *slot = (|| {
                         let i = y * w + x;
                         let water = match labels.data[i] {
@@ -1215,9 +1262,23 @@ impl FrameLabels {
                                 }
                             }
                         }
+                        // With the z-buffer, the march starts where the ray first meets
+                        // the drawn map; a ray that meets nothing drawn meets no ground, and
+                        // only water (placed in a hole at its near rim's level) is marched.
+                        let mut after = 0.0;
+                        if let Some(zb) = zbuf {
+                            match zb.first(r * nc + ci) {
+                                Some(t) => after = t,
+                                None if water => {}
+                                None => {
+                                    n[2] += 1;
+                                    return None;
+                                }
+                            }
+                        }
                         let cast = map_rays[i].and_then(|d| {
                             surface
-                                .cast_through_holes(&origin, &d, max_range)
+                                .cast_through_holes_after(&origin, &d, max_range, after)
                                 .map(|h| (d, h))
                         });
                         // A hole beyond the dry reach is explained by range alone.

@@ -18,10 +18,11 @@
 
 pub mod frame;
 pub mod surface;
+mod zbuffer;
 
 pub use frame::{
     reflection_check, Encoding, FrameLabelConfig, FrameLabels, FrameLabelsReport, LabelSensor,
-    LabelsConfig, MwirLabelConfig,
+    LabelsConfig, MwirLabelConfig, Sampler,
 };
 pub use surface::GridSurface;
 

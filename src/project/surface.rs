@@ -102,6 +102,11 @@ impl GridSurface {
         Self::with_blocks(n, grid.resolution(), grid.origin(), z)
     }
 
+    /// The elevations, row-major from the window's lower-left key (NaN: none).
+    pub(crate) fn raster(&self) -> &[f32] {
+        &self.z
+    }
+
     /// The raster's storage, for [`Self::from_grid_gated_in`].
     pub(crate) fn into_raster(self) -> Vec<f32> {
         self.z
@@ -235,6 +240,20 @@ impl GridSurface {
         dir: &Vector3<f64>,
         max_range: f64,
     ) -> Option<(Point3<f64>, usize, Option<f64>)> {
+        self.cast_through_holes_after(origin, dir, max_range, 0.0)
+    }
+
+    /// [`Self::cast_through_holes`] for a ray known to meet nothing before `t_after` along
+    /// it (the label stage's z-buffer says so): the march starts from a little before
+    /// `t_after`, with the rim level it would have carried there (the last observed cell
+    /// it passed, found by walking back), and gives what the whole march gives.
+    pub(crate) fn cast_through_holes_after(
+        &self,
+        origin: &Point3<f64>,
+        dir: &Vector3<f64>,
+        max_range: f64,
+        t_after: f64,
+    ) -> Option<(Point3<f64>, usize, Option<f64>)> {
         let horiz = dir.xy().norm();
         if horiz.is_nan() || horiz <= 1e-9 || !origin.coords.iter().all(|v| v.is_finite()) {
             return None;
@@ -246,12 +265,37 @@ impl GridSurface {
         // Where the ray entered the current hole (after an observed rim), if it is in one.
         let mut entry: Option<f64> = None;
         let mut was_inside = false;
+        let mut s = 0;
+        // Resume at sample `s0`, two cells before `t_after` (what the caller found the ray
+        // meeting may be a smoother surface than the march's flat cells, which a ray can
+        // meet up to a cell sooner): the state the march carries there is the last
+        // observed sample's level, and a hole entered after it if it is not `s0`.
+        let s0 = (floor_i64(t_after / dt) - 4).clamp(0, steps as i64) as usize;
+        if s0 > 0 {
+            let mut k = s0;
+            while k > 0 {
+                let p = sample(origin, dir, dt, k);
+                match self.index_of(p.x, p.y) {
+                    Some(c) if !self.z[c].is_nan() => {
+                        level = self.z[c] as f64;
+                        entry = (k < s0).then_some(k as f64 * dt);
+                        break;
+                    }
+                    Some(_) => was_inside = true,
+                    None if was_inside => break,
+                    None => {}
+                }
+                k -= 1;
+            }
+            let p = sample(origin, dir, dt, s0);
+            was_inside |= self.index_of(p.x, p.y).is_some();
+            s = s0;
+        }
         // The block the ray was last found to dip below the top of: no skipping there.
         let mut low = usize::MAX;
         let mut low_super = usize::MAX;
         // Magnitude of the heights and times compared, for the rounding margin.
         let scale = 1.0 + origin.z.abs() + dir.z.abs() * (steps as f64 * dt);
-        let mut s = 0;
         while s < steps {
             s += 1;
             let t = s as f64 * dt;

@@ -100,6 +100,11 @@ pub struct BuildArgs {
     /// (far stereo-only cells); `inf` keeps every cell [default: 0.1].
     #[arg(long)]
     pub label_surface_max_std: Option<f64>,
+    /// (log) How a pixel finds its cell: `zbuffer` (the march started where the map drawn
+    /// into the image says the ray meets it) or `march` (from the camera); the same votes
+    /// [default: zbuffer].
+    #[arg(long)]
+    pub label_sampler: Option<String>,
     /// (log) Publish the window's hazard map after every frame, as the vehicle does, and
     /// time it (the `water` stage); without it the water stage runs once at the end. The
     /// map is the same.
@@ -144,6 +149,7 @@ impl BuildArgs {
             label_wide_rows: false,
             label_max_range: None,
             label_surface_max_std: None,
+            label_sampler: None,
             per_frame_maps: false,
             water_prior: None,
             json: false,
@@ -161,7 +167,8 @@ fn apply_label_args(a: &BuildArgs, cfg: &mut MapperConfig) -> anyhow::Result<()>
         || a.label_stride.is_some()
         || a.label_wide_rows
         || a.label_max_range.is_some()
-        || a.label_surface_max_std.is_some();
+        || a.label_surface_max_std.is_some()
+        || a.label_sampler.is_some();
     if !given {
         return Ok(());
     }
@@ -201,6 +208,9 @@ fn apply_label_args(a: &BuildArgs, cfg: &mut MapperConfig) -> anyhow::Result<()>
     }
     if let Some(v) = a.label_surface_max_std {
         l.surface_max_std_m = v;
+    }
+    if let Some(v) = &a.label_sampler {
+        l.sampler = v.parse().context("--label-sampler")?;
     }
     anyhow::ensure!(
         !l.sensors.is_empty(),
