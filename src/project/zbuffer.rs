@@ -270,7 +270,6 @@ impl ZBuffer {
             * 1.2
             + 0.25;
         let r_max = camera.fold_radius();
-        let range2 = reach * reach;
         let mut bufs = std::mem::take(&mut self.t);
         let this = &*self;
         let rot = to_cam.rotation.to_rotation_matrix();
@@ -297,10 +296,9 @@ impl ZBuffer {
             let mut out = vec![f32::NAN; pw * ph];
             for j in 0..hh {
                 for i in 0..w {
-                    let (v, o) = (h[j * w + i], &mut out[(j / 2) * pw + i / 2]);
-                    if v > *o || o.is_nan() {
-                        *o = if o.is_nan() { v } else { o.max(v) };
-                    }
+                    // `max` passes over NaN (not drawn) on either side.
+                    let o = &mut out[(j / 2) * pw + i / 2];
+                    *o = o.max(h[j * w + i]);
                 }
             }
             (out, pw, ph)
@@ -355,7 +353,7 @@ impl ZBuffer {
                     let dx = x - origin.x;
                     let d2 = dx * dx + dy2;
                     let off = ([f64::NAN; 2], Point3::new(x, y, f64::NAN));
-                    if d2 > range2 + (2.0 * cres) * (2.0 * cres + 2.0 * reach)
+                    if d2 > (reach + 2.0 * cres) * (reach + 2.0 * cres)
                         || d2 < rmin * rmin
                         || d2 > rmax * rmax
                         || wedge.as_ref().is_some_and(|w| !w.contains(x, y))
