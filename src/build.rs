@@ -628,6 +628,38 @@ mod tests {
         assert!(lines[1].starts_with("frame at 100.400000 s: lidar cues"));
     }
 
+    /// Compiled label models given without a `[labels]` section (a library user's) label
+    /// the log's cameras; only the sensors the log lacks are dropped.
+    #[test]
+    fn compiled_label_models_alone_keep_the_cameras_the_log_has() {
+        use crate::classify::{color::RuleClassifier, lut::ColorLut};
+        use crate::io::mcap_log::LogSummary;
+        let log = crate::io::frames::LogConfig::default();
+        let summary = |topics: &[&str]| {
+            LogSummary::of(
+                topics
+                    .iter()
+                    .map(|t| (t.to_string(), ("schema".to_string(), 3)))
+                    .collect(),
+                Some(0),
+                Some(1),
+                Vec::new(),
+            )
+        };
+        let cfg = MapperConfig {
+            labels: None,
+            label_models: Some(crate::project::FrameLabelConfig {
+                colour: Some(ColorLut::compile(&RuleClassifier::default(), 5).unwrap()),
+                ..Default::default()
+            }),
+            ..MapperConfig::default()
+        };
+        let with = sensors_of_log(&cfg, &log, &summary(&[&log.image_topic]));
+        assert!(with.label_models.is_some_and(|m| m.colour.is_some()));
+        let without = sensors_of_log(&cfg, &log, &summary(&[&log.lidar_topic]));
+        assert!(without.label_models.is_none());
+    }
+
     fn ramp(n: usize, side: f64) -> PointCloud {
         let mut pts = Vec::new();
         for j in 0..n {
@@ -1385,8 +1417,10 @@ pub fn sensors_of_log(
         });
         if l.sensors.is_empty() {
             c.labels = None;
+            c.label_models = None;
         }
     }
+    // Compiled models stand for `labels` or are given alone (a library user's, the bench's).
     if let Some(m) = &mut c.label_models {
         if !has(&log.image_topic) {
             m.colour = None;
@@ -1397,9 +1431,9 @@ pub fn sensors_of_log(
         if !has(&log.mwir_topic) {
             m.mwir = None;
         }
-    }
-    if c.labels.is_none() {
-        c.label_models = None;
+        if m.colour.is_none() && m.swir.is_none() && m.mwir.is_none() {
+            c.label_models = None;
+        }
     }
     c
 }
