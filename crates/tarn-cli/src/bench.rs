@@ -138,6 +138,13 @@ pub struct BenchReport {
     /// Log duration over the time `build::build_log` takes for the whole log (median).
     pub offline_x_realtime: f64,
     pub offline_build_s: f64,
+    /// The same offline build with no water cue and no labels (`--cues none --labels
+    /// none`), median seconds, and the ratio of the two (target ≤ 2).
+    pub offline_bare_build_s: f64,
+    pub offline_over_bare: f64,
+    /// CPU seconds (user and system, every thread) over wall seconds of the offline build:
+    /// the cores it kept busy (median over repetitions; `None` off unix).
+    pub offline_cores_busy: Option<f64>,
     pub log_duration_s: f64,
     /// Peak resident memory of this process (VmHWM), bytes; `None` where /proc is absent.
     pub peak_memory_bytes: Option<u64>,
@@ -204,6 +211,27 @@ pub fn peak_memory_bytes() -> Option<u64> {
     let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
+}
+
+/// CPU seconds this process has used so far, user and system, every thread (getrusage);
+/// `None` off unix.
+pub fn cpu_seconds() -> Option<f64> {
+    #[cfg(unix)]
+    {
+        // SAFETY: getrusage writes one `rusage` into the zeroed struct it is given.
+        unsafe {
+            let mut u: libc::rusage = std::mem::zeroed();
+            if libc::getrusage(libc::RUSAGE_SELF, &mut u) == 0 {
+                let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+                return Some(t(u.ru_utime) + t(u.ru_stime));
+            }
+        }
+        None
+    }
+    #[cfg(not(unix))]
+    {
+        None
+    }
 }
 
 /// Minor page faults of this process so far (getrusage `ru_minflt`); `None` off unix.
@@ -582,7 +610,18 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         per_frame_maps: true,
         ..log_cfg.clone()
     };
+    // The same log with no water cue and no labels: the elevation map alone, the reference
+    // of the offline ratio.
+    let bare_cfg = {
+        let mut c = log_cfg.clone();
+        c.mapper.labels = None;
+        c.mapper.label_models = None;
+        c.mapper.set_cues("none")?;
+        c
+    };
     let mut builds = Vec::new();
+    let mut bare_builds = Vec::new();
+    let mut cores = Vec::new();
     let mut duration = 0.0;
     // Per stage of `Mapper::update` (and "total"), its median over the log's frames in each
     // repetition.
@@ -590,10 +629,17 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let mut build_faults = Vec::new();
     for r in 0..reps.min(3) {
         let out = tmp.path().join(format!("build{r}"));
-        let t0 = Instant::now();
+        let (t0, c0) = (Instant::now(), cpu_seconds());
         let rep = build_log(&log, &out, &log_cfg, &mut |_, _| {})?;
-        builds.push(t0.elapsed().as_secs_f64());
+        let wall = t0.elapsed().as_secs_f64();
+        builds.push(wall);
+        if let (Some(a), Some(b)) = (c0, cpu_seconds()) {
+            cores.push((b - a) / wall);
+        }
         duration = rep.log_duration_s;
+        let t0 = Instant::now();
+        build_log(&log, &out, &bare_cfg, &mut |_, _| {})?;
+        bare_builds.push(t0.elapsed().as_secs_f64());
         let f0 = minor_faults();
         let rep = build_log(&log, &out, &online_cfg, &mut |_, _| {})?;
         if let (Some(a), Some(b)) = (f0, minor_faults()) {
@@ -607,6 +653,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         }
     }
     let build_s = median(&mut builds);
+    let bare_build_s = median(&mut bare_builds);
     // The full frame is what `Mapper::update` takes (median over the log's frames, then
     // over the repetitions); the stage medians above say where that time goes.
     let mut frame_stages_ms: BTreeMap<String, f64> = frame_parts
@@ -645,6 +692,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         snapshot_cells_changed_or_beside: churn.map(|c| c.1),
         offline_x_realtime: duration / build_s,
         offline_build_s: build_s,
+        offline_bare_build_s: bare_build_s,
+        offline_over_bare: build_s / bare_build_s,
+        offline_cores_busy: (!cores.is_empty()).then(|| median(&mut cores)),
         log_duration_s: duration,
         peak_memory_bytes: peak_memory_bytes(),
         bytes_per_cell: RollingGrid::bytes_per_cell(),
@@ -719,6 +769,45 @@ impl BenchReport {
             f(self.snapshot_cells_changed, 0.01, 1),
             f(self.snapshot_cells_changed_or_beside, 0.01, 1),
         ));
+        s.push_str(&self.targets_markdown());
+        s
+    }
+
+    /// The ratios the speed targets are stated in, each beside its target, all from this
+    /// run.
+    pub fn targets_markdown(&self) -> String {
+        let f = |v: Option<f64>, d: usize| v.map_or("–".to_string(), |v| format!("{v:.d$}"));
+        let rows = [
+            (
+                "offline build / the same log with `--cues none --labels none`",
+                format!(
+                    "{} ({:.2} s / {:.2} s)",
+                    f(Some(self.offline_over_bare), 2),
+                    self.offline_build_s,
+                    self.offline_bare_build_s
+                ),
+                "≤ 2.0",
+            ),
+            (
+                "ingest of the frame's scan, one thread / plain binning",
+                f(self.ingest_vs_plain_scan, 2),
+                "≥ 0.5",
+            ),
+            (
+                "cores kept busy by the offline build",
+                format!("{} of {}", f(self.offline_cores_busy, 2), self.threads),
+                "≥ 1.8 of 2",
+            ),
+            (
+                "bytes per window cell, every per-cell allocation",
+                format!("{:.0}", self.bytes_per_cell_all),
+                "≤ 64",
+            ),
+        ];
+        let mut s = String::from("\n| ratio (this run) | value | target |\n| --- | ---: | --- |\n");
+        for (what, v, target) in rows {
+            s.push_str(&format!("| {what} | {v} | {target} |\n"));
+        }
         s
     }
 }
@@ -768,6 +857,17 @@ mod tests {
         assert!(r.stages_ms["cue_stereo"] > 0.0);
         assert!(r.frame_ms.is_finite() && r.frame_ms > 0.0, "{}", r.frame_ms);
         assert!(r.ingest_points_per_s > 0.0 && r.offline_x_realtime > 0.0);
+        assert!(r.offline_over_bare.is_finite() && r.offline_over_bare > 0.0);
+        assert!((r.offline_over_bare - r.offline_build_s / r.offline_bare_build_s).abs() < 1e-12);
+        // CPU time over wall time: some of a core at least, never more than the threads
+        // (and a little for the clocks' granularity).
+        #[cfg(unix)]
+        assert!(r
+            .offline_cores_busy
+            .is_some_and(|c| c > 0.0 && c <= r.threads as f64 + 0.25));
+        assert!(r
+            .markdown()
+            .contains("cores kept busy by the offline build"));
         assert!(r.log_duration_s > 0.0);
         assert_eq!(r.bytes_per_cell, RollingGrid::bytes_per_cell());
         // Every per-cell allocation counts: at least the layers, and the owners add up.
@@ -793,6 +893,7 @@ mod tests {
             "frame_ms_method",
             "classify_ms_640x480",
             "offline_x_realtime",
+            "offline_over_bare",
             "peak_memory_bytes",
             "bytes_per_cell",
             "stages_ms",
