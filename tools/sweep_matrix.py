@@ -27,7 +27,7 @@ import tempfile
 
 SCENES = "default pond_bush fig4_reflections puddles stream_slope reservoir_night snow_ice dry_decoys dry_paved vertical_scanner"
 RIGS = "small wide lidar_camera stereo_camera"
-KNOBS = "label-stride=1,3,4 label-wide-rows label-surface-max-std=0.05,inf resolution=0.2 window-cells=300,600"
+KNOBS = "label-stride=1,3,4 label-wide-rows label-surface-max-std=0.05,inf label-sampler=march resolution=0.2 window-cells=300,600"
 
 ap = argparse.ArgumentParser()
 ap.add_argument("--out", default="out/matrix")
