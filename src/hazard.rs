@@ -777,22 +777,9 @@ impl HazardMap {
     /// The cells and water bodies looked up by position, built once (linear in the cells)
     /// for a map that does not change while the index lives.
     pub fn index(&self) -> MapIndex<'_> {
-        let cells = self
-            .cells
-            .iter()
-            .enumerate()
-            .map(|(i, c)| (c.key, i as u32))
-            .collect();
-        let bodies = self
-            .bodies
-            .iter()
-            .enumerate()
-            .flat_map(|(b, body)| body.cells.iter().map(move |&k| (k, b as u32)))
-            .collect();
         MapIndex {
             map: self,
-            cells,
-            bodies,
+            lookup: MapLookup::of(self),
         }
     }
 }
@@ -802,34 +789,76 @@ impl HazardMap {
 #[derive(Debug, Clone)]
 pub struct MapIndex<'a> {
     map: &'a HazardMap,
+    lookup: MapLookup,
+}
+
+impl<'a> MapIndex<'a> {
+    /// The observed cell `key`, if any.
+    pub fn cell(&self, key: CellKey) -> Option<&'a MapCell> {
+        self.lookup.cell(self.map, key)
+    }
+
+    /// The observed cell under map position (x, y), if any (its class, hazard, water
+    /// probability, elevation, σ and depth).
+    pub fn at(&self, x: f64, y: f64) -> Option<&'a MapCell> {
+        self.lookup.at(self.map, x, y)
+    }
+
+    /// The water body holding the cell under map position (x, y), if any.
+    pub fn body_at(&self, x: f64, y: f64) -> Option<&'a WaterBody> {
+        self.lookup.body_at(self.map, x, y)
+    }
+}
+
+/// The tables of a [`MapIndex`] without the map they index, for an owner that keeps the
+/// map beside them (a struct cannot hold a map and a borrow of it): each query takes the
+/// map it was built from.
+#[derive(Debug, Clone)]
+pub struct MapLookup {
     /// Cell key → position in `map.cells`.
     cells: CellMap<u32>,
     /// Cell key → position in `map.bodies`.
     bodies: CellMap<u32>,
 }
 
-impl<'a> MapIndex<'a> {
-    /// The observed cell `key`, if any.
-    pub fn cell(&self, key: CellKey) -> Option<&'a MapCell> {
-        self.cells.get(&key).map(|&i| &self.map.cells[i as usize])
+impl MapLookup {
+    /// The tables of `map` (linear in its cells).
+    pub fn of(map: &HazardMap) -> Self {
+        let cells = map
+            .cells
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (c.key, i as u32))
+            .collect();
+        let bodies = map
+            .bodies
+            .iter()
+            .enumerate()
+            .flat_map(|(b, body)| body.cells.iter().map(move |&k| (k, b as u32)))
+            .collect();
+        MapLookup { cells, bodies }
     }
 
-    /// The observed cell under map position (x, y), if any (its class, hazard, water
-    /// probability, elevation, σ and depth).
-    pub fn at(&self, x: f64, y: f64) -> Option<&'a MapCell> {
+    /// [`MapIndex::cell`] of `map`, the map these tables were built from.
+    pub fn cell<'a>(&self, map: &'a HazardMap, key: CellKey) -> Option<&'a MapCell> {
+        self.cells.get(&key).map(|&i| &map.cells[i as usize])
+    }
+
+    /// [`MapIndex::at`] of `map`, the map these tables were built from.
+    pub fn at<'a>(&self, map: &'a HazardMap, x: f64, y: f64) -> Option<&'a MapCell> {
         if !(x.is_finite() && y.is_finite()) {
             return None;
         }
-        self.cell(self.map.key_at(x, y))
+        self.cell(map, map.key_at(x, y))
     }
 
-    /// The water body holding the cell under map position (x, y), if any.
-    pub fn body_at(&self, x: f64, y: f64) -> Option<&'a WaterBody> {
+    /// [`MapIndex::body_at`] of `map`, the map these tables were built from.
+    pub fn body_at<'a>(&self, map: &'a HazardMap, x: f64, y: f64) -> Option<&'a WaterBody> {
         if !(x.is_finite() && y.is_finite()) {
             return None;
         }
-        let k = self.map.key_at(x, y);
-        self.bodies.get(&k).map(|&b| &self.map.bodies[b as usize])
+        let k = map.key_at(x, y);
+        self.bodies.get(&k).map(|&b| &map.bodies[b as usize])
     }
 }
 

@@ -19,7 +19,7 @@ use tarn::build::{
     build_tiles as core_build_tiles, finish_tile_region, finish_tiles, LogBuildConfig,
 };
 use tarn::grid::{CellKey, TileMap};
-use tarn::hazard::{join_regions as core_join_regions, HazardMap, RegionMap, TileKey};
+use tarn::hazard::{join_regions as core_join_regions, HazardMap, MapLookup, RegionMap, TileKey};
 use tarn::io::frames::{Frame as CoreFrame, FrameStream};
 use tarn::mapper::{Mapper as CoreMapper, MapperConfig};
 
@@ -65,15 +65,15 @@ const LAYERS: [&str; 8] = [
 #[pyclass(module = "tarn", frozen)]
 struct Map {
     map: HazardMap,
-    /// Cell key → (its record, its water body), built on the first `at`.
-    index: std::sync::OnceLock<std::collections::HashMap<CellKey, (u32, Option<u32>)>>,
+    /// The map looked up by position, built on the first `at`.
+    lookup: std::sync::OnceLock<MapLookup>,
 }
 
 impl Map {
     fn new(map: HazardMap) -> Self {
         Map {
             map,
-            index: std::sync::OnceLock::new(),
+            lookup: std::sync::OnceLock::new(),
         }
     }
 
@@ -194,30 +194,11 @@ impl Map {
     /// the id of the water body holding it, or None), or None where no cell was observed.
     /// The first call indexes the cells; every later one is a lookup.
     fn at<'py>(&self, py: Python<'py>, x: f64, y: f64) -> PyResult<Option<Bound<'py, PyDict>>> {
-        if !(x.is_finite() && y.is_finite()) {
-            return Ok(None);
-        }
-        let index = self.index.get_or_init(|| {
-            let mut ix: std::collections::HashMap<CellKey, (u32, Option<u32>)> = self
-                .map
-                .cells
-                .iter()
-                .enumerate()
-                .map(|(i, c)| (c.key, (i as u32, None)))
-                .collect();
-            for b in &self.map.bodies {
-                for k in &b.cells {
-                    if let Some(e) = ix.get_mut(k) {
-                        e.1 = Some(b.id);
-                    }
-                }
-            }
-            ix
-        });
-        let Some(&(i, body)) = index.get(&self.map.key_at(x, y)) else {
+        let lookup = self.lookup.get_or_init(|| MapLookup::of(&self.map));
+        let Some(c) = lookup.at(&self.map, x, y) else {
             return Ok(None);
         };
-        let c = &self.map.cells[i as usize];
+        let body = lookup.body_at(&self.map, x, y).map(|b| b.id);
         let d = PyDict::new(py);
         d.set_item("class", c.class.name())?;
         d.set_item("hazard", c.hazard.name())?;
