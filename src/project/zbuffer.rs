@@ -486,7 +486,7 @@ impl ZBuffer {
                     .fold(f32::NEG_INFINITY, |a, &b| a.max(b));
             }
         }
-        self.rim.copy_from_slice(&self.cover);
+        std::mem::swap(&mut self.rim, &mut self.cover);
         for bj in 0..bh {
             for bi in 0..bw {
                 let v = (bj.saturating_sub(k)..(bj + k + 1).min(bh))
