@@ -39,7 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         pts.push([x as f32, y as f32, (terrain(x, y) + 0.02 * n) as f32]);
     }
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("maps/default.ply");
-    tarn::io::export::write_atomic(&path, |w| {
+    tarn::files::write_atomic(&path, |w| {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\ncomment tarn demo terrain (examples/demo_cloud.rs)\n\

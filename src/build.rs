@@ -572,7 +572,7 @@ pub fn build_file(
             total: t0.elapsed().as_secs_f64(),
         },
     };
-    export::write_json(&stage.path().join("report.json"), &report)?;
+    crate::files::write_json(&stage.path().join("report.json"), &report)?;
     crate::interrupt::check("writing the outputs")?;
     stage.commit()?;
     Ok(report)
@@ -1313,7 +1313,7 @@ pub fn build_log(
         stage_totals_s: stage_totals,
         stage_latency_ms: stage_latency(&per_frame),
     };
-    export::write_json(&stage.path().join("report.json"), &report)?;
+    crate::files::write_json(&stage.path().join("report.json"), &report)?;
     crate::interrupt::check("writing the outputs")?;
     stage.commit()?;
     Ok(report)

@@ -5,9 +5,11 @@ use std::collections::{BTreeSet, HashMap};
 
 use serde::{Deserialize, Serialize};
 
-use crate::cues::BuildKeyHasher;
+use crate::cues::prior::{PriorLevel, WaterPrior};
 use crate::error::Result;
-use crate::grid::{centre_of, CellKey, CellStats, Evidence, Fusion, FusionLogs, TileMap};
+use crate::grid::{
+    centre_of, BuildKeyHasher, CellKey, CellStats, Evidence, Fusion, FusionLogs, TileMap,
+};
 use crate::water::{find_bodies_and_void, HazardConfig, Vehicle, WaterBody};
 
 mod region;
@@ -645,6 +647,22 @@ fn cell_records(
 }
 
 impl HazardMap {
+    /// The prior this map's water bodies give the next frames' cues: their surface levels,
+    /// carried `reach_m` beyond their cells (in steps of whole cells, 4-connected). Cells of
+    /// no body, and bodies with a non-finite surface, give nothing.
+    pub fn water_prior(&self, reach_m: f64) -> WaterPrior {
+        let sigma: CellMap<f64> = self
+            .bodies
+            .iter()
+            .flat_map(|b| b.cells.iter().map(|&k| (k, b.level_residual_m)))
+            .collect();
+        let levels = self.cells.iter().filter_map(|c| {
+            let &sigma = sigma.get(&c.key)?;
+            Some((c.key, PriorLevel { z: c.z, sigma }))
+        });
+        WaterPrior::from_levels(self.resolution, levels, reach_m)
+    }
+
     /// The geometry-only map of a tile map: every cell with fused points is ground, free.
     /// (Water, vegetation and obstacles come from the later stages of the pipeline.)
     /// Cells holding only below-surface points have no elevation and are left out.

@@ -14,6 +14,7 @@ pub mod calib;
 pub mod classify;
 pub mod cues;
 pub mod error;
+pub mod files;
 pub mod geom;
 pub mod grid;
 pub mod hazard;
@@ -22,6 +23,7 @@ pub mod io;
 pub mod mapper;
 pub mod optics;
 pub mod project;
+pub mod sensor;
 pub mod water;
 
 pub use error::{Error, Result};

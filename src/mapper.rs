@@ -55,8 +55,8 @@ use crate::cues::{
 use crate::error::{Error, Result};
 use crate::grid::{Fusion, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap};
 use crate::hazard::HazardMap;
-use crate::io::frames::Frame;
 use crate::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
+use crate::sensor::Frame;
 use crate::water::{HazardConfig, Vehicle, WaterConfig};
 
 /// The lidar: how its scans are fused and which of its cues run.
@@ -1238,7 +1238,7 @@ impl Mapper {
                 } else {
                     Arc::new(self.window_map()?)
                 };
-                self.cues.prior = Some(WaterPrior::from_map(&map, cue.prior_reach_m));
+                self.cues.prior = Some(map.water_prior(cue.prior_reach_m));
                 times.water += t.elapsed().as_secs_f64();
             }
         }

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use tarn::calib::Source;
 use tarn::geom::Pose;
-use tarn::io::frames::Frame;
 use tarn::mapper::{Mapper, MapperConfig};
+use tarn::sensor::Frame;
 
 const DIR: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),

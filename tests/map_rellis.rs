@@ -15,9 +15,9 @@ use nalgebra::Point3;
 use tarn::classify::gmm::TrainConfig;
 use tarn::grid::{key_of, CellKey};
 use tarn::hazard::{Class, HazardMap};
-use tarn::io::frames::{Frame, SensorImage};
-use tarn::io::ros::convert::{Image, Pixels};
+
 use tarn::mapper::{Mapper, MapperConfig};
+use tarn::sensor::{Frame, Image, Pixels, SensorImage};
 
 const PUDDLE: u16 = 31;
 const WATER: u16 = 6;

@@ -6,13 +6,12 @@ use std::path::Path;
 use nalgebra::Point3;
 use tarn::geom::camera::{CameraModel, Distortion};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
-use tarn::io::frames::{Frame, FrameStream, LogConfig};
+use tarn::io::frames::{FrameStream, LogConfig};
 use tarn::io::mcap_log::{
     summarize, summarize_quick, LogCompression, LogReader, LogWriter, WriteOptions,
 };
-use tarn::io::ros::{
-    cloud_to_pointcloud2, Endian, Header, Image, ImageMsg, Pixels, TfMessage, TransformStamped,
-};
+use tarn::io::ros::{cloud_to_pointcloud2, Endian, Header, ImageMsg, TfMessage, TransformStamped};
+use tarn::sensor::{Frame, Image, Pixels};
 
 const NS: i64 = 1_000_000_000;
 const T0: i64 = 1_700_000_000 * NS;

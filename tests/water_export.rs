@@ -94,7 +94,7 @@ fn exports_of_a_scene_with_ponds_a_stream_and_a_box() {
     let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/water-check/mixed");
     export::write_map_files(&dir, &map).unwrap();
-    export::write_json(
+    tarn::files::write_json(
         &dir.join("report.json"),
         &serde_json::json!({ "water_bodies": map.water_report() }),
     )

@@ -20,7 +20,8 @@ use tarn::build::{
 };
 use tarn::grid::{CellKey, TileMap};
 use tarn::hazard::{join_regions as core_join_regions, HazardMap, MapLookup, RegionMap, TileKey};
-use tarn::io::frames::{Frame as CoreFrame, FrameStream};
+use tarn::io::frames::FrameStream;
+use tarn::sensor::Frame as CoreFrame;
 use tarn::mapper::{Mapper as CoreMapper, MapperConfig};
 
 create_exception!(

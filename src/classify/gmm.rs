@@ -351,7 +351,7 @@ impl ColorModel {
 
     /// Writes the model as JSON (temporary file, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        crate::io::export::write_json(path, &self.data)
+        crate::files::write_json(path, &self.data)
     }
 
     /// ln(prior · p(rgb | class)) for every class, in model order.

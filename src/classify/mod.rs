@@ -210,7 +210,7 @@ impl MonoImage {
 
 /// Writes an 8-bit PNG atomically (temporary file, then rename).
 pub fn save_gray_png(path: &std::path::Path, img: &image::GrayImage) -> Result<()> {
-    crate::io::export::write_atomic(path, |w| {
+    crate::files::write_atomic(path, |w| {
         image::codecs::png::PngEncoder::new(w)
             .write_image(
                 img.as_raw(),

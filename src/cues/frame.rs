@@ -12,8 +12,7 @@ use super::prior::WaterPrior;
 use super::stereo::{stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig};
 use crate::error::Result;
 use crate::grid::{CellKey, Evidence, IngestStats, RangeNoise, RollingGrid};
-use crate::io::frames::Frame;
-use crate::io::ros::convert::{Image, Pixels};
+use crate::sensor::{Frame, Image, Pixels};
 
 /// Which cues run, and how.
 #[derive(Debug, Clone, Default)]

@@ -37,7 +37,7 @@ pub mod stereo;
 
 use std::collections::HashMap;
 
-use crate::grid::{key_of, quantize_mm, CellKey, Evidence};
+use crate::grid::{key_of, quantize_mm, BuildKeyHasher, CellKey, Evidence};
 
 pub use frame::{FrameCueConfig, FrameCues, FrameCuesReport};
 pub use lidar::{
@@ -49,35 +49,6 @@ pub use stereo::{
     stereo_reflections, stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig,
     StereoCues, StereoSeen,
 };
-
-/// A multiply-rotate hasher for cell keys (two integers): SipHash's resistance to chosen
-/// keys buys nothing for map cells and costs most of a lookup.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct KeyHasher(u64);
-
-impl std::hash::Hasher for KeyHasher {
-    #[inline]
-    fn write(&mut self, bytes: &[u8]) {
-        for b in bytes {
-            self.write_u64(*b as u64);
-        }
-    }
-    #[inline]
-    fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-    #[inline]
-    fn write_i64(&mut self, v: i64) {
-        self.write_u64(v as u64);
-    }
-    #[inline]
-    fn finish(&self) -> u64 {
-        self.0 ^ (self.0 >> 29)
-    }
-}
-
-/// [`std::hash::BuildHasher`] of [`KeyHasher`].
-pub type BuildKeyHasher = std::hash::BuildHasherDefault<KeyHasher>;
 
 /// A sparse accumulator of per-cell evidence for one frame, keyed like the grid.
 #[derive(Debug, Clone)]

@@ -9,9 +9,7 @@
 
 use std::collections::{HashMap, VecDeque};
 
-use crate::cues::BuildKeyHasher;
-use crate::grid::{key_of, CellKey};
-use crate::hazard::HazardMap;
+use crate::grid::{key_of, BuildKeyHasher, CellKey};
 
 /// One cell of the prior: the water surface there and how well it is known.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,22 +30,6 @@ pub struct WaterPrior {
 }
 
 impl WaterPrior {
-    /// The prior of `map`'s water bodies, carried `reach_m` beyond their cells (in steps of
-    /// whole cells, 4-connected). Cells of no body, and bodies with a non-finite surface,
-    /// give nothing.
-    pub fn from_map(map: &HazardMap, reach_m: f64) -> WaterPrior {
-        let sigma: HashMap<CellKey, f64, BuildKeyHasher> = map
-            .bodies
-            .iter()
-            .flat_map(|b| b.cells.iter().map(|&k| (k, b.level_residual_m)))
-            .collect();
-        let levels = map.cells.iter().filter_map(|c| {
-            let &sigma = sigma.get(&c.key)?;
-            Some((c.key, PriorLevel { z: c.z, sigma }))
-        });
-        WaterPrior::from_levels(map.resolution, levels, reach_m)
-    }
-
     /// The prior of the given cells' levels (cells `resolution` metres wide), carried
     /// `reach_m` beyond them: breadth first from every given cell at once, each cell of the
     /// reach takes the level of a given cell nearest to it in 4-connected steps (the first

@@ -15,13 +15,14 @@ use nalgebra::{Point3, Vector3};
 use super::log::{canonical_type, wire_of, MessageSource};
 use super::mcap_log::{DamagedRange, LogReader, RawMessage};
 use super::ros::{
-    camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, Image,
-    ImageMsg, NavSatFixMsg, PointCloud2Msg, TfMessage,
+    camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, ImageMsg,
+    NavSatFixMsg, PointCloud2Msg, TfMessage,
 };
 use super::tf::TfBuffer;
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{PointCloud, Pose};
+use crate::sensor::{Frame, Image, SensorImage};
 
 /// Topic names, frame names and timing for reading a log. Defaults follow DESIGN.md.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -320,44 +321,6 @@ pub fn stereo_baseline(right: &CameraInfoMsg) -> std::result::Result<f64, String
             "right camera P[0][0] = {f}, P[0][3] = {tx}: no baseline (P[0][3] must be −f·B, B > 0)"
         ))
     }
-}
-
-/// An image with what is needed to project it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SensorImage {
-    /// The pixels and their stamp and frame.
-    pub image: Image,
-    /// Latest `CameraInfo` seen on the matching info topic.
-    pub camera: Option<CameraModel>,
-    /// Pose of the image's (optical) frame in the map at the image's stamp; `None` when
-    /// the transform was missing.
-    pub frame_to_map: Option<Pose>,
-}
-
-/// One time step of the vehicle.
-#[derive(Debug, Clone)]
-pub struct Frame {
-    /// Stamp of the frame's scan, seconds.
-    pub stamp: f64,
-    /// `base_link → map` at `stamp`.
-    pub base_to_map: Pose,
-    /// Clouds with `frame_to_map` at their own stamps and `sensor_origin` at their frame's
-    /// origin.
-    pub lidar: Option<PointCloud>,
-    /// The stereo cloud nearest the scan within `tolerance_s`, if any.
-    pub stereo: Option<PointCloud>,
-    /// The colour image nearest the scan within `tolerance_s`, if any.
-    pub image: Option<SensorImage>,
-    /// The short-wave infrared image nearest the scan within `tolerance_s`, if any.
-    pub swir: Option<SensorImage>,
-    /// The mid-wave infrared image nearest the scan within `tolerance_s`, if any.
-    pub mwir: Option<SensorImage>,
-    /// The stereo baseline (m) from the latest right-camera `CameraInfo`, when the log has
-    /// one.
-    pub stereo_baseline_m: Option<f64>,
-    /// Latitude and longitude (degrees) of the latest usable GNSS fix read at or before
-    /// the frame, when the log has one.
-    pub geo: Option<(f64, f64)>,
 }
 
 /// What happened while streaming.

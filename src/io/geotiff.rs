@@ -19,9 +19,9 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::export::write_atomic;
 use super::raster::{Layer, MapRaster};
 use crate::error::{Error, Result};
+use crate::files::write_atomic;
 use crate::hazard::HazardMap;
 
 /// What the GeoTIFF says about its coordinates.

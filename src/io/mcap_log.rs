@@ -16,12 +16,13 @@ use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader};
 
 use super::ros::{
     camera_to_info, cloud_to_pointcloud2, encode_image, schema_name, schema_text, Endian, Header,
-    Image, TfMessage,
+    TfMessage,
 };
 use super::ros::{CameraInfoMsg, ImageMsg, NavSatFixMsg, PointCloud2Msg};
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::PointCloud;
+use crate::sensor::Image;
 
 /// What a channel carries.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -2,7 +2,7 @@
 //!
 //! ROS 2 logs (MCAP, CDR), without a ROS installation:
 //! - [`ros`]: CDR in both byte orders; `TFMessage`, `PointCloud2`, `Image`, `CameraInfo`;
-//!   their `ros2msg` schemas; conversions to [`crate::geom::PointCloud`], [`ros::Image`]
+//!   their `ros2msg` schemas; conversions to [`crate::geom::PointCloud`], [`crate::sensor::Image`]
 //!   and [`crate::geom::camera::CameraModel`].
 //! - [`mcap_log`]: [`mcap_log::LogReader`] streams messages from chunked or unchunked,
 //!   zstd / lz4 / uncompressed files, with or without summary; [`mcap_log::LogWriter`]

@@ -6,8 +6,9 @@ use std::path::Path;
 
 use image::{Rgb, RgbImage};
 
-use super::export::{elevation_range, write_atomic};
+use super::export::elevation_range;
 use crate::error::Result;
+use crate::files::write_atomic;
 use crate::grid::CellKey;
 use crate::hazard::{Class, Hazard, HazardMap, MapCell};
 

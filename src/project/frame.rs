@@ -32,8 +32,7 @@ use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{ceil_i64, floor_i64, pose_is_finite, PointCloud, Pose};
 use crate::grid::{CellKey, Evidence, RollingGrid};
-use crate::io::frames::{Frame, SensorImage};
-use crate::io::ros::convert::Pixels;
+use crate::sensor::{Frame, Pixels, SensorImage};
 
 /// MWIR labelling: the classifier's parameters, and how the local solar hour of each
 /// image is known.

@@ -28,9 +28,10 @@ use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;
 use tarn::grid::{CellKey, GridConfig, RangeNoise, RollingGrid, TileMap};
 use tarn::hazard::HazardMap;
-use tarn::io::frames::{Frame, FrameStream, LogConfig};
-use tarn::io::ros::convert::Pixels;
+use tarn::io::frames::{FrameStream, LogConfig};
 use tarn::project::{FrameLabelConfig, FrameLabels};
+use tarn::sensor::Frame;
+use tarn::sensor::Pixels;
 use tarn_sim::sim::synthetic_lidar_cloud;
 
 /// What to measure.

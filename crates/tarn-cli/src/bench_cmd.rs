@@ -75,8 +75,8 @@ pub fn run_bench(a: &BenchArgs) -> anyhow::Result<()> {
         let rows = sweep(&opts)?;
         std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
         let md = sweep_markdown(&rows);
-        tarn::io::export::write_atomic(&a.out.join("sweep.md"), |w| w.write_all(md.as_bytes()))?;
-        tarn::io::export::write_json(&a.out.join("sweep.json"), &rows)?;
+        tarn::files::write_atomic(&a.out.join("sweep.md"), |w| w.write_all(md.as_bytes()))?;
+        tarn::files::write_json(&a.out.join("sweep.json"), &rows)?;
         sweep_plot(&rows, &a.out.join("sweep.png"))?;
         print!("{md}");
         return Ok(());

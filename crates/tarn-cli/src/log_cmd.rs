@@ -56,9 +56,9 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
                 .map_err(anyhow::Error::msg)
                 .with_context(at)?;
             let pixels: Value = match &img.pixels {
-                ros::Pixels::Rgb8(p) => json!(p),
-                ros::Pixels::Mono8(p) => json!(p),
-                ros::Pixels::Mono16(p) => json!(p),
+                tarn::sensor::Pixels::Rgb8(p) => json!(p),
+                tarn::sensor::Pixels::Mono8(p) => json!(p),
+                tarn::sensor::Pixels::Mono16(p) => json!(p),
             };
             base(
                 json!({"stamp": stamp(&msg.header), "frame_id": msg.header.frame_id,

@@ -144,7 +144,7 @@ fn a_nan_quaternion_is_refused() {
     );
     let mut cloud = scan(&lidar_ext(), 8, 64);
     cloud.frame_to_map = lidar_ext();
-    let frame = tarn::io::frames::Frame {
+    let frame = tarn::sensor::Frame {
         stamp: 3.5,
         base_to_map: bad,
         lidar: Some(cloud),

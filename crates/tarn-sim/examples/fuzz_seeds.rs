@@ -13,9 +13,9 @@ use tarn::geom::camera::{CameraModel, Distortion};
 use tarn::geom::{pose_xyz_rpy, PointCloud};
 use tarn::io::mcap_log::{LogCompression, LogWriter, WriteOptions};
 use tarn::io::ros::{
-    camera_to_info, cloud_to_pointcloud2, encode_image, Endian, Header, Image, Pixels, TfMessage,
-    TransformStamped,
+    camera_to_info, cloud_to_pointcloud2, encode_image, Endian, Header, TfMessage, TransformStamped,
 };
+use tarn::sensor::{Image, Pixels};
 
 const NS: i64 = 1_000_000_000;
 

@@ -416,7 +416,7 @@ pub fn mapper_update(data: &[u8]) -> bool {
             c.frame_to_map = base_to_map;
             c.stamp = stamp;
         }
-        let frame = crate::io::frames::Frame {
+        let frame = crate::sensor::Frame {
             stamp,
             base_to_map,
             lidar,

@@ -8,8 +8,9 @@ use std::sync::Arc;
 use tarn::calib::Source;
 use tarn::grid::{RollingGrid, TileMap};
 use tarn::hazard::HazardMap;
-use tarn::io::frames::{Frame, FrameStream, LogConfig};
+use tarn::io::frames::{FrameStream, LogConfig};
 use tarn::mapper::*;
+use tarn::sensor::Frame;
 use tarn_sim::sim::{simulate, Scene, SimOptions};
 
 /// The default scene, cut down: 6 frames 2 m apart, a 256-column lidar, 160 × 120 stereo.

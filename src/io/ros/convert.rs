@@ -6,6 +6,7 @@
 use super::msgs::{datatype, CameraInfoMsg, Header, ImageMsg, PointCloud2Msg, PointField};
 use crate::geom::camera::{CameraModel, Distortion};
 use crate::geom::PointCloud;
+use crate::sensor::{Image, Pixels};
 
 fn read_scalar(data: &[u8], at: usize, dt: u8, big: bool) -> f64 {
     macro_rules! rd {
@@ -356,32 +357,6 @@ pub fn cloud_to_pointcloud2(cloud: &PointCloud, header: Header) -> PointCloud2Ms
         data,
         is_dense: cloud.valid_count() == cloud.len(),
     }
-}
-
-/// Pixels of a decoded image, row-major.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Pixels {
-    /// Colour (from `rgb8` or `bgr8`; always stored R, G, B).
-    Rgb8(Vec<[u8; 3]>),
-    /// Grey levels (from `mono8` or `8UC1`).
-    Mono8(Vec<u8>),
-    /// 16-bit grey levels (from `mono16` or `16UC1`).
-    Mono16(Vec<u16>),
-}
-
-/// A decoded camera image.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Image {
-    /// Columns, pixels.
-    pub width: usize,
-    /// Rows, pixels.
-    pub height: usize,
-    /// Pixel values, row major.
-    pub pixels: Pixels,
-    /// The optical frame of the camera (the message's `header.frame_id`).
-    pub frame_id: String,
-    /// Acquisition time, seconds.
-    pub stamp: f64,
 }
 
 /// Decodes an `Image` with encoding rgb8, bgr8, mono8 or mono16 (8UC1/16UC1 accepted as

@@ -8,7 +8,7 @@ pub mod msgs;
 pub use cdr::{CdrError, Endian, Wire};
 pub use convert::{
     camera_from_info, camera_to_info, cloud_to_pointcloud2, decode_image, encode_image,
-    organize_by_ring, pointcloud2_to_cloud, Image, Pixels,
+    organize_by_ring, pointcloud2_to_cloud,
 };
 pub use msgs::{
     schema_name, schema_text, CameraInfoMsg, Header, ImageMsg, NavSatFixMsg, PointCloud2Msg,

@@ -4,7 +4,7 @@ use crate::classify::horizon::{optical_pose, Horizon};
 use crate::geom::camera::Distortion;
 use crate::geom::pose_xyz_rpy;
 use crate::grid::{Fusion, GridConfig, RangeNoise};
-use crate::io::ros::convert::Image;
+use crate::sensor::Image;
 
 const SKY: [u8; 3] = [250, 250, 252];
 const GRASS: [u8; 3] = [60, 120, 40];

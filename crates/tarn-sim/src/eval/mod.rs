@@ -37,9 +37,8 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::cues::BuildKeyHasher;
 use crate::error::{Error, Result};
-use crate::grid::CellKey;
+use crate::grid::{BuildKeyHasher, CellKey};
 use crate::hazard::{terrain_hazard, Class, Hazard, HazardMap, MapCell};
 use crate::sim::{ColourView, TruthInfo};
 

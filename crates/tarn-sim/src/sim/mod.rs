@@ -38,7 +38,8 @@ pub use world::{Hit, Material, Surface, Terrain, WaterBody, World};
 use crate::error::{Error, Result};
 use crate::geom::{PointCloud, Pose};
 use crate::io::mcap_log::{LogWriter, WriteOptions};
-use crate::io::ros::{Header, Image, NavSatFixMsg, TfMessage, Time, TransformStamped};
+use crate::io::ros::{Header, NavSatFixMsg, TfMessage, Time, TransformStamped};
+use crate::sensor::Image;
 
 /// Options of a simulation run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -529,10 +530,10 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
             seen.into_iter().collect()
         }),
     };
-    crate::io::export::write_json(&out_dir.join("truth.json"), &info)?;
+    tarn::files::write_json(&out_dir.join("truth.json"), &info)?;
     let rig_text = toml::to_string(&scene.rig)
         .map_err(|e| Error::invalid("rig", format!("cannot be written as TOML: {e}")))?;
-    crate::io::export::write_atomic(&out_dir.join("rig.toml"), |w| {
+    tarn::files::write_atomic(&out_dir.join("rig.toml"), |w| {
         w.write_all(
             format!(
                 "# The rig the log was recorded with (tarn simulate): datasheet values and\n\

@@ -734,8 +734,8 @@ pub fn render_image(
     noise_sd: f64,
     frame: u64,
     noise: bool,
-) -> crate::io::ros::Pixels {
-    use crate::io::ros::Pixels;
+) -> crate::sensor::Pixels {
+    use crate::sensor::Pixels;
     let o: Point3<f64> = optical_to_map.translation.vector.into();
     let n = camera.width * camera.height;
     let seed = w.scene.seed;

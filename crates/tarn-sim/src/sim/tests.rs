@@ -1068,7 +1068,7 @@ fn the_log_carries_the_baseline_and_the_distortion() {
 /// limit, leaves no missing beam inside the interval either way.
 #[test]
 fn missing_returns_past_the_scans_own_dry_limit_say_nothing() {
-    use crate::cues::{BeamModel, LidarCueConfig, LidarCueModel};
+    use tarn::cues::{BeamModel, LidarCueConfig, LidarCueModel};
     let mut noret = Vec::new();
     for material in ["pavement", "grass"] {
         let w = lot(material, "none");
