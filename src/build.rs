@@ -19,6 +19,7 @@ use crate::grid::{
 };
 use crate::hazard::HazardMap;
 use crate::io::export;
+use crate::io::frames::{LogConfig, NamedTopics};
 use crate::mapper::{Mapper, MapperConfig, StageTimes};
 
 /// Parameters of an offline build.
@@ -66,7 +67,7 @@ pub struct ExtraMaps {
 impl ExtraMaps {
     /// What the `[build]` section asks for: the map's frame is `frame_id`, else `map_frame`;
     /// `stamp_ns` is the map's log time.
-    pub fn of(b: &crate::mapper::BuildOptions, map_frame: &str, stamp_ns: u64) -> Self {
+    pub fn of(b: &BuildOptions, map_frame: &str, stamp_ns: u64) -> Self {
         ExtraMaps {
             ros_map: b.ros_map.then(|| crate::io::ros_export::RosMapOptions {
                 frame_id: b.frame_id.clone().unwrap_or_else(|| map_frame.to_string()),
@@ -608,6 +609,33 @@ pub fn check_output_dir(out: &Path) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// One file holds the mapper's sections, `[log]` and `[build]`; every section
+    /// round-trips, an absent sensor section stays off, and a bad value is named.
+    #[test]
+    fn a_config_file_holds_the_mapper_the_log_and_the_outputs() {
+        let dir = tempfile::tempdir().unwrap();
+        let load = |name: &str, text: &str| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, text).unwrap();
+            LogBuildConfig::load(&p)
+        };
+        let mut every = LogBuildConfig::of_mapper(MapperConfig::every_sensor());
+        every.build.per_frame_maps = true;
+        every.build.epsg = Some(32633);
+        every.log.frame_topic = every.log.stereo_topic.clone();
+        every.mapper.labels.as_mut().unwrap().stride = 3;
+        assert_eq!(load("v.toml", &every.to_toml().unwrap()).unwrap(), every);
+        let json = serde_json::to_string(&ConfigFile::of(&every)).unwrap();
+        assert_eq!(load("v.json", &json).unwrap(), every);
+        let bare = load("e.toml", "[build]\ntiles = true\n").unwrap();
+        assert!(bare.build.tiles && bare.mapper.lidar.is_none());
+        assert_eq!(bare.log, LogConfig::default());
+        let err = load("b.toml", "[build]\nmax_window_cells = 3\n").unwrap_err();
+        assert!(err.to_string().contains("build.max_window_cells"), "{err}");
+        let err = load("u.toml", "[built]\n").unwrap_err();
+        assert!(err.to_string().contains("line 1"), "{err}");
+    }
+
     #[test]
     fn a_warning_repeated_in_every_frame_is_one_line() {
         let mut w = FrameWarnings::default();
@@ -634,7 +662,7 @@ mod tests {
     fn compiled_label_models_alone_keep_the_cameras_the_log_has() {
         use crate::classify::{color::RuleClassifier, lut::ColorLut};
         use crate::io::mcap_log::LogSummary;
-        let log = crate::io::frames::LogConfig::default();
+        let log = LogConfig::default();
         let summary = |topics: &[&str]| {
             LogSummary::of(
                 topics
@@ -1038,40 +1066,176 @@ pub fn stage_latency(times: &[StageTimes]) -> Vec<StageLatency> {
         .collect()
 }
 
-/// Settings of a log build.
-#[derive(Debug, Clone, Default)]
+/// The `[build]` section: options of an offline build (`tarn build`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BuildOptions {
+    /// Publish the window's hazard map after every frame, as on the vehicle, and time it;
+    /// off, the water stage runs once at the end (the map is the same).
+    pub per_frame_maps: bool,
+    /// (cloud inputs) Elevation noise of the points (m, one σ).
+    pub noise_sigma_m: f64,
+    /// (cloud inputs) Largest window side (cells); larger clouds are built in blocks.
+    pub max_window_cells: usize,
+    /// Also write `map.mcap`: the map as a GridMap and an OccupancyGrid
+    /// ([`crate::io::ros_export`]).
+    pub ros_map: bool,
+    /// Also write `map.tif`: the map's layers as a GeoTIFF ([`crate::io::geotiff`]).
+    pub geotiff: bool,
+    /// Also write `tiles.bin`: the map's cells before the water stage, as a tile set
+    /// ([`crate::grid::TileMap::to_bytes`]).
+    pub tiles: bool,
+    /// EPSG code of the projected CRS the map frame is in, written into `map.tif`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub epsg: Option<u16>,
+    /// The frame the map's coordinates are in, named in `map.mcap`'s headers; `None`: the
+    /// log config's `map_frame`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame_id: Option<String>,
+}
+
+impl BuildOptions {
+    /// Rejects values no build can run with; the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.noise_sigma_m.is_finite() && self.noise_sigma_m > 0.0) {
+            return Err(Error::invalid(
+                "build.noise_sigma_m",
+                format!("{} is not a finite number > 0", self.noise_sigma_m),
+            ));
+        }
+        if self.max_window_cells < 16 {
+            return Err(Error::invalid(
+                "build.max_window_cells",
+                format!("{} must be ≥ 16", self.max_window_cells),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            per_frame_maps: false,
+            noise_sigma_m: 0.02,
+            max_window_cells: 2048,
+            ros_map: false,
+            geotiff: false,
+            tiles: false,
+            epsg: None,
+            frame_id: None,
+        }
+    }
+}
+
+/// Settings of a log build: the vehicle's mapper config, and what only an offline build
+/// reads: the log's topics and frames, and the outputs besides the map. One config file
+/// holds all three ([`LogBuildConfig::load`]): the mapper's sections, `[log]` and `[build]`.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct LogBuildConfig {
     /// The pipeline: grid, fusion, vehicle, sensors and cues.
     pub mapper: MapperConfig,
-    /// Log reading settings: topic and frame names, matching tolerances, speed limit.
-    pub log: crate::io::frames::LogConfig,
-    /// Use this topic for frames; by default the lidar topic, or the stereo topic when the
-    /// log has no lidar messages.
-    pub frame_topic: Option<String>,
-    /// Sensor topics chosen by name ([`crate::io::frames::LogConfig::with_topics_of`]
-    /// finds the others by type).
-    pub topics: crate::io::frames::NamedTopics,
-    /// Publish the window's hazard map after every frame, as on the vehicle, and report the
-    /// water stage's per-frame latency. Off (the default), the water stage runs once, on
-    /// the whole map at the end; the exported map is the same either way.
-    pub per_frame_maps: bool,
+    /// Log reading settings: topic and frame names, matching tolerances, speed limit. Its
+    /// `frame_topic`, when not the default, names the topic frames are built on; by
+    /// default the lidar topic, or the stereo topic when the log has no lidar messages.
+    pub log: LogConfig,
+    /// What the build does besides mapping.
+    pub build: BuildOptions,
+    /// Sensor topics chosen by name ([`LogConfig::with_topics_of`] finds the others by
+    /// type).
+    pub topics: NamedTopics,
+}
+
+/// A config file's sections, as written: the mapper's, then `[log]` and `[build]`.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+struct ConfigFile {
+    grid: crate::grid::GridConfig,
+    fusion: crate::grid::Fusion,
+    vehicle: crate::water::Vehicle,
+    water: crate::water::WaterConfig,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    lidar: Option<crate::mapper::LidarConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    stereo: Option<crate::mapper::StereoConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    labels: Option<crate::project::LabelsConfig>,
+    log: LogConfig,
+    build: BuildOptions,
+}
+
+impl Default for ConfigFile {
+    fn default() -> Self {
+        ConfigFile::of(&LogBuildConfig::default())
+    }
+}
+
+impl ConfigFile {
+    fn of(c: &LogBuildConfig) -> Self {
+        let m = c.mapper.clone();
+        ConfigFile {
+            grid: m.grid,
+            fusion: m.fusion,
+            vehicle: m.vehicle,
+            water: m.water,
+            lidar: m.lidar,
+            stereo: m.stereo,
+            labels: m.labels,
+            log: c.log.clone(),
+            build: c.build.clone(),
+        }
+    }
 }
 
 impl LogBuildConfig {
-    /// The log build of a mapper config as `tarn build` makes it: the config's `[log]`
-    /// settings, its frame topic when it names one other than the default (else the topic
-    /// is chosen from the log), and per-frame maps as its `[build]` section says.
+    /// The log build of a mapper config with the default log settings and outputs.
     pub fn of_mapper(mapper: MapperConfig) -> Self {
-        let frame_topic = (mapper.log.frame_topic
-            != crate::io::frames::LogConfig::default().frame_topic)
-            .then(|| mapper.log.frame_topic.clone());
         LogBuildConfig {
-            log: mapper.log.clone(),
-            frame_topic,
-            topics: crate::io::frames::NamedTopics::default(),
-            per_frame_maps: mapper.build.per_frame_maps,
             mapper,
+            ..Default::default()
         }
+    }
+
+    /// Reads a config file: TOML for a `.toml` file, JSON for any other extension. A
+    /// section left out takes its defaults, but for a sensor's (`[lidar]`, `[stereo]`,
+    /// `[labels]`), whose absence turns the sensor off. Errors name the file, and the key
+    /// and line where parsing failed; then the config is validated.
+    pub fn load(path: &Path) -> Result<Self> {
+        let f: ConfigFile = crate::mapper::read_config_file(path)?;
+        let cfg = LogBuildConfig {
+            mapper: MapperConfig {
+                grid: f.grid,
+                fusion: f.fusion,
+                vehicle: f.vehicle,
+                water: f.water,
+                lidar: f.lidar,
+                stereo: f.stereo,
+                labels: f.labels,
+                label_models: None,
+            },
+            log: f.log,
+            build: f.build,
+            topics: NamedTopics::default(),
+        };
+        cfg.validate()
+            .map_err(|e| Error::format(path, "config", e.to_string()))?;
+        Ok(cfg)
+    }
+
+    /// The config as TOML text (what [`LogBuildConfig::load`] reads back).
+    pub fn to_toml(&self) -> Result<String> {
+        toml::to_string(&ConfigFile::of(self)).map_err(|e| Error::invalid("config", e.to_string()))
+    }
+
+    /// Rejects values no build can run with; the error names the field.
+    pub fn validate(&self) -> Result<()> {
+        self.mapper.validate()?;
+        self.log
+            .validate()
+            .map_err(|e| Error::invalid("config log", e.to_string()))?;
+        self.build
+            .validate()
+            .map_err(|e| Error::invalid("config", e.to_string()))
     }
 }
 
@@ -1095,7 +1259,7 @@ pub fn build_log(
     let summary = crate::io::log::summarize_quick(input)?;
     let log_cfg = frame_log_config(cfg, &summary, input)?;
     let mut mapper = Mapper::new(sensors_of_log(&cfg.mapper, &log_cfg, &summary))?;
-    mapper.set_publish(cfg.per_frame_maps);
+    mapper.set_publish(cfg.build.per_frame_maps);
     calibrate_on_log(&mut mapper, input, &log_cfg)?;
     let mut stream = FrameStream::open(input, &log_cfg)?;
     let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
@@ -1219,7 +1383,7 @@ pub fn build_log(
             format!("no frame could be built: {why}"),
         ));
     }
-    let cues = cue_names(mapper.config());
+    let cues = mapper.config().cue_names();
     let lidar_height_m = mapper.lidar_height();
     let diagnostic_interval_m = mapper.diagnostic_interval();
     let calibration = mapper.calibration().clone();
@@ -1267,12 +1431,8 @@ pub fn build_log(
         &damage_marks(input, &damaged),
         &vehicle_path,
     )?;
-    let extra_outputs = ExtraMaps::of(
-        &cfg.mapper.build,
-        &log_cfg.map_frame,
-        summary.end_ns.unwrap_or(0),
-    )
-    .write(stage.path(), &tiles)?;
+    let extra_outputs = ExtraMaps::of(&cfg.build, &log_cfg.map_frame, summary.end_ns.unwrap_or(0))
+        .write(stage.path(), &tiles)?;
     let t_export = t2.elapsed().as_secs_f64();
     let total = t0.elapsed().as_secs_f64();
     let report = LogBuildReport {
@@ -1285,7 +1445,7 @@ pub fn build_log(
         frames_fused,
         log_duration_s: summary.duration_s,
         x_realtime: summary.duration_s / total.max(1e-9),
-        per_frame_maps: cfg.per_frame_maps,
+        per_frame_maps: cfg.build.per_frame_maps,
         cues,
         lidar_height_m,
         diagnostic_interval_m,
@@ -1372,11 +1532,7 @@ pub const CALIBRATION_MAX_FRAMES: usize = 200;
 /// calibration is settled, at most [`CALIBRATION_MAX_FRAMES`], and holds what it measured:
 /// every build of the log, whole or in time chunks, then fuses every frame with the same
 /// noise. Frames that cannot be read are left to the build, which reports them.
-pub fn calibrate_on_log(
-    mapper: &mut Mapper,
-    input: &Path,
-    log_cfg: &crate::io::frames::LogConfig,
-) -> Result<()> {
+pub fn calibrate_on_log(mapper: &mut Mapper, input: &Path, log_cfg: &LogConfig) -> Result<()> {
     let stream = crate::io::frames::FrameStream::open(input, log_cfg)?;
     for frame in stream.take(CALIBRATION_MAX_FRAMES).flatten() {
         crate::interrupt::check("measuring the sensors' noise")?;
@@ -1397,7 +1553,7 @@ pub fn calibrate_on_log(
 /// mapper assumed of it.
 pub fn sensors_of_log(
     cfg: &MapperConfig,
-    log: &crate::io::frames::LogConfig,
+    log: &LogConfig,
     summary: &crate::io::mcap_log::LogSummary,
 ) -> MapperConfig {
     use crate::project::LabelSensor;
@@ -1439,15 +1595,15 @@ pub fn sensors_of_log(
 }
 
 /// The log settings of a build: [`LogBuildConfig::log`] with its sensor topics chosen
-/// ([`crate::io::frames::LogConfig::with_topics_of`]: named ones, else by message type).
+/// ([`LogConfig::with_topics_of`]: named ones, else by message type).
 pub fn frame_log_config(
     cfg: &LogBuildConfig,
     summary: &crate::io::mcap_log::LogSummary,
     input: &Path,
-) -> Result<crate::io::frames::LogConfig> {
+) -> Result<LogConfig> {
     let mut named = cfg.topics.clone();
-    if named.frame.is_none() {
-        named.frame = cfg.frame_topic.clone();
+    if named.frame.is_none() && cfg.log.frame_topic != LogConfig::default().frame_topic {
+        named.frame = Some(cfg.log.frame_topic.clone());
     }
     cfg.log.with_topics_of(summary, &named, input)
 }
@@ -1618,27 +1774,5 @@ fn damage_marks(input: &Path, damaged: &[crate::io::mcap_log::DamagedRange]) -> 
             .take(SHOWN)
             .map(|d| format!("damaged bytes {}..{}", d.start_byte, d.end_byte)),
     );
-    v
-}
-
-/// The cues a config runs, by name.
-pub fn cue_names(cfg: &MapperConfig) -> Vec<String> {
-    let mut v = Vec::new();
-    if let Some(l) = &cfg.lidar {
-        if l.cues {
-            v.push("lidar".to_string());
-        }
-        if l.cues && l.reflectivity {
-            v.push("reflectivity".to_string());
-        }
-    }
-    if let Some(s) = &cfg.stereo {
-        if s.reflections {
-            v.push("stereo".to_string());
-        }
-        if s.reflections && s.mirror_check {
-            v.push("mirror".to_string());
-        }
-    }
     v
 }

@@ -72,3 +72,56 @@ impl Error {
 
 /// The library's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Checks of configuration values: each failure an [`Error::Invalid`] that names the field
+/// (`what`) and says what the value must be.
+pub mod check {
+    use super::{Error, Result};
+
+    /// `v` is finite.
+    pub fn finite(what: &str, v: f64) -> Result<()> {
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(Error::invalid(what, format!("{v} is not finite")))
+        }
+    }
+
+    /// `v` is finite and > 0.
+    pub fn positive(what: &str, v: f64) -> Result<()> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                what,
+                format!("{v} must be a finite number > 0"),
+            ))
+        }
+    }
+
+    /// `v` is finite and ≥ 0.
+    pub fn non_negative(what: &str, v: f64) -> Result<()> {
+        if v.is_finite() && v >= 0.0 {
+            Ok(())
+        } else {
+            Err(Error::invalid(
+                what,
+                format!("{v} must be a finite number ≥ 0"),
+            ))
+        }
+    }
+
+    /// `v` is in 0..=1.
+    pub fn unit(what: &str, v: f64) -> Result<()> {
+        if (0.0..=1.0).contains(&v) {
+            Ok(())
+        } else {
+            Err(Error::invalid(what, format!("{v} must be in 0..1")))
+        }
+    }
+
+    /// Every value of `v` is finite.
+    pub fn all_finite(what: &str, v: &[f64]) -> Result<()> {
+        v.iter().try_for_each(|x| finite(what, *x))
+    }
+}

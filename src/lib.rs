@@ -4,8 +4,11 @@
 //! hazards in them (after Matthies, Bellutta & McHenry, "Detecting water hazards for
 //! autonomous off-road navigation", SPIE 2003).
 //!
-//! Data flows one way: `geom` → `grid` → (cues, water) → `io` exports. A module imports
-//! only from modules to its left; `geom` and `optics` are the ground floor.
+//! Data flows one way, and a module imports only from modules to its left (enforced by
+//! `tests/module_graph.rs`): `error`, `interrupt`, `files`, `geom`, `optics` (the ground
+//! floor) → `sensor` (a frame's clouds and images) → `grid` → `classify` → `cues` →
+//! `calib` → `project` → `water` → `hazard` → `mapper` (one frame through every stage) →
+//! `rig` (sensor datasheets) → `io` (logs in, maps out) → `build` (offline builds of clouds and logs).
 
 #![warn(missing_docs)]
 
@@ -23,6 +26,7 @@ pub mod io;
 pub mod mapper;
 pub mod optics;
 pub mod project;
+pub mod rig;
 pub mod sensor;
 pub mod water;
 

@@ -263,53 +263,6 @@ pub struct MapperConfig {
     /// absent, [`Mapper::new`] compiles `labels`.
     #[serde(skip)]
     pub label_models: Option<crate::project::FrameLabelConfig>,
-    /// Topics, frame names and timing of the log.
-    pub log: crate::io::frames::LogConfig,
-    /// What `tarn build` does besides mapping.
-    pub build: BuildOptions,
-}
-
-/// The `[build]` section: options of an offline build (`tarn build`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct BuildOptions {
-    /// Publish the window's hazard map after every frame, as on the vehicle, and time it;
-    /// off, the water stage runs once at the end (the map is the same).
-    pub per_frame_maps: bool,
-    /// (cloud inputs) Elevation noise of the points (m, one σ).
-    pub noise_sigma_m: f64,
-    /// (cloud inputs) Largest window side (cells); larger clouds are built in blocks.
-    pub max_window_cells: usize,
-    /// Also write `map.mcap`: the map as a GridMap and an OccupancyGrid
-    /// ([`crate::io::ros_export`]).
-    pub ros_map: bool,
-    /// Also write `map.tif`: the map's layers as a GeoTIFF ([`crate::io::geotiff`]).
-    pub geotiff: bool,
-    /// Also write `tiles.bin`: the map's cells before the water stage, as a tile set
-    /// ([`crate::grid::TileMap::to_bytes`]).
-    pub tiles: bool,
-    /// EPSG code of the projected CRS the map frame is in, written into `map.tif`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub epsg: Option<u16>,
-    /// The frame the map's coordinates are in, named in `map.mcap`'s headers; `None`: the
-    /// log config's `map_frame`.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub frame_id: Option<String>,
-}
-
-impl Default for BuildOptions {
-    fn default() -> Self {
-        BuildOptions {
-            per_frame_maps: false,
-            noise_sigma_m: 0.02,
-            max_window_cells: 2048,
-            ros_map: false,
-            geotiff: false,
-            tiles: false,
-            epsg: None,
-            frame_id: None,
-        }
-    }
 }
 
 impl Default for MapperConfig {
@@ -323,9 +276,34 @@ impl Default for MapperConfig {
             stereo: Some(StereoConfig::default()),
             labels: None,
             label_models: None,
-            log: Default::default(),
-            build: BuildOptions::default(),
         }
+    }
+}
+
+/// Parses a config file: TOML for a `.toml` file, JSON for any other extension. Errors name
+/// the file, and the line (and column) where parsing failed.
+pub(crate) fn read_config_file<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let is_toml = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    if is_toml {
+        toml::from_str(&text).map_err(|e| {
+            let loc = e
+                .span()
+                .map(|s| format!("line {}", text[..s.start].lines().count().max(1)))
+                .unwrap_or_else(|| "config".into());
+            Error::format(path, loc, e.message().to_string())
+        })
+    } else {
+        serde_json::from_str(&text).map_err(|e| {
+            Error::format(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
+        })
     }
 }
 
@@ -377,28 +355,7 @@ impl MapperConfig {
     /// Reads a config from a `.toml` file, or JSON for any other extension. Errors name the
     /// file, and the key and line where parsing failed; then the config is validated.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let is_toml = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-        let cfg: MapperConfig = if is_toml {
-            toml::from_str(&text).map_err(|e| {
-                let loc = e
-                    .span()
-                    .map(|s| format!("line {}", text[..s.start].lines().count().max(1)))
-                    .unwrap_or_else(|| "mapper config".into());
-                Error::format(path, loc, e.message().to_string())
-            })?
-        } else {
-            serde_json::from_str(&text).map_err(|e| {
-                Error::format(
-                    path,
-                    format!("line {} column {}", e.line(), e.column()),
-                    e.to_string(),
-                )
-            })?
-        };
+        let cfg: MapperConfig = read_config_file(path)?;
         cfg.validate()
             .map_err(|e| Error::format(path, "mapper config", e.to_string()))?;
         Ok(cfg)
@@ -547,24 +504,29 @@ impl MapperConfig {
             }
             named("stereo.cue", s.cue.validate())?;
         }
-        named("log", self.log.validate())?;
-        if !(self.build.noise_sigma_m.is_finite() && self.build.noise_sigma_m > 0.0) {
-            return Err(Error::invalid(
-                "mapper config build.noise_sigma_m",
-                format!("{} is not a finite number > 0", self.build.noise_sigma_m),
-            ));
-        }
-        if self.build.max_window_cells < 16 {
-            return Err(Error::invalid(
-                "mapper config build.max_window_cells",
-                format!("{} must be ≥ 16", self.build.max_window_cells),
-            ));
-        }
         if let Some(l) = &self.labels {
             l.check()
                 .map_err(|e| Error::invalid("mapper config labels", e.to_string()))?;
         }
         Ok(())
+    }
+
+    /// The cues this config runs, by name ([`CUE_NAMES`], in that order).
+    pub fn cue_names(&self) -> Vec<String> {
+        let lidar = self.lidar.as_ref().filter(|l| l.cues);
+        let stereo = self.stereo.as_ref().filter(|s| s.reflections);
+        let on = [
+            lidar.is_some(),
+            lidar.is_some_and(|l| l.reflectivity),
+            stereo.is_some(),
+            stereo.is_some_and(|s| s.mirror_check),
+        ];
+        CUE_NAMES
+            .iter()
+            .zip(on)
+            .filter(|(_, on)| *on)
+            .map(|(n, _)| n.to_string())
+            .collect()
     }
 
     /// Turns the cues on or off by name: `"all"`, `"none"`, or a comma-separated list of

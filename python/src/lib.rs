@@ -40,10 +40,10 @@ fn err(e: tarn::Error) -> PyErr {
 
 /// The config of a build: `None` for what `tarn build` uses on a log without options
 /// (every sensor, colour and SWIR labels), else the path of a `tarn.toml` (or JSON) file.
-fn config_of(config: Option<PathBuf>) -> PyResult<MapperConfig> {
+fn config_of(config: Option<PathBuf>) -> PyResult<LogBuildConfig> {
     match config {
-        None => Ok(MapperConfig::every_sensor()),
-        Some(p) => MapperConfig::load(&p).map_err(err),
+        None => Ok(LogBuildConfig::of_mapper(MapperConfig::every_sensor())),
+        Some(p) => LogBuildConfig::load(&p).map_err(err),
     }
 }
 
@@ -472,7 +472,7 @@ fn build_tiles(
     start: Option<f64>,
     end: Option<f64>,
 ) -> PyResult<TileSet> {
-    let cfg = LogBuildConfig::of_mapper(config_of(config)?);
+    let cfg = config_of(config)?;
     let range = match (start, end) {
         (None, None) => None,
         (s, e) => Some((s.unwrap_or(f64::NEG_INFINITY), e.unwrap_or(f64::INFINITY))),
@@ -488,7 +488,7 @@ fn build_tiles(
 #[pyfunction]
 #[pyo3(signature = (tiles, config = None))]
 fn finish(py: Python<'_>, tiles: PyRef<'_, TileSet>, config: Option<PathBuf>) -> PyResult<Map> {
-    let cfg = config_of(config)?;
+    let cfg = config_of(config)?.mapper;
     let t = &tiles.tiles;
     let map = py.detach(|| finish_tiles(t, &cfg)).map_err(err)?;
     Ok(Map::new(map))
@@ -506,15 +506,15 @@ fn build(py: Python<'_>, path: PathBuf, config: Option<PathBuf>) -> PyResult<Map
 #[pyfunction]
 #[pyo3(signature = (paths, config = None))]
 fn build_many(py: Python<'_>, paths: Vec<PathBuf>, config: Option<PathBuf>) -> PyResult<Map> {
-    let mapper = config_of(config)?;
-    let cfg = LogBuildConfig::of_mapper(mapper.clone());
+    let cfg = config_of(config)?;
+    let mapper = &cfg.mapper;
     let map = py
         .detach(|| -> tarn::Result<HazardMap> {
             let mut all = TileMap::new(mapper.grid.resolution, mapper.grid.z_ref)?;
             for p in &paths {
                 all.merge(&core_build_tiles(p, &cfg, None)?.tiles)?;
             }
-            finish_tiles(&all, &mapper)
+            finish_tiles(&all, mapper)
         })
         .map_err(err)?;
     Ok(Map::new(map))
@@ -597,7 +597,7 @@ fn finish_region(
     bounds: (TileKey, TileKey),
     config: Option<PathBuf>,
 ) -> PyResult<Region> {
-    let cfg = config_of(config)?;
+    let cfg = config_of(config)?.mapper;
     let t = &tiles.tiles;
     let region = py
         .detach(|| finish_tile_region(t, &region, halo, bounds, &cfg))
@@ -726,7 +726,7 @@ impl FrameIter {
 #[pyfunction]
 #[pyo3(signature = (path, config = None))]
 fn read_frames(path: PathBuf, config: Option<PathBuf>) -> PyResult<FrameIter> {
-    let cfg = LogBuildConfig::of_mapper(config_of(config)?);
+    let cfg = config_of(config)?;
     let summary = tarn::io::log::summarize_quick(&path).map_err(err)?;
     let log_cfg = tarn::build::frame_log_config(&cfg, &summary, &path).map_err(err)?;
     let stream = FrameStream::open(&path, &log_cfg).map_err(err)?;
@@ -757,7 +757,7 @@ impl Mapper {
     #[new]
     #[pyo3(signature = (config = None, publish = false))]
     fn new(config: Option<PathBuf>, publish: bool) -> PyResult<Self> {
-        let mut m = CoreMapper::new(config_of(config)?).map_err(err)?;
+        let mut m = CoreMapper::new(config_of(config)?.mapper).map_err(err)?;
         m.set_publish(publish);
         Ok(Mapper { mapper: Some(m) })
     }

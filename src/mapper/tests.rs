@@ -73,27 +73,25 @@ fn configs_round_trip_through_toml_and_cue_lists() {
     c.lidar.as_mut().unwrap().attenuation_per_m = Some(0.6);
     c.lidar.as_mut().unwrap().height_m = Some(1.0);
     c.set_cues("lidar,stereo").unwrap();
-    assert_eq!(crate::build::cue_names(&c), ["lidar", "stereo"]);
+    assert_eq!(c.cue_names(), ["lidar", "stereo"]);
     let back = load_str("c.toml", &c.to_toml().unwrap()).unwrap();
     assert_eq!(back, c);
     let json = serde_json::to_string(&c).unwrap();
     assert_eq!(load_str("c.json", &json).unwrap(), c);
     c.set_cues("all").unwrap();
-    assert_eq!(
-        crate::build::cue_names(&c),
-        ["lidar", "reflectivity", "stereo", "mirror"]
-    );
+    assert_eq!(c.cue_names(), ["lidar", "reflectivity", "stereo", "mirror"]);
     c.set_cues("none").unwrap();
-    assert!(crate::build::cue_names(&c).is_empty());
-    // Every section round-trips, labels and build options too.
+    assert!(c.cue_names().is_empty());
+    // Every section round-trips, labels too.
     let mut every = MapperConfig::every_sensor();
-    every.build.per_frame_maps = true;
-    every.log.frame_topic = every.log.stereo_topic.clone();
     every.labels.as_mut().unwrap().stride = 3;
     assert_eq!(
         load_str("v.toml", &every.to_toml().unwrap()).unwrap(),
         every
     );
+    // The log's and the outputs' sections are the offline builder's, not the vehicle's.
+    let err = load_str("l.toml", "[log]\nmap_frame = \"odom\"\n").unwrap_err();
+    assert!(err.to_string().contains("log"), "{err}");
 }
 
 /// In a config file a sensor whose section is absent is off, in TOML as in JSON: an empty

@@ -394,10 +394,7 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         None => {
             let scene = tarn_sim::sim::Scene::load_with_rig(&opts.scene, opts.rig.as_deref())?;
             tarn_sim::sim::simulate(&scene, tmp.path(), tarn_sim::sim::SimOptions::default())?;
-            (
-                tmp.path().join("log.mcap"),
-                tarn_sim::sim::mapper_config(&scene.rig),
-            )
+            (tmp.path().join("log.mcap"), scene.rig.mapper_config())
         }
     };
     let reps = opts.reps.max(1);
@@ -607,10 +604,8 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
 
     // The whole log, offline (the water stage once, at the end), and as the vehicle runs
     // it (the hazard map published after every frame) for the full frame's time.
-    let online_cfg = LogBuildConfig {
-        per_frame_maps: true,
-        ..log_cfg.clone()
-    };
+    let mut online_cfg = log_cfg.clone();
+    online_cfg.build.per_frame_maps = true;
     // The same log with no water cue and no labels: the elevation map alone, the reference
     // of the offline ratio.
     let bare_cfg = {
@@ -1043,7 +1038,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     let log = sim_dir.join("log.mcap");
     for res in [0.05, 0.1, 0.2, 0.4] {
         let out = tmp.path().join(format!("res{res}"));
-        let mut mapper = tarn_sim::sim::mapper_config(&scene.rig);
+        let mut mapper = scene.rig.mapper_config();
         mapper.grid = GridConfig {
             resolution: res,
             size_cells: ((40.0 / res).round() as usize).max(2),
@@ -1128,7 +1123,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
         (2, true),
     ] {
         let out = tmp.path().join(format!("stride{stride}-{wide_rows}"));
-        let mut mapper = tarn_sim::sim::mapper_config(&scene.rig);
+        let mut mapper = scene.rig.mapper_config();
         mapper.grid.size_cells = 800;
         mapper.label_models = Some(tarn::project::FrameLabelConfig {
             colour: Some(ColorLut::compile(&RuleClassifier::default(), 8)?),
@@ -1186,7 +1181,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     let stream = tarn_sim::sim::Scene::load(&opts.scene.with_file_name("stream_slope.toml"))?;
     let stream_dir = tmp.path().join("stream");
     tarn_sim::sim::simulate(&stream, &stream_dir, tarn_sim::sim::SimOptions::default())?;
-    let mut mapper = tarn::mapper::Mapper::new(tarn_sim::sim::mapper_config(&stream.rig))?;
+    let mut mapper = tarn::mapper::Mapper::new(stream.rig.mapper_config())?;
     for f in FrameStream::open(stream_dir.join("log.mcap"), &LogConfig::default())? {
         mapper.update(&f?)?;
     }
@@ -1202,7 +1197,7 @@ pub fn sweep(opts: &BenchOptions) -> Result<Vec<SweepRow>> {
     .into_iter()
     .enumerate()
     {
-        let mut hc = tarn_sim::sim::mapper_config(&stream.rig).hazard_config();
+        let mut hc = stream.rig.mapper_config().hazard_config();
         hc.water.level_residual_m = level_residual_m;
         hc.water.vertex_median_radius_m = vertex_median_radius_m;
         let (ms, map) = timed(reps, || HazardMap::from_tiles(&tiles, &hc))?;

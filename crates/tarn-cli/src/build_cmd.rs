@@ -13,7 +13,7 @@ use tarn::grid::{GridConfig, RangeNoise};
 use tarn::io::frames::LogConfig;
 use tarn::mapper::MapperConfig;
 use tarn::project::{LabelSensor, LabelsConfig};
-use tarn_sim::sim::RigSpec;
+use tarn::rig::RigSpec;
 
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
@@ -269,7 +269,7 @@ pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
                 a.input.display()
             );
         }
-        let cfg = mapper_config(a)?;
+        let cfg = build_config(a)?;
         let r = run_cloud(a, &cfg)?;
         if a.json {
             println!("{}", serde_json::to_string_pretty(&r)?);
@@ -300,13 +300,14 @@ fn print_extra(files: &[String]) {
 
 /// The config of `tarn build`: the file's (or every sensor), the rig's datasheet values,
 /// then the options.
-pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
-    let mut cfg = match &a.config {
-        Some(p) => MapperConfig::load(p)?,
-        None => MapperConfig::every_sensor(),
+pub fn build_config(a: &BuildArgs) -> anyhow::Result<LogBuildConfig> {
+    let mut build = match &a.config {
+        Some(p) => LogBuildConfig::load(p)?,
+        None => LogBuildConfig::of_mapper(MapperConfig::every_sensor()),
     };
+    let cfg = &mut build.mapper;
     if let Some(p) = &a.rig {
-        tarn_sim::sim::apply_rig(&mut cfg, &RigSpec::load(p)?);
+        RigSpec::load(p)?.apply_to(cfg);
     }
     if let Some(r) = a.resolution {
         cfg.grid.resolution = r;
@@ -318,13 +319,13 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
         cfg.set_cues(c)?;
     }
     if let Some(v) = a.noise_sigma {
-        cfg.build.noise_sigma_m = v;
+        build.build.noise_sigma_m = v;
     }
     if let Some(v) = a.max_window_cells {
-        cfg.build.max_window_cells = v;
+        build.build.max_window_cells = v;
     }
     if a.per_frame_maps {
-        cfg.build.per_frame_maps = true;
+        build.build.per_frame_maps = true;
     }
     if let Some(n) = a.water_prior {
         match cfg.lidar.as_mut() {
@@ -332,16 +333,16 @@ pub fn mapper_config(a: &BuildArgs) -> anyhow::Result<MapperConfig> {
             None => eprintln!("warning: --water-prior: no lidar is configured to read it"),
         }
     }
+    apply_label_args(a, cfg)?;
     if let Some(p) = &a.log_config {
-        cfg.log = load_log_config(p)?;
+        build.log = load_log_config(p)?;
     }
     if let Some(t) = &a.frame_topic {
-        cfg.log.frame_topic = t.clone();
+        build.log.frame_topic = t.clone();
     }
-    apply_label_args(a, &mut cfg)?;
-    crate::maps_out::apply(&a.maps_out, &mut cfg);
-    cfg.validate()?;
-    Ok(cfg)
+    crate::maps_out::apply(&a.maps_out, &mut build.build);
+    build.validate()?;
+    Ok(build)
 }
 
 /// A log configuration file (`--log-config`: JSON, the fields of `LogConfig`, all optional),
@@ -358,7 +359,7 @@ pub fn load_log_config(p: &Path) -> anyhow::Result<LogConfig> {
 /// Builds a log with a progress bar (frames and bytes); returns the report.
 pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
     // The frame topic is chosen from the log unless it was named.
-    let mut cfg = LogBuildConfig::of_mapper(mapper_config(a)?);
+    let mut cfg = build_config(a)?;
     cfg.topics = tarn::io::frames::NamedTopics {
         lidar: a.lidar_topic.clone(),
         stereo: a.stereo_topic.clone(),
@@ -375,16 +376,17 @@ pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
     r.with_context(|| format!("building {}", a.input.display()))
 }
 
-pub fn run_cloud(a: &BuildArgs, mapper: &MapperConfig) -> anyhow::Result<BuildReport> {
+pub fn run_cloud(a: &BuildArgs, build: &LogBuildConfig) -> anyhow::Result<BuildReport> {
+    let mapper = &build.mapper;
     let cfg = BuildConfig {
         grid: GridConfig {
             resolution: mapper.grid.resolution,
             ..GridConfig::default()
         },
-        noise: RangeNoise::constant(mapper.build.noise_sigma_m),
-        max_window_cells: mapper.build.max_window_cells,
+        noise: RangeNoise::constant(build.build.noise_sigma_m),
+        max_window_cells: build.build.max_window_cells,
         // A cloud is in the map frame; it has no log time.
-        extra: ExtraMaps::of(&mapper.build, &mapper.log.map_frame, 0),
+        extra: ExtraMaps::of(&build.build, &build.log.map_frame, 0),
     };
     let bar = progress_bar("{spinner} fusing {bar:40} {human_pos}/{human_len} points ({eta})");
     let report = build_file(&a.input, &a.out, &cfg, &mut |done, total| {

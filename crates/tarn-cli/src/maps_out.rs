@@ -4,7 +4,7 @@
 //! (`tarn::build::ExtraMaps`).
 
 use clap::Args;
-use tarn::mapper::MapperConfig;
+use tarn::build::BuildOptions;
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct MapsOutArgs {
@@ -32,14 +32,14 @@ pub struct MapsOutArgs {
 }
 
 /// The options over the config's `[build]` section.
-pub fn apply(a: &MapsOutArgs, cfg: &mut MapperConfig) {
-    cfg.build.ros_map |= a.ros_map;
-    cfg.build.geotiff |= a.geotiff;
-    cfg.build.tiles |= a.tiles;
+pub fn apply(a: &MapsOutArgs, b: &mut BuildOptions) {
+    b.ros_map |= a.ros_map;
+    b.geotiff |= a.geotiff;
+    b.tiles |= a.tiles;
     if a.epsg.is_some() {
-        cfg.build.epsg = a.epsg;
+        b.epsg = a.epsg;
     }
     if a.frame_id.is_some() {
-        cfg.build.frame_id = a.frame_id.clone();
+        b.frame_id = a.frame_id.clone();
     }
 }

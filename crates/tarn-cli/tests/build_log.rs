@@ -364,7 +364,7 @@ fn tiles_of_a_log_finish_to_the_built_map() {
     let cfg = window_of(200);
     let out = dir.path().join("map");
     let mut with_tiles = cfg.clone();
-    with_tiles.mapper.build.tiles = true;
+    with_tiles.build.tiles = true;
     let report = build_log(&log, &out, &with_tiles, &mut |_, _| {}).unwrap();
     assert_eq!(report.extra_outputs, ["tiles.bin"]);
     let built = std::fs::read(out.join("map.ply")).unwrap();

@@ -77,7 +77,7 @@ fn run(cfg: &MapperConfig, frames: &[Frame]) -> (TileMap, Vec<FrameReport>) {
 
 #[test]
 fn cues_put_water_evidence_at_the_pond() {
-    let mut cfg = tarn_sim::sim::mapper_config(&small_scene().rig);
+    let mut cfg = small_scene().rig.mapper_config();
     cfg.lidar.as_mut().unwrap().height_m = None; // estimated from the scan
     let (tiles, reps) = run(&cfg, &sim().frames);
     // The lidar is 1.8 m above base_link, which the simulator puts on the terrain.
@@ -178,7 +178,10 @@ fn offline_build_is_the_online_map() {
         out.path(),
         &tarn::build::LogBuildConfig {
             mapper: MapperConfig::default(),
-            per_frame_maps: true,
+            build: tarn::build::BuildOptions {
+                per_frame_maps: true,
+                ..Default::default()
+            },
             ..Default::default()
         },
         &mut |_, _| {},
@@ -369,7 +372,7 @@ fn a_lidar_only_config_runs_no_stereo_code() {
         .collect();
     let (t2, _) = run(&MapperConfig::default(), &stripped);
     assert!(tiles == t2);
-    assert_eq!(tarn::build::cue_names(&cfg), ["lidar", "reflectivity"]);
+    assert_eq!(cfg.cue_names(), ["lidar", "reflectivity"]);
 }
 
 /// The stereo range noise is stated by the disparity noise, the focal length and binning

@@ -204,55 +204,6 @@ pub fn write_scene_mesh(w: &World, path: &Path) -> Result<()> {
     )
 }
 
-/// The [`MapperConfig`](crate::mapper::MapperConfig) of a rig: the default config with
-/// what the sensors' datasheets say and a log cannot ([`apply_rig`]). It takes the rig
-/// alone, so nothing of a scene (water clarity, levels, depths) can reach the mapper; what
-/// the log holds (focal lengths, binning, mounts, the lidar's height) the mapper reads from
-/// the log.
-pub fn mapper_config(rig: &RigSpec) -> crate::mapper::MapperConfig {
-    let mut cfg = crate::mapper::MapperConfig::default();
-    apply_rig(&mut cfg, rig);
-    cfg
-}
-
-/// Puts a rig's datasheet values into `cfg`, keeping its cue choices and everything else:
-/// the lidar's wavelength, sensitivity (dry limit and its reference albedo), aperture and
-/// range noise; the stereo pair's disparity noise, minimum disparity and baseline; the
-/// colour camera's encoding. A sensor the rig lacks is turned off.
-pub fn apply_rig(cfg: &mut crate::mapper::MapperConfig, rig: &RigSpec) {
-    use crate::grid::RangeNoise;
-    use crate::mapper::{LidarConfig, StereoConfig};
-    cfg.lidar = match (&rig.lidar, cfg.lidar.take()) {
-        (Some(l), Some(c)) => Some(LidarConfig {
-            wavelength_nm: l.wavelength_nm,
-            dry_limit_m: l.dry_limit_m,
-            albedo: l.reference_albedo,
-            aperture_diameter_m: l.aperture_m,
-            // The datasheet's range and a margin for range noise: nothing real lies beyond.
-            max_range_m: l.max_range_m * 1.1,
-            noise: Some(RangeNoise {
-                sigma0: l.range_noise_m.max(0.01),
-                ..RangeNoise::LIDAR
-            }),
-            ..c
-        }),
-        _ => None,
-    };
-    cfg.stereo = match (&rig.stereo, cfg.stereo.take()) {
-        (Some(s), Some(c)) => Some(StereoConfig {
-            disparity_noise_px: Some(s.disparity_noise_px),
-            min_disparity_px: s.min_disparity_px,
-            baseline_m: Some(s.baseline_m),
-            max_range_m: s.max_range_m * 1.1,
-            ..c
-        }),
-        _ => None,
-    };
-    if let (Some(l), Some(e)) = (cfg.labels.as_mut(), rig.colour_encoding()) {
-        l.encoding = e;
-    }
-}
-
 /// Simulates `scene` into `out_dir` (created if missing).
 pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimReport> {
     let t0 = Instant::now();

@@ -1001,7 +1001,9 @@ fn a_rig_cannot_carry_scene_truth() {
         )
         .unwrap();
         assert!(!out.join("mapper.toml").exists());
-        let cfg = mapper_config(&RigSpec::load(&out.join("rig.toml")).unwrap());
+        let cfg = RigSpec::load(&out.join("rig.toml"))
+            .unwrap()
+            .mapper_config();
         assert_eq!(cfg.lidar.as_ref().unwrap().attenuation_per_m, None);
         assert_eq!(cfg.vehicle, crate::water::Vehicle::default());
         outs.push((std::fs::read(out.join("rig.toml")).unwrap(), cfg));
