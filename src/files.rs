@@ -1,6 +1,7 @@
 //! Files written whole or not at all: a temporary file beside the destination, renamed
 //! over it only once complete and on disk, so that a reader never sees a partial file and
-//! a failed or interrupted write leaves the previous file in place.
+//! a failed or interrupted write leaves the previous file in place. And config files read
+//! with the line of any error.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -63,6 +64,33 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
         serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;
         w.write_all(b"\n")
     })
+}
+
+/// Parses a config file: TOML for a `.toml` file, JSON for any other extension. Errors name
+/// the file, and the line (and column) where parsing failed.
+pub fn read_config<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let is_toml = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    if is_toml {
+        toml::from_str(&text).map_err(|e| {
+            let loc = e
+                .span()
+                .map(|s| format!("line {}", text[..s.start].lines().count().max(1)))
+                .unwrap_or_else(|| "config".into());
+            Error::format(path, loc, e.message().to_string())
+        })
+    } else {
+        serde_json::from_str(&text).map_err(|e| {
+            Error::format(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
+        })
+    }
 }
 
 #[cfg(test)]

@@ -8,11 +8,11 @@
 //! `tests/module_graph.rs`): `error`, `interrupt`, `files`, `geom`, `optics` (the ground
 //! floor) → `sensor` (a frame's clouds and images) → `grid` → `classify` → `cues` →
 //! `calib` → `project` → `water` → `hazard` → `mapper` (one frame through every stage) →
-//! `rig` (sensor datasheets) → `io` (logs in, maps out) → `build` (offline builds of clouds and logs).
+//! `rig` (sensor datasheets) → `io` (clouds in, maps out). Robot logs and offline builds
+//! are the `tarn-log` crate's.
 
 #![warn(missing_docs)]
 
-pub mod build;
 pub mod calib;
 pub mod classify;
 pub mod cues;
@@ -31,8 +31,3 @@ pub mod sensor;
 pub mod water;
 
 pub use error::{Error, Result};
-
-/// The README's example is compiled and run as a doctest, so it cannot go stale.
-#[cfg(doctest)]
-#[doc = include_str!("../README.md")]
-pub struct ReadmeDoctests;

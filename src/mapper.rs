@@ -280,33 +280,6 @@ impl Default for MapperConfig {
     }
 }
 
-/// Parses a config file: TOML for a `.toml` file, JSON for any other extension. Errors name
-/// the file, and the line (and column) where parsing failed.
-pub(crate) fn read_config_file<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let is_toml = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
-    if is_toml {
-        toml::from_str(&text).map_err(|e| {
-            let loc = e
-                .span()
-                .map(|s| format!("line {}", text[..s.start].lines().count().max(1)))
-                .unwrap_or_else(|| "config".into());
-            Error::format(path, loc, e.message().to_string())
-        })
-    } else {
-        serde_json::from_str(&text).map_err(|e| {
-            Error::format(
-                path,
-                format!("line {} column {}", e.line(), e.column()),
-                e.to_string(),
-            )
-        })
-    }
-}
-
 /// The cue names of [`MapperConfig::set_cues`].
 pub const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
 
@@ -355,7 +328,7 @@ impl MapperConfig {
     /// Reads a config from a `.toml` file, or JSON for any other extension. Errors name the
     /// file, and the key and line where parsing failed; then the config is validated.
     pub fn load(path: &Path) -> Result<Self> {
-        let cfg: MapperConfig = read_config_file(path)?;
+        let cfg: MapperConfig = crate::files::read_config(path)?;
         cfg.validate()
             .map_err(|e| Error::format(path, "mapper config", e.to_string()))?;
         Ok(cfg)

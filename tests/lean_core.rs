@@ -1,6 +1,7 @@
 //! The core library is what a vehicle embeds: its dependency tree holds no command-line,
 //! progress-bar, plotting, font or simulator crate (those live in `tarn-cli` and
-//! `tarn-sim`), and the picture's font only with the `render` feature.
+//! `tarn-sim`), no log storage (MCAP, SQLite, bz2, lz4: `tarn-log`), and the picture's font
+//! only with the `render` feature.
 
 use std::process::Command;
 
@@ -34,7 +35,7 @@ fn normal_deps(features: &[&str]) -> Vec<String> {
         .collect()
 }
 
-const NOT_IN_THE_CORE: [&str; 9] = [
+const NOT_IN_THE_CORE: [&str; 14] = [
     "clap",
     "indicatif",
     "plotters",
@@ -44,10 +45,15 @@ const NOT_IN_THE_CORE: [&str; 9] = [
     "ctrlc",
     "tarn-sim",
     "tarn-cli",
+    "tarn-log",
+    "mcap",
+    "rusqlite",
+    "bzip2",
+    "lz4",
 ];
 
 #[test]
-fn the_core_crate_compiles_no_cli_plot_font_or_simulator() {
+fn the_core_crate_compiles_no_cli_plot_font_simulator_or_log_storage() {
     let deps = normal_deps(&[]);
     assert!(deps.iter().any(|d| d == "nalgebra"), "{deps:?}");
     for name in NOT_IN_THE_CORE {

@@ -15,12 +15,12 @@ use pyo3::exceptions::{PyException, PyOSError, PyStopIteration, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList};
 
-use tarn::build::{
+use tarn_log::build::{
     build_tiles as core_build_tiles, finish_tile_region, finish_tiles, LogBuildConfig,
 };
 use tarn::grid::{CellKey, TileMap};
 use tarn::hazard::{join_regions as core_join_regions, HazardMap, MapLookup, RegionMap, TileKey};
-use tarn::io::frames::FrameStream;
+use tarn_log::frames::FrameStream;
 use tarn::sensor::Frame as CoreFrame;
 use tarn::mapper::{Mapper as CoreMapper, MapperConfig};
 
@@ -727,8 +727,8 @@ impl FrameIter {
 #[pyo3(signature = (path, config = None))]
 fn read_frames(path: PathBuf, config: Option<PathBuf>) -> PyResult<FrameIter> {
     let cfg = config_of(config)?;
-    let summary = tarn::io::log::summarize_quick(&path).map_err(err)?;
-    let log_cfg = tarn::build::frame_log_config(&cfg, &summary, &path).map_err(err)?;
+    let summary = tarn_log::log::summarize_quick(&path).map_err(err)?;
+    let log_cfg = tarn_log::build::frame_log_config(&cfg, &summary, &path).map_err(err)?;
     let stream = FrameStream::open(&path, &log_cfg).map_err(err)?;
     Ok(FrameIter {
         stream,

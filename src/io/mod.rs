@@ -1,42 +1,15 @@
-//! Reading and writing the outside world's files: point clouds, logs, exports.
-//!
-//! ROS 2 logs (MCAP, CDR), without a ROS installation:
-//! - [`ros`]: CDR in both byte orders; `TFMessage`, `PointCloud2`, `Image`, `CameraInfo`;
-//!   their `ros2msg` schemas; conversions to [`crate::geom::PointCloud`], [`crate::sensor::Image`]
-//!   and [`crate::geom::camera::CameraModel`].
-//! - [`mcap_log`]: [`mcap_log::LogReader`] streams messages from chunked or unchunked,
-//!   zstd / lz4 / uncompressed files, with or without summary; [`mcap_log::LogWriter`]
-//!   writes `ros2`-profile logs; [`mcap_log::summarize`], [`mcap_log::recode`].
-//! - [`log`]: every log storage behind [`log::MessageSource`]: MCAP, rosbag2 directories,
-//!   and with the `bags` feature rosbag2 `.db3` files and ROS 1 `.bag` files ([`bags`]);
-//!   [`log::open`], [`log::summarize`].
-//! - [`tf`]: [`tf::TfBuffer`], interpolating transforms, never extrapolating.
-//! - [`frames`]: [`frames::FrameStream`], the time-synchronized [`frames::Frame`]s a map
-//!   is built from, with [`frames::FrameStats`] and progress in bytes.
-//!
-//! Measured with `cargo bench --bench mcap_read -- --warm-up-time 1 --measurement-time 4`
-//! (2 shared cores, 60 clouds of 32 × 1024 points with intensity plus 100 Hz TF): the
-//! frame stream read a zstd log at 276 MiB/s of file (8.4 k messages/s, 60 clouds in
-//! about 80 ms) and an uncompressed one at 1.2 GiB/s (24 k messages/s). Peak RSS of the
-//! frame stream (`examples/mcap_memory.rs`) was 8588 kB for a 100-scan log and 8648 kB
-//! for a 1000-scan log.
+//! Files other programs read and write: point clouds in (PLY, KITTI `.bin`), maps out
+//! (the export contract's `map.ply`, `terrain.ply`, `water.ply`, `map.png`; GeoTIFF;
+//! the map read back). Robot logs are the `tarn-log` crate's.
 
-#[cfg(feature = "bags")]
-pub mod bags;
 pub mod export;
-pub mod frames;
 pub mod geotiff;
 pub mod kitti;
-pub mod log;
 pub mod mapfile;
-pub mod mcap_log;
 pub mod ply;
 pub mod raster;
 #[cfg(feature = "render")]
 pub mod render;
-pub mod ros;
-pub mod ros_export;
-pub mod tf;
 
 use std::path::Path;
 
@@ -56,7 +29,7 @@ pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
         _ => Err(Error::format(
             path,
             "file name",
-            format!("not an input tarn reads ({})", log::SUPPORTED),
+            "not a point cloud tarn reads (.ply, .bin)".to_string(),
         )),
     }
 }
@@ -133,7 +106,7 @@ mod tests {
         assert_eq!(read_point_cloud(&bin).unwrap().xyz, vec![[4.0, 5.0, 6.0]]);
         for name in ["cloud.pcd", "cloud"] {
             let e = read_point_cloud(&dir.path().join(name)).unwrap_err();
-            assert!(e.to_string().contains(log::SUPPORTED), "{e}");
+            assert!(e.to_string().contains("(.ply, .bin)"), "{e}");
             assert!(e.to_string().contains(name), "{e}");
         }
     }

@@ -1,5 +1,5 @@
 //! The hazard map as a dense raster: the layers the ROS and GIS exports write
-//! ([`crate::io::ros_export`], [`crate::io::geotiff`]), over the bounding box of the
+//! (`tarn_log::ros_export`, [`crate::io::geotiff`]), over the bounding box of the
 //! observed cells.
 //!
 //! Cell `(ix, iy)` of the raster is the map cell with key `(lo.x + ix, lo.y + iy)`: `ix`

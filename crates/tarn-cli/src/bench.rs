@@ -17,7 +17,6 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use tarn::build::{build_log, LogBuildConfig};
 use tarn::classify::color::RuleClassifier;
 use tarn::classify::lut::ColorLut;
 use tarn::classify::Label;
@@ -28,10 +27,11 @@ use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;
 use tarn::grid::{CellKey, GridConfig, RangeNoise, RollingGrid, TileMap};
 use tarn::hazard::HazardMap;
-use tarn::io::frames::{FrameStream, LogConfig};
 use tarn::project::{FrameLabelConfig, FrameLabels};
 use tarn::sensor::Frame;
 use tarn::sensor::Pixels;
+use tarn_log::build::{build_log, LogBuildConfig};
+use tarn_log::frames::{FrameStream, LogConfig};
 use tarn_sim::sim::synthetic_lidar_cloud;
 
 /// What to measure.
@@ -1382,7 +1382,11 @@ pub fn cloud_build(n: usize, side_m: f64) -> Result<CloudBenchRow> {
     let cloud = PointCloud::unorganized(pts);
     let generate_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let b = tarn::build::build_cloud(&cloud, &tarn::build::BuildConfig::default(), &mut |_, _| {})?;
+    let b = tarn_log::build::build_cloud(
+        &cloud,
+        &tarn_log::build::BuildConfig::default(),
+        &mut |_, _| {},
+    )?;
     let build_s = t1.elapsed().as_secs_f64();
     Ok(CloudBenchRow {
         points: n,

@@ -5,15 +5,15 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use tarn::build::{
-    build_file, build_log, check_output_dir, BuildConfig, BuildReport, ExtraMaps, LogBuildConfig,
-    LogBuildReport, WaterSummary,
-};
 use tarn::grid::{GridConfig, RangeNoise};
-use tarn::io::frames::LogConfig;
 use tarn::mapper::MapperConfig;
 use tarn::project::{LabelSensor, LabelsConfig};
 use tarn::rig::RigSpec;
+use tarn_log::build::{
+    build_file, build_log, check_output_dir, BuildConfig, BuildReport, ExtraMaps, LogBuildConfig,
+    LogBuildReport, WaterSummary,
+};
+use tarn_log::frames::LogConfig;
 
 #[derive(Args)]
 #[command(allow_negative_numbers = true)]
@@ -66,7 +66,7 @@ pub struct BuildArgs {
     /// mirror [default: the config's; all without a config].
     #[arg(long)]
     pub cues: Option<String>,
-    /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional;
+    /// (log) Log configuration (JSON; fields of tarn_log::frames::LogConfig, all optional;
     /// the config's [log] section does the same).
     #[arg(long)]
     pub log_config: Option<PathBuf>,
@@ -242,7 +242,7 @@ impl std::error::Error for DamagedInput {}
 pub fn damaged_input(
     input: &Path,
     what: &str,
-    damaged: &[tarn::io::mcap_log::DamagedRange],
+    damaged: &[tarn_log::mcap_log::DamagedRange],
 ) -> anyhow::Result<()> {
     if damaged.is_empty() {
         return Ok(());
@@ -262,7 +262,7 @@ pub fn damaged_input(
 /// `Err(DamagedInput)` after the outputs were written (exit status 3).
 pub fn run(a: &BuildArgs) -> anyhow::Result<()> {
     check_output_dir(&a.out)?;
-    if !tarn::io::log::is_log(&a.input) {
+    if !tarn_log::log::is_log(&a.input) {
         if a.cues.is_some() || a.log_config.is_some() || a.rig.is_some() {
             anyhow::bail!(
                 "--cues, --rig and --log-config are for logs; {} is a cloud",
@@ -360,7 +360,7 @@ pub fn load_log_config(p: &Path) -> anyhow::Result<LogConfig> {
 pub fn run_log(a: &BuildArgs) -> anyhow::Result<LogBuildReport> {
     // The frame topic is chosen from the log unless it was named.
     let mut cfg = build_config(a)?;
-    cfg.topics = tarn::io::frames::NamedTopics {
+    cfg.topics = tarn_log::frames::NamedTopics {
         lidar: a.lidar_topic.clone(),
         stereo: a.stereo_topic.clone(),
         camera: a.camera_topic.clone(),

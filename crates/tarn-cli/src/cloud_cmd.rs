@@ -1,7 +1,7 @@
 //! `tarn info CLOUD`: what a point cloud file holds.
 
 pub fn info(input: &std::path::Path, rings: Option<usize>) -> anyhow::Result<()> {
-    let mut cloud = tarn::io::read_point_cloud(input)?;
+    let mut cloud = tarn_log::log::read_cloud(input)?;
     if let Some(r) = rings {
         cloud = tarn::io::organize_column_major(&cloud, r)?;
     }

@@ -54,7 +54,7 @@ struct Report {
 }
 
 pub fn run(a: &CuesArgs) -> anyhow::Result<()> {
-    let raw = tarn::io::read_point_cloud(&a.input)
+    let raw = tarn_log::log::read_cloud(&a.input)
         .with_context(|| format!("reading {}", a.input.display()))?;
     let cloud = tarn::io::organize_column_major(&raw, a.rings)?;
     let (height, estimated) = match a.height_m {

@@ -4,9 +4,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use serde_json::{json, Value};
-use tarn::io::frames::{FrameStream, LogConfig, NamedTopics};
-use tarn::io::mcap_log;
-use tarn::io::ros::{self, schema_name};
+use tarn_log::frames::{FrameStream, LogConfig, NamedTopics};
+use tarn_log::mcap_log;
+use tarn_log::ros::{self, schema_name};
 
 fn f64s(v: &[f64]) -> Value {
     json!(v)
@@ -24,8 +24,8 @@ fn dump_message(m: &mcap_log::RawMessage) -> anyhow::Result<Option<Value>> {
     let stamp = |h: &ros::Header| json!([h.stamp.sec, h.stamp.nanosec]);
     let at = || format!("{} at log time {} ns", ch.topic, m.log_time);
     let (Some(kind), Some(wire)) = (
-        tarn::io::log::canonical_type(&ch.schema),
-        tarn::io::log::wire_of(&ch.message_encoding),
+        tarn_log::log::canonical_type(&ch.schema),
+        tarn_log::log::wire_of(&ch.message_encoding),
     ) else {
         return Ok(None);
     };
@@ -92,12 +92,12 @@ pub fn info(
     cfg: LogConfig,
     named: &NamedTopics,
 ) -> anyhow::Result<()> {
-    let summary = tarn::io::log::summarize(&log)?;
+    let summary = tarn_log::log::summarize(&log)?;
     let cfg = cfg.with_topics_of(&summary, named, &log)?;
     let mut stream = FrameStream::open(&log, &cfg)?;
     let mut frame_errors = Vec::new();
     // The sensors' calibration as `tarn build LOG` measures it, over the first frames.
-    let mut mapper = tarn::mapper::Mapper::new(tarn::build::sensors_of_log(
+    let mut mapper = tarn::mapper::Mapper::new(tarn_log::build::sensors_of_log(
         &tarn::mapper::MapperConfig::every_sensor(),
         &cfg,
         &summary,
@@ -133,7 +133,7 @@ pub fn info(
         });
         if dump {
             let mut msgs = Vec::new();
-            let mut r = tarn::io::log::open(&log)?;
+            let mut r = tarn_log::log::open(&log)?;
             while let Some(m) = r.next_message() {
                 if let Some(v) = dump_message(&m?)? {
                     msgs.push(v);
@@ -306,7 +306,7 @@ pub fn print_calibration(c: &tarn::calib::CalibrationReport) {
 }
 
 /// On stderr when no frame would be built: `tarn build` would refuse the log.
-fn no_frames_warning(cfg: &LogConfig, stats: &tarn::io::frames::FrameStats) {
+fn no_frames_warning(cfg: &LogConfig, stats: &tarn_log::frames::FrameStats) {
     if stats.frames_built == 0 {
         eprintln!(
             "warning: no frame would be built from {} ({} skipped without a transform); \

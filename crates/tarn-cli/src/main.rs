@@ -17,9 +17,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use tarn::io::frames::LogConfig;
-use tarn::io::mcap_log::{self, LogCompression, WriteOptions};
-use tarn::io::ros::Endian;
+use tarn_log::frames::LogConfig;
+use tarn_log::mcap_log::{self, LogCompression, WriteOptions};
+use tarn_log::ros::Endian;
 
 use build_cmd::BuildArgs;
 
@@ -82,7 +82,7 @@ enum Command {
         /// (log) The colour camera's Image topic.
         #[arg(long)]
         camera_topic: Option<String>,
-        /// (log) Log configuration (JSON; fields of tarn::io::frames::LogConfig, all optional).
+        /// (log) Log configuration (JSON; fields of tarn_log::frames::LogConfig, all optional).
         #[arg(long)]
         log_config: Option<PathBuf>,
         /// (cloud) The file is a column-major lidar scan with this many rings (point = column ×
@@ -149,14 +149,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             log_config,
             rings,
         }) => {
-            if !tarn::io::log::is_log(&input) {
+            if !tarn_log::log::is_log(&input) {
                 return cloud_cmd::info(&input, rings);
             }
             let cfg = match log_config {
                 Some(p) => build_cmd::load_log_config(&p)?,
                 None => LogConfig::default(),
             };
-            let named = tarn::io::frames::NamedTopics {
+            let named = tarn_log::frames::NamedTopics {
                 lidar: lidar_topic,
                 stereo: stereo_topic,
                 camera: camera_topic,

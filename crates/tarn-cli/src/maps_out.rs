@@ -1,10 +1,10 @@
 //! The options of `tarn build` for its outputs beside the contract's: `map.mcap`
 //! (`--ros-map`), `map.tif` (`--geotiff`) and `tiles.bin` (`--tiles`), over the config's
 //! `[build]` `ros_map`, `geotiff`, `tiles`, `epsg` and `frame_id`. The library writes them with the contract's files
-//! (`tarn::build::ExtraMaps`).
+//! (`tarn_log::build::ExtraMaps`).
 
 use clap::Args;
-use tarn::build::BuildOptions;
+use tarn_log::build::BuildOptions;
 
 #[derive(Args, Debug, Clone, Default)]
 pub struct MapsOutArgs {

@@ -6,13 +6,13 @@
 use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
-use tarn::build::{build_log, LogBuildConfig};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::grid::GridConfig;
-use tarn::io::mcap_log::{LogReader, LogWriter, WriteOptions};
 use tarn::io::ply;
-use tarn::io::ros::{Header, TfMessage, TransformStamped};
 use tarn::mapper::MapperConfig;
+use tarn_log::build::{build_log, LogBuildConfig};
+use tarn_log::mcap_log::{LogReader, LogWriter, WriteOptions};
+use tarn_log::ros::{Header, TfMessage, TransformStamped};
 
 const NS: u64 = 1_000_000_000;
 const SLOPE: f64 = 0.05;
@@ -218,7 +218,7 @@ fn records_offset(c: &mcap::records::ChunkIndex) -> usize {
     c.chunk_start_offset as usize + 9 + 8 + 8 + 8 + 4 + 4 + c.compression.len() + 8
 }
 
-fn messages_of(bytes: Vec<u8>) -> (u64, Vec<tarn::io::mcap_log::DamagedRange>) {
+fn messages_of(bytes: Vec<u8>) -> (u64, Vec<tarn_log::mcap_log::DamagedRange>) {
     let mut r = LogReader::from_bytes(bytes, "damaged.mcap");
     let mut n = 0;
     while let Some(m) = r.next_message() {
@@ -356,8 +356,8 @@ fn a_damaged_end_of_file_is_the_same_answer_however_it_is_damaged() {
 /// against the one pass.
 #[test]
 fn tiles_of_a_log_finish_to_the_built_map() {
-    use tarn::build::{build_tiles, finish_tiles};
     use tarn::grid::TileMap;
+    use tarn_log::build::{build_tiles, finish_tiles};
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("drive.mcap");
     write_log(&log, 60);
@@ -426,17 +426,17 @@ fn tiles_of_a_log_finish_to_the_built_map() {
 /// byte, and what it holds at the end is less than all of it.
 #[test]
 fn cells_taken_while_driving_merge_to_the_whole_map() {
-    use tarn::build::{build_tiles, frame_log_config};
     use tarn::grid::TileMap;
-    use tarn::io::frames::FrameStream;
     use tarn::mapper::Mapper;
+    use tarn_log::build::{build_tiles, frame_log_config};
+    use tarn_log::frames::FrameStream;
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("drive.mcap");
     write_log(&log, 60);
     let cfg = window_of(60);
     let whole = build_tiles(&log, &cfg, None).unwrap().tiles;
 
-    let summary = tarn::io::log::summarize_quick(&log).unwrap();
+    let summary = tarn_log::log::summarize_quick(&log).unwrap();
     let log_cfg = frame_log_config(&cfg, &summary, &log).unwrap();
     let mut mapper = Mapper::new(cfg.mapper.clone()).unwrap();
     mapper.set_publish(false);

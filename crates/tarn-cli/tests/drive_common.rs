@@ -7,8 +7,8 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
-use tarn::io::mcap_log::{LogWriter, WriteOptions};
-use tarn::io::ros::{TfMessage, TransformStamped};
+use tarn_log::mcap_log::{LogWriter, WriteOptions};
+use tarn_log::ros::{TfMessage, TransformStamped};
 
 /// A log at `path` that starts with the lidar's mount ([`lidar_ext`]) on `/tf_static`.
 pub fn log_with_mount(path: &Path) -> LogWriter {

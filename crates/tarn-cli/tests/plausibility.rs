@@ -11,7 +11,7 @@ use std::process::{Command, Output};
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use tarn::geom::Pose;
-use tarn::io::ros::Header;
+use tarn_log::ros::Header;
 
 const NS: u64 = 1_000_000_000;
 

@@ -12,8 +12,8 @@ use std::process::{Command, Output};
 
 use nalgebra::{Point3, Vector3};
 use tarn::geom::{PointCloud, Pose};
-use tarn::io::ros::msgs::datatype;
-use tarn::io::ros::{Header, PointCloud2Msg, PointField};
+use tarn_log::ros::msgs::datatype;
+use tarn_log::ros::{Header, PointCloud2Msg, PointField};
 
 const NS: u64 = 1_000_000_000;
 const RINGS: usize = 32;

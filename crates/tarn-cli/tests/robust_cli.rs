@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use nalgebra::Point3;
-use tarn::io::ros::Header;
+use tarn_log::ros::Header;
 
 const NS: u64 = 1_000_000_000;
 

@@ -11,11 +11,11 @@ use tarn::classify::gmm::{ClassModel, ColorModel, ColorModelData, Component};
 use tarn::classify::Label;
 use tarn::geom::camera::{CameraModel, Distortion};
 use tarn::geom::{pose_xyz_rpy, PointCloud};
-use tarn::io::mcap_log::{LogCompression, LogWriter, WriteOptions};
-use tarn::io::ros::{
+use tarn::sensor::{Image, Pixels};
+use tarn_log::mcap_log::{LogCompression, LogWriter, WriteOptions};
+use tarn_log::ros::{
     camera_to_info, cloud_to_pointcloud2, encode_image, Endian, Header, TfMessage, TransformStamped,
 };
-use tarn::sensor::{Image, Pixels};
 
 const NS: i64 = 1_000_000_000;
 

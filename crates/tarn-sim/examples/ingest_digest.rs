@@ -5,9 +5,9 @@
 //! `cargo run --release --example ingest_digest`
 use std::hash::{Hash, Hasher};
 
-use tarn::build::{build_cloud, BuildConfig};
 use tarn::geom::{pose_xyz_rpy, PointCloud};
 use tarn::grid::{CellKey, CellStats, GridConfig, RangeNoise, RollingGrid};
+use tarn_log::build::{build_cloud, BuildConfig};
 
 struct Rng(u64);
 impl Rng {

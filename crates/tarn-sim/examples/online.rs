@@ -13,9 +13,9 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use tarn::build::stage_latency;
-use tarn::io::frames::{FrameStream, LogConfig};
 use tarn::mapper::{Mapper, MapperConfig};
+use tarn_log::build::stage_latency;
+use tarn_log::frames::{FrameStream, LogConfig};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut log: Option<PathBuf> = None;

@@ -9,13 +9,13 @@
 
 use std::path::Path;
 
-use crate::io::frames::{FrameStream, LogConfig};
-use crate::io::mcap_log::LogReader;
-use crate::io::ros::{
+use tarn_log::frames::{FrameStream, LogConfig};
+use tarn_log::mcap_log::LogReader;
+use tarn_log::ros::{
     camera_from_info, decode_image, pointcloud2_to_cloud, CameraInfoMsg, ImageMsg, NavSatFixMsg,
     PointCloud2Msg, TfMessage, Wire,
 };
-use crate::io::tf::TfBuffer;
+use tarn_log::tf::TfBuffer;
 
 /// A point cloud in PLY, through [`crate::io::ply::read_from_bytes`], and the same bytes as
 /// a contract `map.ply` through [`crate::io::mapfile::parse_map_ply`].
@@ -88,11 +88,11 @@ pub fn mcap(data: &[u8]) -> bool {
     ok
 }
 
-/// A ROS 1 bag ([`crate::io::bags::Ros1Reader`]): every message read, then the frame
+/// A ROS 1 bag ([`tarn_log::bags::Ros1Reader`]): every message read, then the frame
 /// stream over it, whose decoders read the ROS 1 wire.
 pub fn ros1_bag(data: &[u8]) -> bool {
-    use crate::io::bags::Ros1Reader;
-    use crate::io::log::MessageSource;
+    use tarn_log::bags::Ros1Reader;
+    use tarn_log::log::MessageSource;
     let mut ok = true;
     let Ok(mut reader) = Ros1Reader::from_bytes(data.to_vec(), "fuzz.bag") else {
         return false;
@@ -297,7 +297,7 @@ fn exports_of(map: &crate::hazard::HazardMap, files: bool) {
 
 /// A cloud build: the first byte chooses the reader (PLY, KITTI, or the bytes as raw
 /// little-endian `f32` x y z triples, which reach any coordinate), the window size and the
-/// resolution; the cloud is built ([`crate::build::build_cloud`]) and exported in memory.
+/// resolution; the cloud is built ([`tarn_log::build::build_cloud`]) and exported in memory.
 pub fn cloud_build(data: &[u8]) -> bool {
     let Some((&head, rest)) = data.split_first() else {
         return false;
@@ -317,7 +317,7 @@ pub fn cloud_build(data: &[u8]) -> bool {
     let Ok(cloud) = cloud else {
         return false;
     };
-    let cfg = crate::build::BuildConfig {
+    let cfg = tarn_log::build::BuildConfig {
         grid: crate::grid::GridConfig {
             resolution: [0.05, 0.1, 0.25, 1.0][(head >> 2) as usize % 4],
             ..Default::default()
@@ -325,7 +325,7 @@ pub fn cloud_build(data: &[u8]) -> bool {
         max_window_cells: 16 << ((head >> 4) % 8),
         ..Default::default()
     };
-    let b = match crate::build::build_cloud(&cloud, &cfg, &mut |_, _| {}) {
+    let b = match tarn_log::build::build_cloud(&cloud, &cfg, &mut |_, _| {}) {
         Ok(b) => b,
         Err(_) => return false,
     };
@@ -504,7 +504,7 @@ pub fn exports(data: &[u8]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::ros::{Endian, Header};
+    use tarn_log::ros::{Endian, Header};
 
     /// The corpus seed of the NavSatFix kind: a fix's payload behind the kind byte 7
     /// (`TARN_WRITE_SEED=1 cargo test -p tarn-sim --lib nav_sat_fix` writes it).

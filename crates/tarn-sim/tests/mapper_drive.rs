@@ -8,9 +8,9 @@ use std::sync::Arc;
 use tarn::calib::Source;
 use tarn::grid::{RollingGrid, TileMap};
 use tarn::hazard::HazardMap;
-use tarn::io::frames::{FrameStream, LogConfig};
 use tarn::mapper::*;
 use tarn::sensor::Frame;
+use tarn_log::frames::{FrameStream, LogConfig};
 use tarn_sim::sim::{simulate, Scene, SimOptions};
 
 /// The default scene, cut down: 6 frames 2 m apart, a 256-column lidar, 160 × 120 stereo.
@@ -126,10 +126,10 @@ fn offline_build_is_the_online_map() {
     }
     let (tiles, online) = m.finish_map().unwrap();
     let out = tempfile::tempdir().unwrap();
-    let r = tarn::build::build_log(
+    let r = tarn_log::build::build_log(
         &s.log,
         out.path(),
-        &tarn::build::LogBuildConfig {
+        &tarn_log::build::LogBuildConfig {
             mapper: cfg,
             ..Default::default()
         },
@@ -164,7 +164,7 @@ fn offline_build_is_the_online_map() {
     assert_eq!(r.stage_latency_ms.len(), StageTimes::NAMES.len());
     // The offline build skips the per-frame water stage; the map above, with it on in the
     // online mapper, is the same.
-    let water_ms = |r: &tarn::build::LogBuildReport| {
+    let water_ms = |r: &tarn_log::build::LogBuildReport| {
         r.stage_latency_ms
             .iter()
             .find(|l| l.stage == "water")
@@ -173,12 +173,12 @@ fn offline_build_is_the_online_map() {
     };
     assert!(!r.per_frame_maps);
     assert_eq!(water_ms(&r), 0.0);
-    let r = tarn::build::build_log(
+    let r = tarn_log::build::build_log(
         &s.log,
         out.path(),
-        &tarn::build::LogBuildConfig {
+        &tarn_log::build::LogBuildConfig {
             mapper: MapperConfig::default(),
-            build: tarn::build::BuildOptions {
+            build: tarn_log::build::BuildOptions {
                 per_frame_maps: true,
                 ..Default::default()
             },

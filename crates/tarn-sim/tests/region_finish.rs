@@ -1,12 +1,12 @@
 //! The water stage of a merged map of simulated logs split by region with a halo, joined,
 //! against the whole map's: byte for byte.
 
-use tarn::build::{
-    build_tiles, finish_tile_region, finish_tiles, finish_tiles_by_regions, LogBuildConfig,
-};
 use tarn::grid::TileMap;
 use tarn::hazard::{join_regions, HazardMap, RegionMap};
 use tarn::mapper::MapperConfig;
+use tarn_log::build::{
+    build_tiles, finish_tile_region, finish_tiles, finish_tiles_by_regions, LogBuildConfig,
+};
 use tarn_sim::sim::{simulate, Scene, SimOptions};
 
 /// A drive of the default scene (small rig) along `waypoints`, 8 frames at 2 Hz: the two

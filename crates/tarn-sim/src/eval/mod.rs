@@ -872,9 +872,9 @@ fn matrix_bands_and_union() -> Vec<(f64, f64)> {
 /// [`tarn::mapper::window_centre`]): the returns a mapper with that window fused. A return
 /// outside the window is dropped by the mapper, so the cell it fell in is not ground the
 /// lidar saw. Empty when the log has no lidar topic (the default
-/// [`LogConfig`](tarn::io::frames::LogConfig)'s).
+/// [`LogConfig`](tarn_log::frames::LogConfig)'s).
 pub fn lidar_cells(log: &Path, grid: &tarn::grid::GridConfig) -> Result<KeySet> {
-    use tarn::io::frames::{FrameStream, LogConfig};
+    use tarn_log::frames::{FrameStream, LogConfig};
     grid.validate()?;
     let (res, n) = (grid.resolution, grid.size_cells as i64);
     let mut keys = KeySet::default();

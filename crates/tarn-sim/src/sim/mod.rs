@@ -37,9 +37,9 @@ pub use world::{Hit, Material, Surface, Terrain, WaterBody, World};
 
 use crate::error::{Error, Result};
 use crate::geom::{PointCloud, Pose};
-use crate::io::mcap_log::{LogWriter, WriteOptions};
-use crate::io::ros::{Header, NavSatFixMsg, TfMessage, Time, TransformStamped};
 use crate::sensor::Image;
+use tarn_log::mcap_log::{LogWriter, WriteOptions};
+use tarn_log::ros::{Header, NavSatFixMsg, TfMessage, Time, TransformStamped};
 
 /// Options of a simulation run.
 #[derive(Debug, Clone, Copy, PartialEq)]

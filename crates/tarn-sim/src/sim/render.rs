@@ -615,8 +615,8 @@ impl Stereo {
 
     /// The right camera's CameraInfo as ROS stereo drivers publish it: the rectified
     /// projection `P = [f 0 cx −f·B; 0 f cy 0; 0 0 1 0]`, so that `B = −P[0][3] / P[0][0]`.
-    pub fn right_info(&self, header: crate::io::ros::Header) -> crate::io::ros::CameraInfoMsg {
-        let mut m = crate::io::ros::camera_to_info(&self.camera, header);
+    pub fn right_info(&self, header: tarn_log::ros::Header) -> tarn_log::ros::CameraInfoMsg {
+        let mut m = tarn_log::ros::camera_to_info(&self.camera, header);
         m.p[3] = -self.camera.fx * self.spec.baseline_m;
         m
     }

@@ -539,7 +539,7 @@ fn same_seed_same_bytes_whatever_the_thread_count() {
 fn the_frame_stream_reads_the_log_back() {
     let (dir, r) = run_sim(2, true);
     let mut fs =
-        crate::io::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default())
+        tarn_log::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default())
             .unwrap();
     let mut n = 0;
     let traj: TruthInfo =
@@ -574,7 +574,7 @@ fn the_gps_fix_and_the_stamps_give_the_scenes_solar_hour() {
         let scene = Scene::from_toml_str(&scene_text(0.5, &extra)).unwrap();
         simulate(&scene, dir.path(), SimOptions::default()).unwrap();
         let fs =
-            crate::io::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default())
+            tarn_log::frames::FrameStream::open(dir.path().join("log.mcap"), &Default::default())
                 .unwrap();
         let mwir = tarn::project::MwirLabelConfig {
             classifier: Default::default(),
@@ -1032,9 +1032,9 @@ fn the_log_carries_the_baseline_and_the_distortion() {
         },
     )
     .unwrap();
-    let frames: Vec<_> = crate::io::frames::FrameStream::open(
+    let frames: Vec<_> = tarn_log::frames::FrameStream::open(
         dir.path().join("log.mcap"),
-        &crate::io::frames::LogConfig::default(),
+        &tarn_log::frames::LogConfig::default(),
     )
     .unwrap()
     .map(|f| f.unwrap())

@@ -14,8 +14,8 @@ use std::sync::Arc;
 use rusqlite::{Connection, OpenFlags};
 
 use crate::error::{Error, Result};
-use crate::io::log::MessageSource;
-use crate::io::mcap_log::{ChannelInfo, DamagedRange, RawMessage};
+use crate::log::MessageSource;
+use crate::mcap_log::{ChannelInfo, DamagedRange, RawMessage};
 
 /// Messages fetched per query.
 const PAGE: i64 = 8;

@@ -6,9 +6,9 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use tarn::geom::{pose_xyz_rpy, PointCloud};
-use tarn::io::frames::{FrameStream, LogConfig};
-use tarn::io::mcap_log::{LogCompression, LogReader, LogWriter, WriteOptions};
-use tarn::io::ros::{
+use tarn_log::frames::{FrameStream, LogConfig};
+use tarn_log::mcap_log::{LogCompression, LogReader, LogWriter, WriteOptions};
+use tarn_log::ros::{
     pointcloud2_to_cloud, Header, PointCloud2Msg, TfMessage, Time, TransformStamped,
 };
 

@@ -14,14 +14,14 @@ use std::sync::Arc;
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader};
 
-use super::ros::{
-    camera_to_info, cloud_to_pointcloud2, encode_image, schema_name, schema_text, Endian, Header,
-    TfMessage,
-};
-use super::ros::{CameraInfoMsg, ImageMsg, NavSatFixMsg, PointCloud2Msg};
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::PointCloud;
+use crate::ros::{
+    camera_to_info, cloud_to_pointcloud2, encode_image, schema_name, schema_text, Endian, Header,
+    TfMessage,
+};
+use crate::ros::{CameraInfoMsg, ImageMsg, NavSatFixMsg, PointCloud2Msg};
 use crate::sensor::Image;
 
 /// What a channel carries.
@@ -967,7 +967,7 @@ pub struct LogSummary {
 /// [`LogSummary::damaged`]; a file that cannot be opened or read, or that is not an MCAP
 /// log, is an error.
 pub fn summarize(path: impl AsRef<Path>) -> Result<LogSummary> {
-    super::log::count_messages(&mut LogReader::open(path)?)
+    crate::log::count_messages(&mut LogReader::open(path)?)
 }
 
 impl LogSummary {
@@ -1358,7 +1358,7 @@ pub struct RecodeStats {
 }
 
 /// Reads every TF, PointCloud2, Image and CameraInfo message of `input` (any log
-/// [`super::log::open`] reads, ROS 1 bags included), decodes it and
+/// [`crate::log::open`] reads, ROS 1 bags included), decodes it and
 /// writes it again with tarn's encoder into `output` (with `opts`' compression, chunking
 /// and byte order). Messages of other types are skipped and counted; damaged parts of the
 /// input are skipped and listed in [`RecodeStats::damaged`].
@@ -1367,7 +1367,7 @@ pub fn recode(
     output: impl AsRef<Path>,
     opts: &WriteOptions,
 ) -> Result<RecodeStats> {
-    let mut r = super::log::open(input)?;
+    let mut r = crate::log::open(input)?;
     let mut w = LogWriter::create(output, opts)?;
     let mut stats = RecodeStats::default();
     while let Some(m) = r.next_message() {
@@ -1381,10 +1381,10 @@ pub fn recode(
                 ch.topic, ch.schema, m.log_time
             )
         };
-        let bad = |e: super::ros::CdrError| Error::format(r.path(), loc(), e.to_string());
+        let bad = |e: crate::ros::CdrError| Error::format(r.path(), loc(), e.to_string());
         let (Some(kind), Some(wire)) = (
-            super::log::canonical_type(&ch.schema),
-            super::log::wire_of(&ch.message_encoding),
+            crate::log::canonical_type(&ch.schema),
+            crate::log::wire_of(&ch.message_encoding),
         ) else {
             *stats.skipped_unknown.entry(ch.topic.clone()).or_insert(0) += 1;
             continue;

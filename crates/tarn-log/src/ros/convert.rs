@@ -512,7 +512,7 @@ pub fn camera_to_info(cam: &CameraModel, header: Header) -> CameraInfoMsg {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::ros::msgs::Time;
+    use crate::ros::msgs::Time;
     use proptest::prelude::*;
 
     #[test]

@@ -13,14 +13,14 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::frames::{LogConfig, NamedTopics};
 use crate::geom::PointCloud;
 use crate::grid::{
     in_map_domain, key_of, CellKey, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap,
 };
 use crate::hazard::HazardMap;
-use crate::io::export;
-use crate::io::frames::{LogConfig, NamedTopics};
 use crate::mapper::{Mapper, MapperConfig, StageTimes};
+use tarn::io::export;
 
 /// Parameters of an offline build.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -54,10 +54,10 @@ impl Default for BuildConfig {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ExtraMaps {
     /// `map.mcap`: the map as a `grid_map_msgs/GridMap` and a `nav_msgs/OccupancyGrid`
-    /// ([`crate::io::ros_export`]), with these headers.
-    pub ros_map: Option<crate::io::ros_export::RosMapOptions>,
-    /// `map.tif`: the layers as a GeoTIFF ([`crate::io::geotiff`]).
-    pub geotiff: Option<crate::io::geotiff::GeoTiffOptions>,
+    /// ([`crate::ros_export`]), with these headers.
+    pub ros_map: Option<crate::ros_export::RosMapOptions>,
+    /// `map.tif`: the layers as a GeoTIFF ([`tarn::io::geotiff`]).
+    pub geotiff: Option<tarn::io::geotiff::GeoTiffOptions>,
     /// `tiles.bin`: the map's cells before the water stage (elevation statistics and
     /// water evidence) as a tile set ([`TileMap::to_bytes`]), which merges exactly with
     /// other builds' and can be finished again under another fusion rule.
@@ -69,13 +69,13 @@ impl ExtraMaps {
     /// `stamp_ns` is the map's log time.
     pub fn of(b: &BuildOptions, map_frame: &str, stamp_ns: u64) -> Self {
         ExtraMaps {
-            ros_map: b.ros_map.then(|| crate::io::ros_export::RosMapOptions {
+            ros_map: b.ros_map.then(|| crate::ros_export::RosMapOptions {
                 frame_id: b.frame_id.clone().unwrap_or_else(|| map_frame.to_string()),
                 stamp_ns,
             }),
             geotiff: b
                 .geotiff
-                .then_some(crate::io::geotiff::GeoTiffOptions { epsg: b.epsg }),
+                .then_some(tarn::io::geotiff::GeoTiffOptions { epsg: b.epsg }),
             tiles: b.tiles,
         }
     }
@@ -92,13 +92,13 @@ impl ExtraMaps {
         if self.ros_map.is_none() && self.geotiff.is_none() {
             return Ok(written);
         }
-        let map = crate::io::mapfile::read_map_ply(&dir.join("map.ply"))?;
+        let map = tarn::io::mapfile::read_map_ply(&dir.join("map.ply"))?;
         if let Some(o) = &self.ros_map {
-            crate::io::ros_export::write_ros_map(&dir.join("map.mcap"), &map, o)?;
+            crate::ros_export::write_ros_map(&dir.join("map.mcap"), &map, o)?;
             written.push("map.mcap".to_string());
         }
         if let Some(o) = &self.geotiff {
-            crate::io::geotiff::write_geotiff(&dir.join("map.tif"), &map, o)?;
+            tarn::io::geotiff::write_geotiff(&dir.join("map.tif"), &map, o)?;
             written.push("map.tif".to_string());
         }
         Ok(written)
@@ -502,7 +502,7 @@ pub fn build_file(
 ) -> Result<BuildReport> {
     let t0 = Instant::now();
     cfg.grid.validate()?;
-    let cloud = crate::io::read_point_cloud(input)?;
+    let cloud = crate::log::read_cloud(input)?;
     crate::interrupt::check("reading the cloud")?;
     if cloud.valid_count() == 0 {
         // Nothing to map: refuse rather than replace a previous map with an empty one.
@@ -660,8 +660,8 @@ mod tests {
     /// the log's cameras; only the sensors the log lacks are dropped.
     #[test]
     fn compiled_label_models_alone_keep_the_cameras_the_log_has() {
-        use crate::classify::{color::RuleClassifier, lut::ColorLut};
-        use crate::io::mcap_log::LogSummary;
+        use crate::mcap_log::LogSummary;
+        use tarn::classify::{color::RuleClassifier, lut::ColorLut};
         let log = LogConfig::default();
         let summary = |topics: &[&str]| {
             LogSummary::of(
@@ -747,10 +747,9 @@ mod tests {
             b.tiles.cell_bytes()
         );
         // The picture of scattered cells stays bounded too.
-        #[cfg(feature = "render")]
         {
             let map = HazardMap::from_elevation(&b.tiles);
-            let img = crate::io::render::render_map_png(&map, &[]);
+            let img = tarn::io::render::render_map_png(&map, &[]);
             assert!(img.width() <= 4096 && img.height() <= 4096 + 200);
         }
     }
@@ -854,7 +853,7 @@ pub struct LogBuildReport {
     /// What the cues found, summed over frames.
     pub cue_counts: CueCounts,
     /// What the frame stream read, built and skipped.
-    pub frames: crate::io::frames::FrameStats,
+    pub frames: crate::frames::FrameStats,
     /// Messages or frames that could not be used, with where and why.
     pub errors: Vec<String>,
     /// What the build noticed but went on past: what the plausibility checks dropped from
@@ -869,7 +868,7 @@ pub struct LogBuildReport {
     /// log times they held. Empty for an undamaged log; a map built from a damaged log
     /// holds everything else.
     #[serde(default)]
-    pub damaged: Vec<crate::io::mcap_log::DamagedRange>,
+    pub damaged: Vec<crate::mcap_log::DamagedRange>,
     /// What the image labels contributed (`None`: not configured).
     #[serde(default)]
     pub labels: Option<crate::project::FrameLabelsReport>,
@@ -1078,9 +1077,9 @@ pub struct BuildOptions {
     /// (cloud inputs) Largest window side (cells); larger clouds are built in blocks.
     pub max_window_cells: usize,
     /// Also write `map.mcap`: the map as a GridMap and an OccupancyGrid
-    /// ([`crate::io::ros_export`]).
+    /// ([`crate::ros_export`]).
     pub ros_map: bool,
-    /// Also write `map.tif`: the map's layers as a GeoTIFF ([`crate::io::geotiff`]).
+    /// Also write `map.tif`: the map's layers as a GeoTIFF ([`tarn::io::geotiff`]).
     pub geotiff: bool,
     /// Also write `tiles.bin`: the map's cells before the water stage, as a tile set
     /// ([`crate::grid::TileMap::to_bytes`]).
@@ -1201,7 +1200,7 @@ impl LogBuildConfig {
     /// `[labels]`), whose absence turns the sensor off. Errors name the file, and the key
     /// and line where parsing failed; then the config is validated.
     pub fn load(path: &Path) -> Result<Self> {
-        let f: ConfigFile = crate::mapper::read_config_file(path)?;
+        let f: ConfigFile = crate::files::read_config(path)?;
         let cfg = LogBuildConfig {
             mapper: MapperConfig {
                 grid: f.grid,
@@ -1239,7 +1238,7 @@ impl LogBuildConfig {
     }
 }
 
-/// Builds the map of a robot log (any storage [`crate::io::log::open`] reads) through the online [`Mapper`] (one code path for online
+/// Builds the map of a robot log (any storage [`crate::log::open`] reads) through the online [`Mapper`] (one code path for online
 /// and offline): each frame is fused at its pose into a rolling window centred on the
 /// vehicle, with the configured cues; cells that leave it go to the global tile map. At the
 /// end the hazard map of everything is exported. `progress(bytes_read, bytes_total)`.
@@ -1253,10 +1252,10 @@ pub fn build_log(
     cfg: &LogBuildConfig,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<LogBuildReport> {
-    use crate::io::frames::FrameStream;
+    use crate::frames::FrameStream;
 
     let t0 = Instant::now();
-    let summary = crate::io::log::summarize_quick(input)?;
+    let summary = crate::log::summarize_quick(input)?;
     let log_cfg = frame_log_config(cfg, &summary, input)?;
     let mut mapper = Mapper::new(sensors_of_log(&cfg.mapper, &log_cfg, &summary))?;
     mapper.set_publish(cfg.build.per_frame_maps);
@@ -1282,8 +1281,8 @@ pub fn build_log(
     // What the reader leaves: its counts, the damaged parts of the log, and the error that
     // ended reading early if one did.
     type ReadEnd = (
-        crate::io::frames::FrameStats,
-        Vec<crate::io::mcap_log::DamagedRange>,
+        crate::frames::FrameStats,
+        Vec<crate::mcap_log::DamagedRange>,
         Option<String>,
     );
     let (stream_stats, damaged, fatal) = std::thread::scope(|scope| -> Result<ReadEnd> {
@@ -1533,7 +1532,7 @@ pub const CALIBRATION_MAX_FRAMES: usize = 200;
 /// every build of the log, whole or in time chunks, then fuses every frame with the same
 /// noise. Frames that cannot be read are left to the build, which reports them.
 pub fn calibrate_on_log(mapper: &mut Mapper, input: &Path, log_cfg: &LogConfig) -> Result<()> {
-    let stream = crate::io::frames::FrameStream::open(input, log_cfg)?;
+    let stream = crate::frames::FrameStream::open(input, log_cfg)?;
     for frame in stream.take(CALIBRATION_MAX_FRAMES).flatten() {
         crate::interrupt::check("measuring the sensors' noise")?;
         // A frame the mapper refuses (an implausible pose) is refused again, and reported,
@@ -1554,7 +1553,7 @@ pub fn calibrate_on_log(mapper: &mut Mapper, input: &Path, log_cfg: &LogConfig) 
 pub fn sensors_of_log(
     cfg: &MapperConfig,
     log: &LogConfig,
-    summary: &crate::io::mcap_log::LogSummary,
+    summary: &crate::mcap_log::LogSummary,
 ) -> MapperConfig {
     use crate::project::LabelSensor;
     let has = |t: &str| summary.has_messages(t);
@@ -1598,7 +1597,7 @@ pub fn sensors_of_log(
 /// ([`LogConfig::with_topics_of`]: named ones, else by message type).
 pub fn frame_log_config(
     cfg: &LogBuildConfig,
-    summary: &crate::io::mcap_log::LogSummary,
+    summary: &crate::mcap_log::LogSummary,
     input: &Path,
 ) -> Result<LogConfig> {
     let mut named = cfg.topics.clone();
@@ -1621,7 +1620,7 @@ pub struct TileBuild {
     /// Frames that could not be read or fused, with why.
     pub errors: Vec<String>,
     /// The damaged parts of the log, skipped.
-    pub damaged: Vec<crate::io::mcap_log::DamagedRange>,
+    pub damaged: Vec<crate::mcap_log::DamagedRange>,
     /// The lidar height the cue model used.
     pub lidar_height_m: Option<f64>,
 }
@@ -1646,7 +1645,7 @@ pub fn build_tiles(
     cfg: &LogBuildConfig,
     range_s: Option<(f64, f64)>,
 ) -> Result<TileBuild> {
-    use crate::io::frames::FrameStream;
+    use crate::frames::FrameStream;
     if let Some((t0, t1)) = range_s {
         if t0.is_nan() || t1.is_nan() || t0 > t1 {
             return Err(Error::invalid(
@@ -1655,7 +1654,7 @@ pub fn build_tiles(
             ));
         }
     }
-    let summary = crate::io::log::summarize_quick(input)?;
+    let summary = crate::log::summarize_quick(input)?;
     let log_cfg = frame_log_config(cfg, &summary, input)?;
     let mut mapper = Mapper::new(sensors_of_log(&cfg.mapper, &log_cfg, &summary))?;
     mapper.set_publish(false);
@@ -1758,7 +1757,7 @@ pub fn finish_tile_region(
 
 /// The comment lines that mark `map.ply` of a map built from a damaged log: the input, how
 /// many ranges were skipped, and the first few of them (`report.json` lists them all).
-fn damage_marks(input: &Path, damaged: &[crate::io::mcap_log::DamagedRange]) -> Vec<String> {
+fn damage_marks(input: &Path, damaged: &[crate::mcap_log::DamagedRange]) -> Vec<String> {
     const SHOWN: usize = 16;
     if damaged.is_empty() {
         return Vec::new();

@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::error::{Error, Result};
-use crate::io::log::MessageSource;
-use crate::io::mcap_log::{record_length_limit, ChannelInfo, DamagedRange, RawMessage};
+use crate::log::MessageSource;
+use crate::mcap_log::{record_length_limit, ChannelInfo, DamagedRange, RawMessage};
 
 const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 

@@ -29,13 +29,13 @@
 
 use std::path::Path;
 
-use super::mcap_log::{LogWriter, WriteOptions};
-use super::raster::{Layer, MapRaster};
-use super::ros::cdr::{CdrReader, CdrResult, CdrWriter, Endian};
-use super::ros::msgs::{with_deps, HEADER_DEF, TIME_DEF};
-use super::ros::{Header, Time};
 use crate::error::Result;
 use crate::hazard::{Hazard, HazardMap};
+use crate::mcap_log::{LogWriter, WriteOptions};
+use crate::ros::cdr::{CdrReader, CdrResult, CdrWriter, Endian};
+use crate::ros::msgs::{with_deps, HEADER_DEF, TIME_DEF};
+use crate::ros::{Header, Time};
+use tarn::io::raster::{Layer, MapRaster};
 
 /// MCAP schema names of the messages written here.
 pub mod schema_name {
@@ -511,8 +511,31 @@ pub fn write_ros_map(path: &Path, map: &HazardMap, opts: &RosMapOptions) -> Resu
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::io::mcap_log::LogReader;
-    use crate::io::raster::tests::cell;
+    use crate::mcap_log::LogReader;
+    use tarn::grid::CellKey;
+    use tarn::hazard::{Class, Hazard, MapCell};
+
+    fn cell(kx: i64, ky: i64, z: f64, hazard: Hazard) -> MapCell {
+        let (x, y) = tarn::grid::centre_of(0.5, CellKey::new(kx, ky));
+        let free = hazard == Hazard::Free;
+        MapCell {
+            key: CellKey::new(kx, ky),
+            x,
+            y,
+            z,
+            elevation_std: 0.01,
+            water: if free { 0.1 } else { 0.9 },
+            depth: if hazard == Hazard::DeepWater {
+                f32::NAN
+            } else {
+                0.0
+            },
+            class: if free { Class::Ground } else { Class::Water },
+            hazard,
+            hits: 1,
+            below: 0,
+        }
+    }
 
     fn map() -> HazardMap {
         // 3 cells along x (keys 4..=6), 2 along y (keys -1..=0), one unobserved.

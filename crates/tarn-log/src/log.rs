@@ -9,12 +9,29 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::mcap_log::{DamagedRange, LogReader, LogSummary, RawMessage};
-use super::ros::{schema_name, Wire};
 use crate::error::{Error, Result};
+use crate::mcap_log::{DamagedRange, LogReader, LogSummary, RawMessage};
+use crate::ros::{schema_name, Wire};
 
 /// The inputs tarn accepts, for error messages.
 pub const SUPPORTED: &str = "supported: .mcap, .db3, rosbag2 directory, .bag, .ply, .bin";
+
+/// Reads an input that is not a log: a point cloud ([`tarn::io::read_point_cloud`]: `.ply`,
+/// `.bin`). Anything else is an error that names every input tarn reads, logs included.
+pub fn read_cloud(path: &Path) -> Result<tarn::geom::PointCloud> {
+    let is_cloud = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply") || e.eq_ignore_ascii_case("bin"));
+    if !is_cloud {
+        return Err(Error::format(
+            path,
+            "file name",
+            format!("not an input tarn reads ({SUPPORTED})"),
+        ));
+    }
+    tarn::io::read_point_cloud(path)
+}
 
 /// A stream of the messages of a log.
 pub trait MessageSource: Send {
@@ -128,12 +145,12 @@ pub fn open(path: impl AsRef<Path>) -> Result<Box<dyn MessageSource>> {
 
 #[cfg(feature = "bags")]
 fn open_db3(path: &Path) -> Result<Box<dyn MessageSource>> {
-    Ok(Box::new(super::bags::Db3Reader::open(path)?))
+    Ok(Box::new(crate::bags::Db3Reader::open(path)?))
 }
 
 #[cfg(feature = "bags")]
 fn open_ros1(path: &Path) -> Result<Box<dyn MessageSource>> {
-    Ok(Box::new(super::bags::Ros1Reader::open(path)?))
+    Ok(Box::new(crate::bags::Ros1Reader::open(path)?))
 }
 
 #[cfg(not(feature = "bags"))]
@@ -348,12 +365,12 @@ pub(crate) fn count_messages(r: &mut dyn MessageSource) -> Result<LogSummary> {
     Ok(LogSummary::of(counts, start, end, r.damaged().to_vec()))
 }
 
-/// [`super::mcap_log::summarize_quick`] for an MCAP file (its summary section when it has
+/// [`crate::mcap_log::summarize_quick`] for an MCAP file (its summary section when it has
 /// one), [`summarize`] for every other log.
 pub fn summarize_quick(path: impl AsRef<Path>) -> Result<LogSummary> {
     let path = path.as_ref();
     if log_format(path) == Some(LogFormat::Mcap) {
-        return super::mcap_log::summarize_quick(path);
+        return crate::mcap_log::summarize_quick(path);
     }
     summarize(path)
 }

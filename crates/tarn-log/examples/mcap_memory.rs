@@ -9,9 +9,9 @@
 //! ```
 
 use tarn::geom::{pose_xyz_rpy, PointCloud};
-use tarn::io::frames::{FrameStream, LogConfig};
-use tarn::io::mcap_log::{LogWriter, WriteOptions};
-use tarn::io::ros::{Header, TfMessage, Time, TransformStamped};
+use tarn_log::frames::{FrameStream, LogConfig};
+use tarn_log::mcap_log::{LogWriter, WriteOptions};
+use tarn_log::ros::{Header, TfMessage, Time, TransformStamped};
 
 fn vm_hwm_kb() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;

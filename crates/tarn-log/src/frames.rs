@@ -12,17 +12,17 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 
-use super::log::{canonical_type, wire_of, MessageSource};
-use super::mcap_log::{DamagedRange, LogReader, RawMessage};
-use super::ros::{
-    camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, ImageMsg,
-    NavSatFixMsg, PointCloud2Msg, TfMessage,
-};
-use super::tf::TfBuffer;
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{PointCloud, Pose};
+use crate::log::{canonical_type, wire_of, MessageSource};
+use crate::mcap_log::{DamagedRange, LogReader, RawMessage};
+use crate::ros::{
+    camera_from_info, decode_image, pointcloud2_to_cloud, schema_name, CameraInfoMsg, ImageMsg,
+    NavSatFixMsg, PointCloud2Msg, TfMessage,
+};
 use crate::sensor::{Frame, Image, SensorImage};
+use crate::tf::TfBuffer;
 
 /// Topic names, frame names and timing for reading a log. Defaults follow DESIGN.md.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -168,7 +168,7 @@ impl LogConfig {
     /// or from the stereo cloud when the log has no lidar.
     pub fn with_topics_of(
         &self,
-        summary: &super::mcap_log::LogSummary,
+        summary: &crate::mcap_log::LogSummary,
         named: &NamedTopics,
         log: &Path,
     ) -> Result<LogConfig> {
@@ -402,10 +402,10 @@ fn secs(ns: i64) -> f64 {
 }
 
 impl FrameStream {
-    /// The frame stream of the log at `path`: any storage [`super::log::open`] reads.
+    /// The frame stream of the log at `path`: any storage [`crate::log::open`] reads.
     pub fn open(path: impl AsRef<Path>, cfg: &LogConfig) -> Result<Self> {
         cfg.validate()?;
-        Self::from_source(super::log::open(path)?, cfg)
+        Self::from_source(crate::log::open(path)?, cfg)
     }
 
     /// The frame stream of an already opened MCAP log (e.g. [`LogReader::from_bytes`]).

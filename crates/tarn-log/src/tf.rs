@@ -9,7 +9,7 @@ use std::collections::{HashMap, VecDeque};
 
 use crate::geom::Pose;
 
-use super::ros::TransformStamped;
+use crate::ros::TransformStamped;
 
 /// Why a transform could not be looked up.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -1,6 +1,6 @@
 //! Robot logs beyond MCAP (feature `bags`): rosbag2's sqlite3 storage ([`Db3Reader`]) and
-//! ROS 1 bags ([`Ros1Reader`]). Both are [`crate::io::log::MessageSource`]s; open any log
-//! with [`crate::io::log::open`].
+//! ROS 1 bags ([`Ros1Reader`]). Both are [`crate::log::MessageSource`]s; open any log
+//! with [`crate::log::open`].
 
 mod db3;
 mod ros1;

@@ -6,12 +6,12 @@ use std::path::Path;
 use nalgebra::Point3;
 use tarn::geom::camera::{CameraModel, Distortion};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
-use tarn::io::frames::{FrameStream, LogConfig};
-use tarn::io::mcap_log::{
+use tarn::sensor::{Frame, Image, Pixels};
+use tarn_log::frames::{FrameStream, LogConfig};
+use tarn_log::mcap_log::{
     summarize, summarize_quick, LogCompression, LogReader, LogWriter, WriteOptions,
 };
-use tarn::io::ros::{cloud_to_pointcloud2, Endian, Header, ImageMsg, TfMessage, TransformStamped};
-use tarn::sensor::{Frame, Image, Pixels};
+use tarn_log::ros::{cloud_to_pointcloud2, Endian, Header, ImageMsg, TfMessage, TransformStamped};
 
 const NS: i64 = 1_000_000_000;
 const T0: i64 = 1_700_000_000 * NS;
@@ -161,7 +161,7 @@ fn write_log(path: &Path, spec: &Spec) {
                     .unwrap();
             }
             2 => {
-                let mut m = tarn::io::ros::convert::encode_image(
+                let mut m = tarn_log::ros::convert::encode_image(
                     &image(k),
                     hdr(scan_ns(k) + NS / 100, "camera_optical"),
                 );
@@ -244,7 +244,7 @@ fn check_frame(f: &Frame, k: usize) {
     assert!(f.swir.is_none() && f.mwir.is_none());
 }
 
-fn frames(path: &Path) -> (Vec<tarn::Result<Frame>>, tarn::io::frames::FrameStats) {
+fn frames(path: &Path) -> (Vec<tarn::Result<Frame>>, tarn_log::frames::FrameStats) {
     let mut s = FrameStream::open(path, &LogConfig::default()).unwrap();
     let v: Vec<_> = s.by_ref().collect();
     (v, s.stats().clone())
@@ -528,7 +528,7 @@ fn log_without_summary_or_indexes_is_read() {
             .emit_chunk_indexes(false)
             .create(f)
             .unwrap();
-        let text = |s| tarn::io::ros::schema_text(s).unwrap();
+        let text = |s| tarn_log::ros::schema_text(s).unwrap();
         let s_tf = w
             .add_schema(
                 "tf2_msgs/msg/TFMessage",
