@@ -1,6 +1,6 @@
 //! The water stage end to end on analytic scenes with known answers: evidence in a tile
 //! map → `HazardMap::from_tiles` → every export. The files are left in
-//! `target/water-check/<scene>/` for the Python check (`tools/test_water_mesh.py`), which
+//! `target/water-check/<scene>/` for the Python check (`tests/python/test_water_mesh.py`), which
 //! reads them with trimesh and Open3D and compares the mesh with `report.json`.
 
 use std::path::PathBuf;

@@ -17,4 +17,4 @@ if [ ! -d ../shared/data ]; then
 fi
 cargo build --bins
 cargo test
-TARN_BIN="$PWD/target/debug/tarn" .venv/bin/python -m pytest -q -p no:dash tools python/tests
+TARN_BIN="$PWD/target/debug/tarn" .venv/bin/python -m pytest -q -p no:dash tests/python python/tests

@@ -23,7 +23,7 @@ from mcap.reader import make_reader
 from mcap_ros2.reader import read_ros2_messages
 from mcap_ros2.writer import Writer
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def tarn_bin() -> str:

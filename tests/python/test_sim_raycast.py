@@ -16,7 +16,7 @@ import open3d as o3d
 import pytest
 from mcap_ros2.reader import read_ros2_messages
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENES = sorted((ROOT / "maps").glob("*.toml"))
 
 

@@ -11,7 +11,7 @@ import open3d as o3d
 import pytest
 import trimesh
 
-DIR = pathlib.Path(__file__).resolve().parent.parent / "target" / "water-check" / "mixed"
+DIR = pathlib.Path(__file__).resolve().parents[2] / "target" / "water-check" / "mixed"
 
 
 @pytest.fixture(scope="module")
