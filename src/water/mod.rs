@@ -3,7 +3,9 @@
 //!
 //! The cues leave per-cell evidence in the map ([`crate::grid::Evidence`]); this stage turns
 //! it into bodies of water with a surface, a depth, an area and a volume, and the hazard map
-//! ([`crate::hazard::HazardMap::from_tiles`]) into one class and hazard per cell.
+//! ([`crate::hazard::HazardMap::from_tiles`]) into one class and hazard per cell. The knobs
+//! are the fields of [`WaterConfig`] and [`Vehicle`], each named below with its default in
+//! parentheses. Measured results are in docs/accuracy.md and docs/limits.md.
 //!
 //! ## 1. Bodies: connected components with hysteresis
 //!
@@ -15,24 +17,23 @@
 //! there, so isolated weak evidence (one dark patch, one stray reflection) never becomes
 //! water while the faint fringe of a real pond does. A cell with a refraction-corrected
 //! bottom return also joins a neighbouring body whatever its `p`: a return from below the
-//! water level is water above it, but one return gives only p ≈ 0.30, and a stream's lidar
-//! sees most of its bed through one return per cell (on `stream_slope` this took the water
-//! found from 33 % to 51 %, with no change on the other scenes). But a bottom return says
-//! "water" only if it lies below the water: the cue judged it against the last ground its
-//! scan line walked, which behind a kerb is the kerb's top, so the pavement behind a kerb
-//! is "bed" 15 cm under a "surface" that is not there. Once a body's surface is fitted to
-//! its shore, a cell whose bottom returns lie no more than `min_bottom_depth_m` below it
-//! (twice the lidar's range noise: what dry ground at the water's level gives) keeps its
-//! depth but loses the bottom returns as evidence, and the bodies are found again without
-//! it, until every bottom return left in a body lies deeper (at most eight passes). A
-//! body that stood on such returns alone is gone; one with other evidence stays, with its
-//! shallow cells. On the simulated `dry_paved` lot this took the false water of the three
-//! lidar rigs from 2.7–6.9 % to 0.5–0.8 %; `stream_slope` lost 2.1–2.5 points of its
-//! found water (bed returns at its edges that its fitted surface does not stand above),
-//! no other scene moved (`tools/eval_matrix.sh`, docs/accuracy.md). Bodies smaller than
-//! `min_body_area_m2` (default 0.25 m², half a metre square: no wheel drops into less, and
-//! single cells of false colour votes are that small) are dropped. A body is a set of cells,
-//! so dry islands inside it (holes) and bays stay exactly as observed.
+//! water level is water above it, but one return gives only p ≈ 0.30, and a lidar sees
+//! most of a stream's bed through one return per cell.
+//!
+//! But a bottom return says "water" only if it lies below the water: the cue judged it
+//! against the last ground its scan line walked, which behind a kerb is the kerb's top, so
+//! the pavement behind a kerb is "bed" a kerb's height under a "surface" that is not there.
+//! Once a body's surface is fitted to its shore, a cell whose bottom returns lie no more
+//! than `min_bottom_depth_m` below it (`None`: twice the configured lidar's range noise σ0,
+//! or that of [`crate::grid::RangeNoise::LIDAR`] without one; what dry ground at the
+//! water's level gives) keeps its depth but loses the bottom returns as evidence, and the
+//! bodies are found again without it, until every bottom return left in a body lies deeper
+//! (at most eight passes). A body that stood on such returns alone is gone; one with other
+//! evidence stays, with its shallow cells. The price: bed returns at a body's edge that
+//! its fitted surface does not stand above by that margin lose their evidence too. Bodies
+//! smaller than `min_body_area_m2` (0.25 m², half a metre square: no wheel drops into
+//! less, and single cells of false colour votes are that small) are dropped. A body is a
+//! set of cells, so dry islands inside it (holes) and bays stay exactly as observed.
 //!
 //! **Ids** are stable as more of a body is seen: [`find_bodies`] takes the previous
 //! snapshot's bodies; a new body that overlaps earlier ones keeps the id of the largest of
@@ -47,17 +48,17 @@
 //! terrain meets the water. A cell with bottom returns is never a shore sample: it is under
 //! water, and its elevation is the bed's. The shore's elevations are not all trustworthy: a
 //! bush, a rock or tall grass on the near shore is seen *above* the ground, and the ground
-//! behind it is not seen at all (paper §2.2). Raised samples are never too low, only too high, so the filter
-//! is one-sided: a sample is dropped when it stands more than `occluder_height_m` (10 cm)
-//! above the `shore_quantile` (25 %) quantile of the elevations within `shore_radius_m`
-//! (1.5 m) of it: the other shore samples and the dry, reliably measured ground cells
-//! there. A local low quantile rather than the body's global minimum, because a stream's
-//! shore legitimately descends along its course, and a local quantile rather than the local
-//! minimum, because one noisy low cell must not decide. A 1 m bush covering a third of the
-//! shore within 1.5 m leaves the quantile on the ground, and is dropped (tested: the level
-//! stays within 3 cm). The ground beside the shore is in the reference because a bush seen
-//! from the vehicle hides the water behind it: every shore cell along it is bush, and on
-//! the simulated `pond_bush` scene, shore samples alone put the level 20 cm high.
+//! behind it is not seen at all (paper §2.2). Raised samples are never too low, only too
+//! high, so the filter is one-sided: a sample is dropped when it stands more than
+//! `occluder_height_m` (10 cm) above the `shore_quantile` (25 %) quantile of the elevations
+//! within `shore_radius_m` (1.5 m) of it: the other shore samples and the dry, reliably
+//! measured ground cells there. A local low quantile rather than the body's global minimum,
+//! because a stream's shore legitimately descends along its course, and a local quantile
+//! rather than the local minimum, because one noisy low cell must not decide. A 1 m bush
+//! covering a third of the shore within 1.5 m leaves the quantile on the ground, and is
+//! dropped. The ground beside the shore is in the reference because a bush seen from the
+//! vehicle hides the water behind it: every shore cell along it is bush, so shore samples
+//! alone put the level high.
 //!
 //! A second one-sided test reads the shore across the water: a water surface slopes by
 //! at most `max_surface_slope` (5 %: a steep mountain stream), so the water beside a shore
@@ -67,9 +68,7 @@
 //! not the waterline and is dropped. This is what removes the top of a bank that faces
 //! away from the vehicle: the bank hides the water's edge below it, so its shore cells are
 //! the bank top, and the ground around them is bank top too, which the first test reads as
-//! the local level. On the simulated stream the near bank's shore cells stood 34 cm above
-//! the water, the far bank's 8 cm; dropping the near ones took the surface RMS from 14.2 to
-//! 10.0 cm (the ponds are unchanged).
+//! the local level; the far bank, seen down to its waterline, bounds them.
 //!
 //! A shore cell's centre lies up to a cell beyond the water's edge, so on a bank rising at
 //! g it stands up to g·res above the water, g·res/2 on average: 5 cm on a 45° bank with
@@ -77,49 +76,41 @@
 //! mean, over the directions with water on one side of the cell and a reliably measured dry
 //! cell on the other, of their elevation difference per cell, clamped to
 //! `0..=max_bank_slope` (1: 45°, about the angle of repose of soil and gravel; a bush
-//! behind the shore rises faster, and is not a bank). Flat ground beside the water gets no
-//! correction. On the simulated `puddles` the surface RMS went from 1.0 to 0.1 cm (their
-//! rims slope gently into the water), on `stream_slope` from 7.2 to 7.0 cm (its far bank
-//! rises at about 45°); the ponds were unchanged.
+//! behind the shore rises faster, and is not a bank; 0 turns the correction off). Flat
+//! ground beside the water gets no correction.
 //!
 //! A dry hole in a body smaller than the smallest body (`min_body_area_m2`; 25 cells of
 //! 10 cm) is not shore. Clear water shows its bed: a lidar return from the bed at grazing
 //! incidence appears n·d·cos θa/cos θw below the surface, inside the ground gate, and
-//! a cell seen only that way is dry and *below* the water. On `stream_slope` such cells lay
-//! scattered through the channel, 9 cm under the surface; leaving them out took the surface
-//! RMS from 7.0 to 6.7 cm. An island that small says little about the level anyway: the
-//! body's outer shore does.
+//! a cell seen only that way is dry and *below* the water; such cells lie scattered through
+//! a clear channel. An island that small says little about the level anyway: the body's
+//! outer shore does.
 //!
 //! Only reliably measured shore cells count when there are at least `min_shore_samples`
-//! of them: a cell whose elevation σ bound (every point's range error taken as vertical,
-//! `CellStats::range_bound_std_m`) exceeds `shore_max_std_m` (5 cm; far cells seen by a
-//! few stereo points, whose range noise grows with the square of the range) is left out.
-//! On the default scene 59 of the pond's 65 shore cells had σ > 0.3 m and lifted the level
-//! by 13 cm; the 6 reliable ones put it within 1.5 cm of the truth. With fewer reliable
-//! cells than that, every shore cell counts, weighted by the inverse of its elevation
-//! variance (σ floored at 1 cm): the level is their weighted median, and such a shore makes
-//! no Delaunay surface. Counted equally, stereo cells of σ 2 m outvoted the one lidar cell
-//! at the water's edge (`pond_bush`: 9.2 cm surface RMS, 0.5 cm weighted).
+//! (6) of them: a cell whose elevation σ bound (every point's range error taken as
+//! vertical, `CellStats::range_bound_std_m`) exceeds `shore_max_std_m` (5 cm) is left out.
+//! Such cells are mostly far ones seen by a few stereo points, whose range noise grows with
+//! the square of the range, and they can far outnumber the reliable cells at the water's
+//! edge. With fewer reliable cells than that, every shore cell counts, weighted by the
+//! inverse of its elevation variance (σ floored at 1 cm): the level is their weighted
+//! median, and such a shore makes no Delaunay surface. Counted equally, noisy stereo cells
+//! would outvote a single lidar cell at the water's edge.
 //!
 //! Where the shore is poorly seen (fewer than `min_shore_samples` kept), the shore may lie
-//! across water that no sensor measured: a stream seen 12–22 m off is a sky reflection in
+//! across water that no sensor measured: a stream seen from afar can be a sky reflection in
 //! the camera along its near half, its near shore hidden by the near bank, its far half
-//! giving neither returns nor labels, while the lidar measures the far bank's waterline a
-//! metre beyond. The *far shore* is, from each body cell in each of the four directions,
-//! the first reliably measured dry cell within `shore_radius_m` past at least one cell
-//! that is unobserved or unreliable. It passes the occluder and spill tests, and one more:
-//! a sample more than `occluder_height_m` below the median of the others within
-//! `shore_radius_m` is dropped, because the spill test takes the lowest sample as the
-//! truth and, across an unseen channel, some cells of the far bank lie well below the
-//! water (on `stream_slope`, six cells 8–22 cm under it, returns placed wrongly, which
-//! bounded every good sample away). On `stream_slope` the second body's surface went from
-//! 8.4 to 2.9 cm RMS (its far bank's waterline cells stand within 2 cm of the water), the
-//! stream's from 4.4 to 3.2 cm; `pond_bush`'s small second body takes it too, with no
-//! change (1.2 cm). Without a far shore, the water-level samples the cues measured with
-//! their evidence (`Evidence::level_mm`: the level of the last ground a no-return beam or
-//! reflection ray was cast from) are used instead, one per water cell, at the cell
-//! centre: upper bounds, 7–10 cm above the stream there. Without either, the body's own
-//! cell elevations.
+//! giving neither returns nor labels, while the lidar measures the far bank's waterline
+//! beyond. The *far shore* is, from each body cell in each of the four directions, the
+//! first reliably measured dry cell within `shore_radius_m` past at least one cell that is
+//! unobserved or unreliable. It passes the occluder and spill tests, and one more: a sample
+//! more than `occluder_height_m` below the median of the others within `shore_radius_m` is
+//! dropped, because the spill test takes the lowest sample as the truth and, across an
+//! unseen channel, some cells of the far bank lie well below the water (returns placed
+//! wrongly), and one of them would bound every good sample away. Without a far shore, the
+//! water-level samples the cues measured with their evidence (`Evidence::level_mm`: the
+//! level of the last ground a no-return beam or reflection ray was cast from) are used
+//! instead, one per water cell, at the cell centre: upper bounds, as that ground stands at
+//! or above the water. Without either, the body's own cell elevations.
 //!
 //! A shore with enough kept samples that is neither level nor a surface a triangulation
 //! predicts (section 3: the fit falls back to its lowest samples), or level only within
@@ -128,74 +119,72 @@
 //! edge carried on level, a guess), takes the far shore too, where there is one: such a
 //! shore can be one stretch of a sloping stream, seen where the labels reached its bank,
 //! and a level from that stretch is metres of stream off elsewhere
-//! (`SurfaceSource::ShoreAndFarShore`). On `stream_slope` the largest bodies seen from the
-//! `small` and `wide` rigs had their shore measured along one end of them only
-//! (`docs/limits.md`).
+//! (`SurfaceSource::ShoreAndFarShore`).
 //!
 //! ## 3. Surface: level plane, or constrained Delaunay where the shore is not level
 //!
 //! The level plane is the median of the kept samples, and its residual is their RMS about
-//! it. If that residual is at most `level_residual_m`, the shore agrees and the body is
-//! level (a pond). It is level too when the spread read robustly (1.4826 times the median
-//! absolute deviation, the RMS of normal noise) is that small and the shore's lower
+//! it. If that residual is at most `level_residual_m` (2 cm), the shore agrees and the body
+//! is level (a pond). It is level too when the spread read robustly (1.4826 times the
+//! median absolute deviation, the RMS of normal noise) is that small and the shore's lower
 //! quarter (`shore_quantile`) stands within it of the median too: a few raised samples the
 //! occluder test kept (the foot of a bush on the shore) do not make a pond a stream, while
 //! low ones would hold the water below the median. Otherwise (a stream down a slope) the
 //! surface interpolates the shore: a constrained Delaunay triangulation (spade,
 //! bulk-loaded) of the samples, with a constraint edge between every two 8-adjacent shore
 //! samples so that triangles follow the shoreline instead of cutting across land; crossing
-//! diagonals are skipped. Water cells are
-//! given barycentric interpolation in their triangle; outside the triangulation, the
-//! surface at the nearest point of its hull, so that it is continuous across the hull and
-//! follows the shore along it (not the nearest sample: where a stream's near bank is
-//! hidden the hull runs down the middle of the channel, and the near half would take one
-//! sample's height per stretch, with steps between stretches).
+//! diagonals are skipped. Water cells are given barycentric interpolation in their
+//! triangle; outside the triangulation, the surface at the nearest point of its hull, so
+//! that it is continuous across the hull and follows the shore along it (not the nearest
+//! sample: where a stream's near bank is hidden the hull runs down the middle of the
+//! channel, and the near half would take one sample's height per stretch, with steps
+//! between stretches).
+//!
 //! The vertices are not the samples as measured but each at the median of the kept samples
 //! within `vertex_median_radius_m` (1.5 m) of it ([`surface::local_medians`]; 0 keeps them
 //! as measured): a triangulation carries each vertex's own error to the water around it,
 //! and across a stream seen from one bank, to the whole near half of the channel. Single
 //! shore cells stand well off the water: a waterline cell mostly under water, seen through
-//! it at grazing incidence (10–14 cm low), or the top of a short stretch of bank. On
-//! `stream_slope` the surface RMS went from 5.5 to 4.4 cm (at x = −4..6 m from 3–6 cm to
-//! 1–2.4 cm) and its depth RMS from 0.132 to 0.118 m; the level bodies do not change. The
-//! median of a one-sided neighbourhood, within the radius of a shore's end, stands off by
-//! up to the slope times half the radius (2.25 cm on a 3 % stream).
-//! The Delaunay model must earn its place: its hold-out residual (every
-//! other sample predicted from the triangulation of the others) must beat the level's, or
-//! the body stays level. Both residuals are reported per body. Degenerate samples
-//! (collinear, duplicates, fewer than three) cannot be triangulated and keep the level.
-//! A body kept level this way (its shore neither level nor smooth) takes the level of its
-//! lowest samples, the median of those within `occluder_height_m` of the `shore_quantile`
+//! it at grazing incidence (low), or the top of a short stretch of bank (high). The median
+//! of a one-sided neighbourhood, within the radius of a shore's end, stands off by up to
+//! the slope times half the radius (2.25 cm on a 3 % stream).
+//!
+//! The Delaunay model must earn its place: its hold-out residual (every other sample
+//! predicted from the triangulation of the others) must beat the level's, or the body
+//! stays level. Both residuals are reported per body. Degenerate samples (collinear,
+//! duplicates, fewer than three) cannot be triangulated and keep the level. A body kept
+//! level this way (its shore neither level nor smooth) takes the level of its lowest
+//! samples, the median of those within `occluder_height_m` of the `shore_quantile`
 //! quantile, not the median of all: water cannot stand above its lowest shore, and what
 //! raises the others (a shore that is all bush for a metre, a bank top where the water's
-//! edge was hidden) only ever raises them.
-//! (spade's natural-neighbour interpolation exists only for unconstrained triangulations;
-//! the constraints were worth more than the smoother interpolant.)
+//! edge was hidden) only ever raises them. (spade's natural-neighbour interpolation exists
+//! only for unconstrained triangulations; the constraints were worth more than the
+//! smoother interpolant.)
 //!
 //! ## 4. Depth, area, volume
 //!
 //! A water cell's depth is the mean of its refraction-corrected bottom returns below the
 //! body's surface at the cell; without any it is **unknown** (NaN in the map), never a
 //! guess. The lidar cue corrected each return against the level it knew then (the local
-//! ground it was cast from, often a bank top 20–35 cm above the water), and at grazing
+//! ground it was cast from, often a bank top well above the water), and at grazing
 //! incidence the depth moves by `cos θₜ/(n cos θᵢ)` (up to 4 and more) per metre of level
 //! error. The correction is linear in the level ([`crate::optics::bottom_depth_gain`]), so
 //! the evidence keeps the gain-weighted sums that move a depth exactly onto any level, and
-//! this stage evaluates it at the fitted surface. On `stream_slope` that took the depth RMS
-//! from 0.544 to 0.165 m (what remains is the surface's own error times the gain).
-//! Area is the number of cells times the cell area. The volume is given only when every
-//! cell's depth is known (`volume_m3: None` otherwise, with the known and unknown-depth
-//! areas reported): it is the volume of the closed water mesh ([`mesh`]) between the
-//! surface and the bottom, where the bottom interpolates the measured depths at the cell
-//! centres and comes up to depth zero at the shoreline, as real water does.
+//! this stage evaluates it at the fitted surface; what error remains in a depth is the
+//! surface's own error times the gain. Area is the number of cells times the cell area.
+//! The volume is given only when every cell's depth is known (`volume_m3: None`
+//! otherwise, with the known and unknown-depth areas reported): it is the volume of the
+//! closed water mesh ([`mesh`]) between the surface and the bottom, where the bottom
+//! interpolates the measured depths at the cell centres and comes up to depth zero at the
+//! shoreline, as real water does.
 //!
 //! ## 5. Hazards
 //!
-//! Water with every bottom return's depth known and at most `fording_depth_m` is shallow
-//! (hazard 1); deeper, or unknown, is deep (hazard 2): unknown is not safe. Dry cells are
-//! geometric obstacles (hazard 3) when the step to an 8-neighbour exceeds `max_step_m` (the
-//! upper side of the step is class obstacle) or the slope of the local 3 × 3 fit exceeds
-//! `max_slope_deg`.
+//! Water with every bottom return's depth known and at most `fording_depth_m` (0.3 m) is
+//! shallow (hazard 1); deeper, or unknown, is deep (hazard 2): unknown is not safe. Dry
+//! cells are geometric obstacles (hazard 3) when the step to an 8-neighbour exceeds
+//! `max_step_m` (0.25 m; the upper side of the step is class obstacle) or the slope of the
+//! local 3 × 3 fit exceeds `max_slope_deg` (25°).
 
 pub mod mesh;
 pub mod surface;
