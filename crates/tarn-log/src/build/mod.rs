@@ -1,6 +1,6 @@
 //! Offline builds: a point cloud in the map frame ([`build_file`], [`build_cloud`]) or a
-//! robot log through the online [`Mapper`] ([`build_log`]: one code path for online and
-//! offline), their reports (`report.json`), the config file of a build
+//! robot log through the online [`Mapper`](tarn::mapper::Mapper) ([`build_log`]: one code
+//! path for online and offline), their reports (`report.json`), the config file of a build
 //! ([`LogBuildConfig`]), and a log's cells before the water stage with the water stage
 //! over them ([`build_tiles`], [`finish_tiles`]), for builds of many logs.
 

@@ -32,7 +32,7 @@ pub struct LogBuildReport {
     /// Log duration over build time (offline speed).
     pub x_realtime: f64,
     /// Whether the window's hazard map was published after every frame
-    /// ([`LogBuildConfig::per_frame_maps`]); the `water` stage's latency is zero otherwise.
+    /// ([`BuildOptions::per_frame_maps`]); the `water` stage's latency is zero otherwise.
     #[serde(default)]
     pub per_frame_maps: bool,
     /// The cues that ran (`lidar`, `reflectivity`, `stereo`, `mirror`).
