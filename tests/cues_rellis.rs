@@ -10,7 +10,7 @@ use tarn::cues::{
     ReflectivityConfig,
 };
 use tarn::geom::PointCloud;
-use tarn::grid::{key_of, CellKey};
+use tarn::grid::{key_of, CellKey, Cue};
 use tarn::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
 
 const DIR: &str = concat!(
@@ -228,10 +228,10 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
     eprintln!(
         "dry cells called water with positive evidence from: no-return {}, reflection {}, \
          bottom {}, reflectivity {}",
-        why(&|c| c.noret),
-        why(&|c| c.reflect),
-        why(&|c| c.bottom),
-        why(&|c| c.reflectivity)
+        why(&|c| c[Cue::NoReturn]),
+        why(&|c| c[Cue::Reflection]),
+        why(&|c| c[Cue::Bottom]),
+        why(&|c| c[Cue::Reflectivity])
     );
     let puddle_cells: std::collections::BTreeSet<CellKey> = (0..cloud.len())
         .filter(|&i| cloud.is_valid(i) && labels[i] == PUDDLE)

@@ -227,6 +227,37 @@ impl Evidence {
         (n > 0).then(|| self.noret as f64 / n as f64)
     }
 
+    /// A cue's two event counts: [for water, against]. The reflection and bottom-return
+    /// cues count events for water only (`[n, 0]`); the reflectivity cue's pair is [dark,
+    /// lit] and votes once per cell, by majority.
+    #[inline]
+    pub fn events(&self, cue: Cue) -> [u32; 2] {
+        let n = |a: u16, b: u16| [u32::from(a), u32::from(b)];
+        match cue {
+            Cue::NoReturn => n(self.noret, self.diag_ret),
+            Cue::Reflection => n(self.reflect, 0),
+            Cue::Bottom => [self.depth_n, 0],
+            Cue::Reflectivity => n(self.dark, self.lit),
+            Cue::Colour => n(self.colour_water, self.colour_dry),
+            Cue::Swir => n(self.swir_dark, self.swir_lit),
+            Cue::Mwir => n(self.mwir_water, self.mwir_dry),
+        }
+    }
+
+    /// Records one frame's vote of an image cue (colour, SWIR, MWIR): water or not.
+    /// Other cues do not vote per frame; for them this does nothing.
+    #[inline]
+    pub fn add_image_vote(&mut self, cue: Cue, water: bool) {
+        let (w, d) = match cue {
+            Cue::Colour => (&mut self.colour_water, &mut self.colour_dry),
+            Cue::Swir => (&mut self.swir_dark, &mut self.swir_lit),
+            Cue::Mwir => (&mut self.mwir_water, &mut self.mwir_dry),
+            _ => return,
+        };
+        let c = if water { w } else { d };
+        *c = c.saturating_add(1);
+    }
+
     /// Per-cue log-likelihood ratios (before the prior), see the module documentation.
     pub fn cue_log_odds(&self, f: &Fusion) -> CueLogOdds {
         self.cue_log_odds_in(&f.logs())
@@ -234,28 +265,30 @@ impl Evidence {
 
     /// [`Self::cue_log_odds`] with the rule's logarithms computed once for many cells.
     pub fn cue_log_odds_in(&self, f: &FusionLogs) -> CueLogOdds {
-        let cap = |v: f64| v.clamp(-f.cue_cap, f.cue_cap);
         // n · ln(a / b), with no product for a count of 0 (most cells of a map have no
         // evidence of most cues). The sum is the same: the ratios are finite, so
         // 0 · ln(a / b) is ±0.
         let term = |n: u32, ln: f64| if n == 0 { 0.0 } else { f64::from(n) * ln };
-        let image = |w: u16, d: u16, [lw, ld]: [f64; 2]| {
-            (term(w.into(), lw) + term(d.into(), ld)).clamp(-f.image_cap, f.image_cap)
-        };
-        CueLogOdds {
-            colour: image(self.colour_water, self.colour_dry, f.colour),
-            swir: image(self.swir_dark, self.swir_lit, f.swir),
-            mwir: image(self.mwir_water, self.mwir_dry, f.mwir),
-            noret: cap(term(self.noret.into(), f.noret[0]) + term(self.diag_ret.into(), f.noret[1])),
-            reflect: cap(term(self.reflect.into(), f.reflect)),
-            bottom: cap(term(self.depth_n, f.bottom)),
-            // The returns of one cell see one surface: one observation, by majority.
-            reflectivity: match (self.dark, self.lit) {
-                (0, 0) => 0.0,
-                (d, l) if d > l => f.dark[0],
-                _ => f.dark[1],
-            },
-        }
+        CueLogOdds(Cue::ALL.map(|cue| {
+            let [w, d] = self.events(cue);
+            let [lw, ld] = f.ln[cue as usize];
+            match cue {
+                // The returns of one cell see one surface: one observation, by majority.
+                Cue::Reflectivity => match (w, d) {
+                    (0, 0) => 0.0,
+                    (d, l) if d > l => lw,
+                    _ => ld,
+                },
+                _ => {
+                    let cap = if cue.is_image() {
+                        f.image_cap
+                    } else {
+                        f.cue_cap
+                    };
+                    (term(w, lw) + term(d, ld)).clamp(-cap, cap)
+                }
+            }
+        }))
     }
 
     /// Fused water log-odds: the prior plus every cue's capped log-likelihood ratio.
@@ -265,8 +298,7 @@ impl Evidence {
 
     /// [`Self::water_log_odds`] with the rule's logarithms computed once for many cells.
     pub fn water_log_odds_in(&self, f: &FusionLogs) -> f64 {
-        let c = self.cue_log_odds_in(f);
-        f.prior + c.noret + c.reflect + c.bottom + c.reflectivity + c.colour + c.swir + c.mwir
+        self.cue_log_odds_in(f).0.iter().fold(f.prior, |l, c| l + c)
     }
 
     /// Fused water probability, 0..1.
@@ -299,43 +331,81 @@ impl Evidence {
     }
 }
 
+/// One term of the fusion rule: a kind of water evidence. It indexes a cell's event
+/// counts ([`Evidence::events`]), the rule's logarithms ([`Fusion::logs`]) and each cue's
+/// contribution ([`CueLogOdds`]), and names them in reports. [`Cue::ALL`] is the order in
+/// which the contributions are added.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Cue {
+    /// Missing and present diagnostic lidar returns.
+    NoReturn,
+    /// Reflection rays (stereo reflections, lidar specular returns) crossing the level.
+    Reflection,
+    /// Refraction-consistent bottom returns.
+    Bottom,
+    /// Dark and lit reflectivity returns.
+    Reflectivity,
+    /// Colour image votes.
+    Colour,
+    /// SWIR image votes.
+    Swir,
+    /// MWIR image votes.
+    Mwir,
+}
+
+impl Cue {
+    /// Every cue, in the order their log-odds are added.
+    pub const ALL: [Cue; 7] = [
+        Cue::NoReturn,
+        Cue::Reflection,
+        Cue::Bottom,
+        Cue::Reflectivity,
+        Cue::Colour,
+        Cue::Swir,
+        Cue::Mwir,
+    ];
+
+    /// The cue's name in reports.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Cue::NoReturn => "noret",
+            Cue::Reflection => "reflect",
+            Cue::Bottom => "bottom",
+            Cue::Reflectivity => "reflectivity",
+            Cue::Colour => "colour",
+            Cue::Swir => "swir",
+            Cue::Mwir => "mwir",
+        }
+    }
+
+    /// Whether the cue is an image's per-frame vote (capped at `image_cap`, not `cue_cap`).
+    pub const fn is_image(self) -> bool {
+        matches!(self, Cue::Colour | Cue::Swir | Cue::Mwir)
+    }
+}
+
 /// The logarithms of a [`Fusion`] rule: each cue's log-likelihood ratio per observation,
 /// ln(P(obs | water) / P(obs | dry)), and the prior's log-odds.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FusionLogs {
     prior_p: f64,
     prior: f64,
-    /// Image cues: [water vote, dry vote].
-    colour: [f64; 2],
-    swir: [f64; 2],
-    mwir: [f64; 2],
-    /// [no return, return] of a diagnostic beam.
-    noret: [f64; 2],
-    reflect: f64,
-    bottom: f64,
-    /// Reflectivity: [dark, lit].
-    dark: [f64; 2],
+    /// Per cue, indexed by [`Cue`]: the ratio of an event for water and of one against
+    /// ([`Evidence::events`]; 0 where the cue has no event against).
+    ln: [[f64; 2]; 7],
     cue_cap: f64,
     image_cap: f64,
 }
 
-/// Each cue's contribution to a cell's log-odds (natural log).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct CueLogOdds {
-    /// Missing and present diagnostic lidar returns.
-    pub noret: f64,
-    /// Reflection rays crossing the level.
-    pub reflect: f64,
-    /// Refraction-consistent bottom returns.
-    pub bottom: f64,
-    /// Dark and lit reflectivity returns.
-    pub reflectivity: f64,
-    /// Colour image votes.
-    pub colour: f64,
-    /// SWIR image votes.
-    pub swir: f64,
-    /// MWIR image votes.
-    pub mwir: f64,
+/// Each cue's contribution to a cell's log-odds (natural log), indexed by [`Cue`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CueLogOdds(pub [f64; 7]);
+
+impl std::ops::Index<Cue> for CueLogOdds {
+    type Output = f64;
+    fn index(&self, cue: Cue) -> &f64 {
+        &self.0[cue as usize]
+    }
 }
 
 /// The likelihoods of the fusion rule (see the module documentation). The defaults are
@@ -431,23 +501,24 @@ impl Fusion {
     /// The rule's logarithms, for [`Evidence::water_probability_in`] over many cells.
     pub fn logs(&self) -> FusionLogs {
         let ln = |a: f64, b: f64| (a / b).ln();
-        let image = |pd: f64, pf: f64| [ln(pd, pf), ln(1.0 - pd, 1.0 - pf)];
+        // A cue whose events are complementary: for water with P(pw | water), P(pd | dry),
+        // against with the complements.
+        let pair = |pw: f64, pd: f64| [ln(pw, pd), ln(1.0 - pw, 1.0 - pd)];
         FusionLogs {
             prior_p: self.prior,
             prior: ln(self.prior, 1.0 - self.prior),
-            colour: image(self.p_colour_detect, self.p_colour_false),
-            swir: image(self.p_swir_detect, self.p_swir_false),
-            mwir: image(self.p_mwir_detect, self.p_mwir_false),
-            noret: [
-                ln(1.0 - self.p_water_return, self.p_dropout),
-                ln(self.p_water_return, 1.0 - self.p_dropout),
-            ],
-            reflect: ln(self.p_reflect_detect, self.p_reflect_false),
-            bottom: ln(self.p_bottom_detect, self.p_bottom_false),
-            dark: [
-                ln(self.p_dark_wet, self.p_dark_dry),
-                ln(1.0 - self.p_dark_wet, 1.0 - self.p_dark_dry),
-            ],
+            ln: Cue::ALL.map(|cue| match cue {
+                Cue::NoReturn => [
+                    ln(1.0 - self.p_water_return, self.p_dropout),
+                    ln(self.p_water_return, 1.0 - self.p_dropout),
+                ],
+                Cue::Reflection => [ln(self.p_reflect_detect, self.p_reflect_false), 0.0],
+                Cue::Bottom => [ln(self.p_bottom_detect, self.p_bottom_false), 0.0],
+                Cue::Reflectivity => pair(self.p_dark_wet, self.p_dark_dry),
+                Cue::Colour => pair(self.p_colour_detect, self.p_colour_false),
+                Cue::Swir => pair(self.p_swir_detect, self.p_swir_false),
+                Cue::Mwir => pair(self.p_mwir_detect, self.p_mwir_false),
+            }),
             cue_cap: self.cue_cap,
             image_cap: self.image_cap,
         }
@@ -557,7 +628,7 @@ mod tests {
             diag_ret: 1,
             ..Evidence::default()
         };
-        let l = e.cue_log_odds(&f).noret;
+        let l = e.cue_log_odds(&f)[Cue::NoReturn];
         assert!((l - (18.0f64 * 0.1 / 0.95).ln()).abs() < 1e-12);
     }
 
@@ -599,19 +670,19 @@ mod tests {
             swir_dark: 500,
             ..Evidence::default()
         };
-        assert!((many.cue_log_odds(&f).swir - 1000f64.ln()).abs() < 1e-12);
+        assert!((many.cue_log_odds(&f)[Cue::Swir] - 1000f64.ln()).abs() < 1e-12);
         let against = Evidence {
             mwir_dry: 500,
             ..Evidence::default()
         };
-        assert!((against.cue_log_odds(&f).mwir + 1000f64.ln()).abs() < 1e-12);
+        assert!((against.cue_log_odds(&f)[Cue::Mwir] + 1000f64.ln()).abs() < 1e-12);
         // A frame against offsets more than half a frame for.
         let mixed = Evidence {
             colour_water: 1,
             colour_dry: 1,
             ..Evidence::default()
         };
-        assert!((mixed.cue_log_odds(&f).colour - (16.0f64 * 0.2 / 0.95).ln()).abs() < 1e-12);
+        assert!((mixed.cue_log_odds(&f)[Cue::Colour] - (16.0f64 * 0.2 / 0.95).ln()).abs() < 1e-12);
     }
 
     proptest! {

@@ -18,7 +18,7 @@ mod tiles;
 
 pub use cell::{quantize_mm, quantize_weight, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
 pub use evidence::{
-    CueLogOdds, Evidence, Fusion, FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS,
+    Cue, CueLogOdds, Evidence, Fusion, FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS,
 };
 pub use ingest::{IngestStats, RangeNoise};
 pub(crate) use tiles::ByteReader;
