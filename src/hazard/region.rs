@@ -40,7 +40,7 @@
 //! knows every tile, so this ends; a body larger than the first halo is finished with a
 //! halo that holds it and its ring of 2n + 2 cells.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use rayon::prelude::*;
 
@@ -48,8 +48,7 @@ use super::{cell_records, water_surface, Class, Hazard, HazardMap, MapCell};
 use crate::error::{Error, Result};
 use crate::grid::{ByteReader, CellKey, CellStats, TileMap, TILE_CELLS};
 use crate::water::{
-    add, body_of, components_seeded, infos, refine_component, seeds_body, DepthStats, HazardConfig,
-    ShoreSample, SurfaceModel, SurfaceSource, WaterBody, WithoutBottom, N8,
+    bodies_in_part, DepthStats, HazardConfig, ShoreSample, SurfaceModel, SurfaceSource, WaterBody,
 };
 
 /// A tile key `(tx, ty)`: the tile of cells `tx·64 ..< tx·64 + 64` along x, likewise y.
@@ -197,63 +196,16 @@ pub fn finish_region(
         return Ok(out);
     }
 
-    let w = &cfg.water;
-    let info = infos(&sub, &observed, cfg);
-    let seeds = info
-        .iter()
-        .filter(|(_, i)| seeds_body(i.p(), w))
-        .map(|(&k, _)| k);
-    let comps = components_seeded(&info, seeds, w);
-    let margin = 2 * w.shore_radius_cells(res) + MARGIN;
-
-    // Cells a body can grow over that connect to a cell next to an unknown tile.
-    let mut open: HashSet<CellKey> = HashSet::new();
-    let mut queue: VecDeque<CellKey> = VecDeque::new();
-    for (&k, i) in &info {
-        if i.joins(w) && !dom.deep(k, 1) && open.insert(k) {
-            queue.push_back(k);
-        }
-    }
-    while let Some(c) = queue.pop_front() {
-        for d in N8 {
-            let n = add(c, d);
-            if !open.contains(&n) && info.get(&n).is_some_and(|i| i.joins(w)) {
-                open.insert(n);
-                queue.push_back(n);
-            }
-        }
-    }
-    // Components: decided when whole and their ring known.
-    // Within two cells: a record reads its 5 × 5 window.
-    let near_region =
-        |k: CellKey| (-2..=2).any(|dy| (-2..=2).any(|dx| in_region(add(k, (dx, dy)))));
-    let cell_area = res * res;
-    let mut kept: Vec<(CellKey, Vec<CellKey>)> = Vec::new();
-    // The bottom returns a whole component's refinement took out of the evidence (as the
-    // whole map's search does, component by component).
-    let mut void = BTreeSet::new();
-    for (seed, comp) in comps {
-        if !comp.iter().all(|&k| dom.deep(k, margin)) {
-            open.extend(comp);
-            continue;
-        }
-        // Only bodies that hold a region cell or lie in a region cell's window matter here.
-        if !comp.iter().any(|&k| near_region(k)) {
-            continue;
-        }
-        // Each component the refinement leaves starts at its smallest seed key, as the
-        // whole map's search starts it; too small a body is no body.
-        for (first, comp) in refine_component(&info, seed, comp, res, w, &mut void) {
-            if comp.len() as f64 * cell_area >= w.min_body_area_m2 {
-                kept.push((first, comp));
-            }
-        }
-    }
-    let info = WithoutBottom::new(&info, &void);
-    let bodies: Vec<(CellKey, Option<WaterBody>)> = kept
-        .into_par_iter()
-        .map(|(first, comp)| (first, body_of(0, comp, &info, res, w)))
-        .collect();
+    let margin = 2 * cfg.water.shore_radius_cells(res) + MARGIN;
+    let part = bodies_in_part(
+        &sub,
+        &observed,
+        cfg,
+        margin,
+        |k, m| dom.deep(k, m),
+        in_region,
+    );
+    let (bodies, open, void) = (part.bodies, part.open, part.void);
     let water = water_surface(bodies.iter().filter_map(|(_, b)| b.as_ref()), res);
 
     let undecided: BTreeSet<TileKey> = observed
@@ -261,7 +213,9 @@ pub fn finish_region(
         .map(|(k, _)| *k)
         .filter(|&k| in_region(k))
         // Its record reads the dry cells of its 5 × 5 window (the σ's gradient).
-        .filter(|&k| (-2..=2).any(|dy| (-2..=2).any(|dx| open.contains(&add(k, (dx, dy))))))
+        .filter(|&k| {
+            (-2..=2).any(|dy| (-2..=2).any(|dx| open.contains(&CellKey::new(k.x + dx, k.y + dy))))
+        })
         .map(tile_of)
         .collect();
     let decided = |t: TileKey| region.contains(&t) && !undecided.contains(&t);

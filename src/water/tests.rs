@@ -1,9 +1,11 @@
-use std::collections::HashMap;
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use proptest::prelude::*;
 
+use super::body::in_small_hole;
+use super::search::{add, assign_ids, N4};
 use super::*;
-use crate::grid::{CellStats, Evidence};
+use crate::grid::{CellStats, Evidence, TileMap};
 use crate::hazard::{Class, Hazard, HazardMap, MapCell};
 
 const RES: f64 = 0.1;
