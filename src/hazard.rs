@@ -728,7 +728,7 @@ impl HazardMap {
 
     /// As [`HazardMap::from_tiles`], with body ids carried over from the bodies of an
     /// earlier snapshot (a body that grew or merged keeps its largest ancestor's id).
-    pub fn from_tiles_after(
+    pub(crate) fn from_tiles_after(
         tiles: &TileMap,
         cfg: &HazardConfig,
         previous: &[WaterBody],
@@ -778,7 +778,7 @@ impl HazardMap {
     }
 
     /// The key of the cell under map position (x, y).
-    pub fn key_at(&self, x: f64, y: f64) -> CellKey {
+    pub(crate) fn key_at(&self, x: f64, y: f64) -> CellKey {
         crate::grid::key_of(self.resolution, x, y)
     }
 

@@ -18,7 +18,7 @@ pub fn request_stop() {
 }
 
 /// Whether a stop was requested.
-pub fn stop_requested() -> bool {
+pub(crate) fn stop_requested() -> bool {
     STOP.load(Ordering::SeqCst)
 }
 

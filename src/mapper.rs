@@ -119,7 +119,7 @@ impl LidarConfig {
     }
 
     /// The stated range noise, or the noisy end of real lidars when none is stated.
-    pub fn stated_noise(&self) -> RangeNoise {
+    pub(crate) fn stated_noise(&self) -> RangeNoise {
         self.noise.unwrap_or(crate::calib::NOISY_LIDAR)
     }
 }
@@ -281,7 +281,7 @@ impl Default for MapperConfig {
 }
 
 /// The cue names of [`MapperConfig::set_cues`].
-pub const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
+pub(crate) const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
 
 impl MapperConfig {
     /// The cues a mapper of this config runs on every frame, with `labels` its compiled
@@ -562,7 +562,7 @@ impl MapperConfig {
     /// The datasheet values of the configured sensors that hold their defaults: what a
     /// mapper of this config assumes of sensors the log cannot describe (a rig file states
     /// them).
-    pub fn assumed_datasheet_values(&self) -> Vec<String> {
+    pub(crate) fn assumed_datasheet_values(&self) -> Vec<String> {
         let mut v = Vec::new();
         if let Some(l) = &self.lidar {
             let d = LidarConfig::default();

@@ -26,7 +26,7 @@ const BANDS: [(f64, f64); 3] = [(1.0, 10.0), (10.0, 20.0), (20.0, 40.0)];
 const POOL: usize = 30_000;
 const PER_SCAN: usize = 20_000;
 /// Triples a band needs before its σ counts.
-pub const MIN_SAMPLES: usize = 300;
+pub(crate) const MIN_SAMPLES: usize = 300;
 
 /// A measured lidar range noise.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -39,7 +39,7 @@ pub struct LidarMeasurement {
 
 /// Measures the lidar's range noise over the scans it is shown.
 #[derive(Debug, Clone)]
-pub struct LidarNoiseEstimator {
+pub(crate) struct LidarNoiseEstimator {
     /// Second differences and the middle return's range, per band.
     bands: Vec<Pool<[f32; 2]>>,
 }
@@ -55,7 +55,7 @@ impl Default for LidarNoiseEstimator {
 impl LidarNoiseEstimator {
     /// Adds one organized scan (rings × azimuth columns; a scan of one or two columns, a
     /// vertical scanner, is walked down its column).
-    pub fn observe(&mut self, scan: &PointCloud) {
+    pub(crate) fn observe(&mut self, scan: &PointCloud) {
         // Walk the rings (rows); a scan of one or two columns, down its column.
         let along_rows = scan.cols >= 3;
         let (lines, len) = if along_rows {
@@ -186,7 +186,7 @@ pub struct IntensityLaw {
 /// exponent of [`crate::cues::ChannelLaw`] fitted to the returns whose beams drop 3–45°
 /// below the horizontal in the map (mostly the ground around the vehicle), and the
 /// channel's name; `None` without such a fit.
-pub fn scan_falloff(
+pub(crate) fn scan_falloff(
     scan: &PointCloud,
     cfg: &crate::cues::ReflectivityConfig,
 ) -> Option<(f64, &'static str)> {
@@ -210,7 +210,7 @@ pub fn scan_falloff(
 
 /// Collects the scans' fitted falloff exponents.
 #[derive(Debug, Clone)]
-pub struct IntensityLawEstimator {
+pub(crate) struct IntensityLawEstimator {
     exponents: Pool<f64>,
     channel: Option<&'static str>,
 }
@@ -226,7 +226,7 @@ impl Default for IntensityLawEstimator {
 
 impl IntensityLawEstimator {
     /// Adds one scan's fitted exponent and the channel it was read from.
-    pub fn observe(&mut self, exponent: f64, channel: &'static str) {
+    pub(crate) fn observe(&mut self, exponent: f64, channel: &'static str) {
         if exponent.is_finite() {
             self.exponents.push(exponent);
             self.channel = Some(channel);

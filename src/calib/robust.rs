@@ -4,7 +4,7 @@
 use std::collections::VecDeque;
 
 /// MAD × this is the σ of a Gaussian (1 / Φ⁻¹(3/4)).
-pub const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+pub(crate) const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
 
 /// The median of `v` (reordered in place); `None` when empty.
 pub fn median(v: &mut [f64]) -> Option<f64> {
@@ -18,7 +18,7 @@ pub fn median(v: &mut [f64]) -> Option<f64> {
 
 /// The σ of a Gaussian whose median absolute deviation `v` has: `MAD_TO_SIGMA · median
 /// |v − median v|`, which a minority of outliers does not move. `None` when empty.
-pub fn mad_sigma(v: impl Iterator<Item = f64>) -> Option<f64> {
+pub(crate) fn mad_sigma(v: impl Iterator<Item = f64>) -> Option<f64> {
     let mut v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
     let m = median(&mut v)?;
     for x in v.iter_mut() {
@@ -30,7 +30,7 @@ pub fn mad_sigma(v: impl Iterator<Item = f64>) -> Option<f64> {
 /// The newest `cap` samples: a log is measured over its first seconds and keeps being
 /// measured as it goes, in memory bounded whatever its length.
 #[derive(Debug, Clone)]
-pub struct Pool<T> {
+pub(crate) struct Pool<T> {
     cap: usize,
     items: VecDeque<T>,
     /// Samples ever offered.
@@ -59,11 +59,6 @@ impl<T> Pool<T> {
     /// Samples held.
     pub fn len(&self) -> usize {
         self.items.len()
-    }
-
-    /// Whether it holds none.
-    pub fn is_empty(&self) -> bool {
-        self.items.is_empty()
     }
 
     /// The samples held, oldest first.

@@ -49,7 +49,7 @@ const PIXELS_PER_FRAME: usize = 30_000;
 /// Samples kept per method (the newest).
 const POOL: usize = 60_000;
 /// Samples a method needs before its estimate counts.
-pub const MIN_SAMPLES: usize = 1_000;
+pub(crate) const MIN_SAMPLES: usize = 1_000;
 
 /// How a stereo noise measurement was made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -100,7 +100,7 @@ impl Default for StereoNoiseEstimator {
 impl StereoNoiseEstimator {
     /// Adds one frame: its stereo cloud (in the left camera's optical frame, z forward),
     /// and its lidar scan when the frame has one.
-    pub fn observe(&mut self, stereo: &PointCloud, lidar: Option<&PointCloud>) {
+    pub(crate) fn observe(&mut self, stereo: &PointCloud, lidar: Option<&PointCloud>) {
         for p in &stereo.xyz {
             let z = (p[2] as f64) - stereo.sensor_origin.z;
             if p.iter().all(|v| v.is_finite()) && z.is_finite() && z > self.far {
@@ -260,7 +260,7 @@ impl StereoNoiseEstimator {
     }
 
     /// The measurement against the lidar alone (`None` below [`MIN_SAMPLES`]).
-    pub fn by_lidar(&self) -> Option<StereoMeasurement> {
+    pub(crate) fn by_lidar(&self) -> Option<StereoMeasurement> {
         let (c, samples) = self.with_cut(
             &self.lidar,
             |s| s[2] as f64,
@@ -288,7 +288,7 @@ impl StereoNoiseEstimator {
     }
 
     /// The measurement from the cloud's local planes alone (`None` below [`MIN_SAMPLES`]).
-    pub fn by_planes(&self) -> Option<StereoMeasurement> {
+    pub(crate) fn by_planes(&self) -> Option<StereoMeasurement> {
         let (c, samples) = self.with_cut(
             &self.planes,
             |s| s[1] as f64,

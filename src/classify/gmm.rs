@@ -48,7 +48,7 @@ impl PixelClassifier for super::color::RuleClassifier {
 }
 
 /// Labels a whole image with any pixel classifier (rows in parallel).
-pub fn classify_image(c: &impl PixelClassifier, img: &RgbImage) -> LabelImage {
+pub(crate) fn classify_image(c: &impl PixelClassifier, img: &RgbImage) -> LabelImage {
     let w = (img.width() as usize).max(1);
     let raw = img.as_raw();
     let mut data = vec![Label::Other; raw.len() / 3];

@@ -13,7 +13,10 @@ use crate::geom::camera::CameraModel;
 use crate::geom::{pose_is_finite, Pose};
 
 /// Unit rays of every pixel in the map frame (row-major); `None` where undistortion fails.
-pub fn pixel_rays_in_map(camera: &CameraModel, cam_to_map: &Pose) -> Vec<Option<Vector3<f64>>> {
+pub(crate) fn pixel_rays_in_map(
+    camera: &CameraModel,
+    cam_to_map: &Pose,
+) -> Vec<Option<Vector3<f64>>> {
     camera
         .pixel_rays()
         .into_iter()
@@ -23,7 +26,7 @@ pub fn pixel_rays_in_map(camera: &CameraModel, cam_to_map: &Pose) -> Vec<Option<
 
 /// Rotation from a camera's optical frame (z forward, x right, y down) to its body frame
 /// (REP-103: x forward, y left, z up).
-pub fn optical_to_body() -> UnitQuaternion<f64> {
+pub(crate) fn optical_to_body() -> UnitQuaternion<f64> {
     UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::new(
         0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
     )))
@@ -148,7 +151,7 @@ impl GroundGeometry {
 
     /// The same from the pixels' rays in the map frame (`camera`'s at `cam_to_map`), as a
     /// caller that keeps them between frames has them.
-    pub fn of_rays(
+    pub(crate) fn of_rays(
         camera: &CameraModel,
         map_rays: &[Option<Vector3<f64>>],
         cam_to_map: &Pose,

@@ -47,7 +47,7 @@ pub enum Label {
 
 impl Label {
     /// All labels that carry a decision, in vote-index order (see [`Label::index`]).
-    pub const DECIDED: [Label; 4] = [Label::Other, Label::Water, Label::Sky, Label::SnowIce];
+    pub(crate) const DECIDED: [Label; 4] = [Label::Other, Label::Water, Label::Sky, Label::SnowIce];
 
     /// Index 0..4 for decided labels, `None` for [`Label::Unknown`].
     pub fn index(self) -> Option<usize> {

@@ -51,7 +51,7 @@ pub fn equation_of_time_min(unix_s: f64) -> f64 {
 /// Local apparent solar time (hours, 0 ≤ h < 24) at `unix_s` seconds since the epoch (UTC)
 /// and `longitude_deg` degrees east. `None` when either is not finite, the longitude lies
 /// outside ±180°, or the stamp outside ±10,000 years of the epoch.
-pub fn local_solar_hour(unix_s: f64, longitude_deg: f64) -> Option<f64> {
+pub(crate) fn local_solar_hour(unix_s: f64, longitude_deg: f64) -> Option<f64> {
     if !(unix_s.is_finite()
         && unix_s.abs() < 3.2e11
         && longitude_deg.is_finite()

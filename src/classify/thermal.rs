@@ -167,7 +167,7 @@ impl Default for SwirConfig {
 }
 
 /// Labels a SWIR image: water / snow-ice (dark), other, or unknown (no ground, grazing).
-pub fn classify_swir(
+pub(crate) fn classify_swir(
     img: &MonoImage,
     geom: &GroundGeometry,
     visible: Option<&MonoImage>,
@@ -218,7 +218,7 @@ pub fn classify_swir(
 /// Which way the thermal contrast goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum ThermalRegime {
+pub(crate) enum ThermalRegime {
     /// Water warmer than terrain.
     Night,
     /// Water cooler than terrain.
@@ -271,7 +271,7 @@ fn in_hours(h: f64, [a, b]: [f64; 2]) -> bool {
 
 impl MwirConfig {
     /// The regime at a local solar hour (0..24).
-    pub fn regime(&self, hour: f64) -> Result<ThermalRegime> {
+    pub(crate) fn regime(&self, hour: f64) -> Result<ThermalRegime> {
         if !(0.0..24.0).contains(&hour) {
             return Err(Error::invalid(
                 "hour of day",
@@ -289,7 +289,7 @@ impl MwirConfig {
 }
 
 /// Labels an MWIR image taken at local solar `hour`.
-pub fn classify_mwir(
+pub(crate) fn classify_mwir(
     img: &MonoImage,
     geom: &GroundGeometry,
     hour: f64,

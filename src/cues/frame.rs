@@ -70,7 +70,7 @@ pub struct FrameCues {
 }
 
 /// Intensity of a camera image as a [`GrayImage`] (mean of R, G, B for colour).
-pub fn gray_of(image: &Image) -> Result<GrayImage> {
+pub(crate) fn gray_of(image: &Image) -> Result<GrayImage> {
     let pixels: Vec<f32> = match &image.pixels {
         Pixels::Rgb8(p) => p
             .iter()
@@ -125,7 +125,7 @@ impl FrameCues {
     /// The lidar half of [`FrameCues::apply`]: runs only when a lidar cue model is
     /// configured and the frame has a lidar cloud. Returns what the scan says of the
     /// surface ([`ScanSurface`]) for the image labels that follow.
-    pub fn apply_lidar(
+    pub(crate) fn apply_lidar(
         &mut self,
         frame: &Frame,
         grid: &mut RollingGrid,
@@ -155,7 +155,7 @@ impl FrameCues {
     /// The stereo half of [`FrameCues::apply`]: runs only when the stereo cue is configured
     /// and the frame has a stereo cloud. Returns what the cloud says of the surface
     /// ([`ScanSurface::stereo`]) for the image labels that follow.
-    pub fn apply_stereo(
+    pub(crate) fn apply_stereo(
         &self,
         frame: &Frame,
         grid: &mut RollingGrid,

@@ -39,7 +39,8 @@ use std::collections::HashMap;
 
 use crate::grid::{key_of, quantize_mm, BuildKeyHasher, CellKey, Evidence};
 
-pub use frame::{FrameCueConfig, FrameCues, FrameCuesReport};
+pub use frame::FrameCuesReport;
+pub use frame::{FrameCueConfig, FrameCues};
 pub use lidar::{
     estimate_sensor_height, BeamModel, DryReach, LidarCueConfig, LidarCueModel, LidarCues,
     ScanSurface,
@@ -72,7 +73,7 @@ impl EvidenceMap {
 
     /// Empties the map for cells `resolution` metres wide and levels relative to `z_ref`,
     /// keeping its storage.
-    pub fn reset(&mut self, resolution: f64, z_ref: f64) {
+    pub(crate) fn reset(&mut self, resolution: f64, z_ref: f64) {
         self.resolution = resolution;
         self.z_ref = z_ref;
         self.cells.clear();
@@ -88,12 +89,18 @@ impl EvidenceMap {
     }
 
     /// A level (map-frame metres) in the grid's fixed-point millimetres.
-    pub fn level_mm(&self, z: f64) -> Option<i32> {
+    pub(crate) fn level_mm(&self, z: f64) -> Option<i32> {
         quantize_mm(z - self.z_ref)
     }
 
     /// Adds `f`'s change to the cell under `(x, y)` together with a level sample.
-    pub fn add_with_level(&mut self, x: f64, y: f64, level_z: f64, f: impl FnOnce(&mut Evidence)) {
+    pub(crate) fn add_with_level(
+        &mut self,
+        x: f64,
+        y: f64,
+        level_z: f64,
+        f: impl FnOnce(&mut Evidence),
+    ) {
         let mm = self.level_mm(level_z);
         if let Some(e) = self.at(x, y) {
             f(e);
@@ -134,14 +141,14 @@ impl EvidenceMap {
 
     /// [`Self::into_batch`] into `out`'s storage (its contents replaced), leaving this map
     /// empty with its storage kept.
-    pub fn drain_batch_into(&mut self, out: &mut Vec<(CellKey, Evidence)>) {
+    pub(crate) fn drain_batch_into(&mut self, out: &mut Vec<(CellKey, Evidence)>) {
         out.clear();
         out.extend(self.cells.drain());
         out.sort_unstable_by_key(|(k, _)| *k);
     }
 
     /// The batch for [`crate::grid::RollingGrid::apply_evidence`], in key order.
-    pub fn into_batch(self) -> Vec<(CellKey, Evidence)> {
+    pub(crate) fn into_batch(self) -> Vec<(CellKey, Evidence)> {
         let mut v: Vec<_> = self.cells.into_iter().collect();
         v.sort_unstable_by_key(|(k, _)| *k);
         v

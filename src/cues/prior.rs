@@ -13,7 +13,7 @@ use crate::grid::{key_of, BuildKeyHasher, CellKey};
 
 /// One cell of the prior: the water surface there and how well it is known.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PriorLevel {
+pub(crate) struct PriorLevel {
     /// Water surface elevation, map z, metres.
     pub z: f64,
     /// Its standard deviation, metres: the body's shore samples' spread about its fitted
@@ -35,7 +35,7 @@ impl WaterPrior {
     /// reach takes the level of a given cell nearest to it in 4-connected steps (the first
     /// reached, in the order given: deterministic). Non-finite levels are left out; a
     /// non-finite σ counts as 0.
-    pub fn from_levels(
+    pub(crate) fn from_levels(
         resolution: f64,
         cells: impl IntoIterator<Item = (CellKey, PriorLevel)>,
         reach_m: f64,
@@ -71,7 +71,7 @@ impl WaterPrior {
     }
 
     /// The level under the map point `(x, y)`, if the prior has one there.
-    pub fn level_at(&self, x: f64, y: f64) -> Option<PriorLevel> {
+    pub(crate) fn level_at(&self, x: f64, y: f64) -> Option<PriorLevel> {
         if self.levels.is_empty() || !(x.is_finite() && y.is_finite()) {
             return None;
         }

@@ -157,7 +157,7 @@ pub struct ChannelLaw {
 impl ChannelLaw {
     /// The law physics gives level Lambertian ground: v ∝ cos θ / r² ∝ r⁻³ for raw
     /// intensity, v ∝ cos θ ∝ r⁻¹ for a range-corrected reflectivity.
-    pub fn lambertian(calibrated: bool) -> Self {
+    pub(crate) fn lambertian(calibrated: bool) -> Self {
         ChannelLaw {
             offset: 0.0,
             exponent: if calibrated { -1.0 } else { -3.0 },
@@ -234,7 +234,7 @@ pub(crate) fn channel_value(
 }
 
 /// The name of the channel `cfg` reads from `cloud`, when it has one.
-pub fn channel_name(cloud: &PointCloud, cfg: &ReflectivityConfig) -> Option<&'static str> {
+pub(crate) fn channel_name(cloud: &PointCloud, cfg: &ReflectivityConfig) -> Option<&'static str> {
     match (cfg.channel, &cloud.reflectivity, &cloud.intensity) {
         (Channel::Reflectivity | Channel::Auto, Some(_), _) => Some("reflectivity"),
         (Channel::Intensity, _, Some(_)) | (Channel::Auto, None, Some(_)) => Some("intensity"),

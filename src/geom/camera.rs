@@ -84,7 +84,7 @@ impl CameraModel {
     }
 
     /// Normalized undistorted image coordinates (x/z, y/z) → distorted normalized ones.
-    pub fn distort(&self, a: f64, b: f64) -> [f64; 2] {
+    pub(crate) fn distort(&self, a: f64, b: f64) -> [f64; 2] {
         match self.distortion {
             Distortion::None => [a, b],
             Distortion::PlumbBob([k1, k2, p1, p2, k3]) => {
@@ -279,7 +279,7 @@ impl CameraModel {
 
 /// Smallest r > 0 where the plumb_bob radial map r·(1 + k1 r² + k2 r⁴ + k3 r⁶) stops rising
 /// (its derivative 1 + 3k1 r² + 5k2 r⁴ + 7k3 r⁶ reaches 0); infinite when it never does.
-pub fn plumb_bob_fold_radius(k1: f64, k2: f64, k3: f64) -> f64 {
+pub(crate) fn plumb_bob_fold_radius(k1: f64, k2: f64, k3: f64) -> f64 {
     // g(s) = 1 + 3k1 s + 5k2 s² + 7k3 s³ in s = r², g(0) = 1. Split [0, ∞) at the stationary
     // points of g (roots of g' = 3k1 + 10k2 s + 21k3 s²) into monotone pieces and bisect the
     // first piece whose end is ≤ 0.

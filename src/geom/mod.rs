@@ -34,7 +34,7 @@ pub fn hypot(x: f64, y: f64) -> f64 {
 /// showed as 4 % of a full-frame build in the label ray march. (Inside a function built
 /// with AVX2, `f64::floor` is one instruction and vectorises: keep it there.)
 #[inline(always)]
-pub fn floor_i64(v: f64) -> i64 {
+pub(crate) fn floor_i64(v: f64) -> i64 {
     let t = v as i64;
     t.saturating_sub((v < t as f64) as i64)
 }
@@ -42,7 +42,7 @@ pub fn floor_i64(v: f64) -> i64 {
 /// `v.ceil() as i64`, bit for bit (NaN → 0, saturating), without a call: see
 /// [`floor_i64`].
 #[inline(always)]
-pub fn ceil_i64(v: f64) -> i64 {
+pub(crate) fn ceil_i64(v: f64) -> i64 {
     let t = v as i64;
     t.saturating_add((v > t as f64) as i64)
 }
@@ -64,7 +64,7 @@ pub(crate) fn cell_coord(v: f64, inv: f64, res: f64) -> i64 {
 }
 
 /// True when every component of the pose is finite and the rotation is a unit quaternion.
-pub fn pose_is_finite(p: &Pose) -> bool {
+pub(crate) fn pose_is_finite(p: &Pose) -> bool {
     let q = p.rotation.coords;
     p.translation.vector.iter().all(|v| v.is_finite())
         && q.iter().all(|v| v.is_finite())

@@ -11,13 +11,13 @@ use super::evidence::Evidence;
 use super::Elev;
 
 /// Reference standard deviation for weights: a point with σ = 1 cm has weight [`W_UNIT`].
-pub const SIGMA_REF_M: f64 = 0.01;
+pub(crate) const SIGMA_REF_M: f64 = 0.01;
 /// Quantized weight of a point with σ = [`SIGMA_REF_M`].
-pub const W_UNIT: f64 = 65536.0;
+pub(crate) const W_UNIT: f64 = 65536.0;
 /// Largest quantized weight (σ ≈ 0.6 mm); smaller σ are clamped to it.
-pub const W_MAX: u32 = 1 << 24;
+pub(crate) const W_MAX: u32 = 1 << 24;
 /// Scale of a point's vertical weight `q = w·s²·V_SCALE` ([`vertical_weight`]).
-pub const V_SCALE: f64 = 256.0;
+pub(crate) const V_SCALE: f64 = 256.0;
 
 /// What a point of weight `w` and range noise `sigma_m`, of which the share `s` (0..1)
 /// reaches its height, adds to the variance of the weighted mean: `(w·s·σ)²`, in units of
@@ -27,7 +27,7 @@ pub const V_SCALE: f64 = 256.0;
 /// vanishes (NaN gives 1), and at most `i32::MAX` (a point some 7 km off). Branch-free:
 /// ingest runs it on lanes of points.
 #[inline]
-pub fn vertical_weight(w: u32, share: f64, sigma_m: f64) -> u32 {
+pub(crate) fn vertical_weight(w: u32, share: f64, sigma_m: f64) -> u32 {
     let a = f64::from(w) * share * sigma_m / SIGMA_REF_M;
     // `f64::max` takes 1 over a NaN.
     let q = (a * a * (V_SCALE / W_UNIT) + 0.5)
@@ -51,7 +51,7 @@ pub fn quantize_weight(sigma_m: f64) -> u32 {
 
 /// Elevation in whole millimetres (relative to the grid's reference height).
 #[inline]
-pub fn quantize_mm(dz_m: f64) -> Option<i32> {
+pub(crate) fn quantize_mm(dz_m: f64) -> Option<i32> {
     let mm = dz_m * 1000.0 + 0.5;
     // In range (NaN fails both comparisons); then floor without a libm call.
     if !(mm > -(i32::MAX as f64) && mm < i32::MAX as f64) {
@@ -121,7 +121,7 @@ impl CellStats {
 
     /// Fuses one quantized measurement of weight `w` and vertical weight `q`.
     #[inline]
-    pub fn add_sample(&mut self, z_mm: i32, w: u32, q: u32) {
+    pub(crate) fn add_sample(&mut self, z_mm: i32, w: u32, q: u32) {
         let mut e = Elev::of(self);
         e.add(z_mm, w, q);
         e.write_to(self);
@@ -144,7 +144,7 @@ impl CellStats {
 
     /// Weighted spread (variance of the fused points about their mean), mm².
     #[inline]
-    pub fn spread_var_mm2(&self) -> Option<f64> {
+    pub(crate) fn spread_var_mm2(&self) -> Option<f64> {
         let m = self.mean_mm()?;
         Some((self.swzz as f64 / self.sw as f64 - m * m).max(0.0))
     }
@@ -154,7 +154,7 @@ impl CellStats {
     /// along its ray, so a grazing return's height is far better known than its range),
     /// or the empirical standard error when the points disagree more than that. What the
     /// map publishes as `elevation_std`.
-    pub fn elevation_std_m(&self) -> Option<f64> {
+    pub(crate) fn elevation_std_m(&self) -> Option<f64> {
         self.with_spread(self.vertical_var_m2())
     }
 
@@ -168,7 +168,7 @@ impl CellStats {
     /// noise explains (m², the points taken as equally weighted): the terrain's own
     /// variation within the cell (roughness, and a slope across it), by which one place in
     /// the cell, its centre, differs from the mean of all of it.
-    pub fn excess_spread_var_m2(&self) -> Option<f64> {
+    pub(crate) fn excess_spread_var_m2(&self) -> Option<f64> {
         let per_point = self.vertical_var_m2() * self.hits as f64;
         Some((self.spread_var_mm2()? * 1e-6 - per_point).max(0.0))
     }
@@ -178,7 +178,7 @@ impl CellStats {
     /// (on a bank facing the sensor the range error moves the height at a fixed place
     /// fully), which the map's own quality gates use (the ray march's holes, the water's
     /// shore cells, the step test).
-    pub fn range_bound_std_m(&self) -> Option<f64> {
+    pub(crate) fn range_bound_std_m(&self) -> Option<f64> {
         self.with_spread((SIGMA_REF_M * SIGMA_REF_M) * W_UNIT / self.sw as f64)
     }
 

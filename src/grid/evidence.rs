@@ -98,10 +98,10 @@ pub struct Evidence {
 }
 
 /// Number of `u16` event counts in [`Evidence`] (see [`Evidence::counts`]).
-pub const EVIDENCE_COUNTS: usize = 11;
+pub(crate) const EVIDENCE_COUNTS: usize = 11;
 
 /// Bytes of evidence storage per cell in the window's structure-of-arrays layers.
-pub const EVIDENCE_BYTES_PER_CELL: usize = EVIDENCE_COUNTS * 2 + 4 + 8 + 4 + 4 + 4 + 8;
+pub(crate) const EVIDENCE_BYTES_PER_CELL: usize = EVIDENCE_COUNTS * 2 + 4 + 8 + 4 + 4 + 4 + 8;
 
 impl Evidence {
     /// Whether the cell has no evidence at all.
@@ -155,7 +155,7 @@ impl Evidence {
 
     /// Sets the event counts from [`Self::counts`] order.
     #[inline]
-    pub fn set_counts(&mut self, c: [u16; EVIDENCE_COUNTS]) {
+    pub(crate) fn set_counts(&mut self, c: [u16; EVIDENCE_COUNTS]) {
         [
             self.noret,
             self.diag_ret,
@@ -201,7 +201,7 @@ impl Evidence {
     }
 
     /// Mean water level, mm relative to the grid's `z_ref`.
-    pub fn level_mm(&self) -> Option<f64> {
+    pub(crate) fn level_mm(&self) -> Option<f64> {
         (self.level_n > 0).then(|| self.level_sum_mm as f64 / self.level_n as f64)
     }
 
@@ -213,7 +213,7 @@ impl Evidence {
 
     /// Mean bottom-return depth below the level `level_mm` (relative to `z_ref`), metres:
     /// each return's depth moved by its gain times the change of level. Not clamped.
-    pub fn depth_at_m(&self, level_mm: f64) -> Option<f64> {
+    pub(crate) fn depth_at_m(&self, level_mm: f64) -> Option<f64> {
         (self.depth_n > 0).then(|| {
             let shift = self.depth_gain_sum as f64 * 1e-3 * level_mm
                 - self.depth_gain_level_sum as f64 * 1e-3;
@@ -264,7 +264,7 @@ impl Evidence {
     }
 
     /// [`Self::cue_log_odds`] with the rule's logarithms computed once for many cells.
-    pub fn cue_log_odds_in(&self, f: &FusionLogs) -> CueLogOdds {
+    pub(crate) fn cue_log_odds_in(&self, f: &FusionLogs) -> CueLogOdds {
         // n · ln(a / b), with no product for a count of 0 (most cells of a map have no
         // evidence of most cues). The sum is the same: the ratios are finite, so
         // 0 · ln(a / b) is ±0.
@@ -297,7 +297,7 @@ impl Evidence {
     }
 
     /// [`Self::water_log_odds`] with the rule's logarithms computed once for many cells.
-    pub fn water_log_odds_in(&self, f: &FusionLogs) -> f64 {
+    pub(crate) fn water_log_odds_in(&self, f: &FusionLogs) -> f64 {
         self.cue_log_odds_in(f).0.iter().fold(f.prior, |l, c| l + c)
     }
 
@@ -312,7 +312,7 @@ impl Evidence {
 
     /// [`Self::water_probability`] with the rule's logarithms computed once for many cells
     /// (the water stage asks every observed cell every frame): the same value, bit for bit.
-    pub fn water_probability_in(&self, f: &FusionLogs) -> f64 {
+    pub(crate) fn water_probability_in(&self, f: &FusionLogs) -> f64 {
         if *self == Evidence::default() {
             return f.prior_p;
         }
@@ -322,7 +322,7 @@ impl Evidence {
 
     /// [`Self::water_probability_in`] without the bottom returns' term: what the cell's
     /// other evidence says where the water stage found its bottom returns no evidence.
-    pub fn water_probability_without_bottom_in(&self, f: &FusionLogs) -> f64 {
+    pub(crate) fn water_probability_without_bottom_in(&self, f: &FusionLogs) -> f64 {
         Evidence {
             depth_n: 0,
             ..*self
@@ -379,7 +379,7 @@ impl Cue {
     }
 
     /// Whether the cue is an image's per-frame vote (capped at `image_cap`, not `cue_cap`).
-    pub const fn is_image(self) -> bool {
+    pub(crate) const fn is_image(self) -> bool {
         matches!(self, Cue::Colour | Cue::Swir | Cue::Mwir)
     }
 }

@@ -16,10 +16,10 @@ mod evidence;
 mod ingest;
 mod tiles;
 
-pub use cell::{quantize_mm, quantize_weight, CellStats, SIGMA_REF_M, W_MAX, W_UNIT};
-pub use evidence::{
-    Cue, CueLogOdds, Evidence, Fusion, FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS,
-};
+pub(crate) use cell::quantize_mm;
+pub use cell::{quantize_weight, CellStats};
+pub use evidence::{Cue, CueLogOdds, Evidence, Fusion};
+pub(crate) use evidence::{FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS};
 pub use ingest::{IngestStats, RangeNoise};
 pub(crate) use tiles::ByteReader;
 pub use tiles::{TileMap, TILESET_MAGIC, TILESET_VERSION, TILE_CELLS};
@@ -236,7 +236,7 @@ impl Elev {
 
     /// Sets `c`'s elevation statistics to these, keeping its evidence.
     #[inline]
-    pub fn write_to(&self, c: &mut CellStats) {
+    pub(crate) fn write_to(&self, c: &mut CellStats) {
         c.hits = self.hits;
         c.below = self.below;
         c.sw = self.sw;
@@ -276,7 +276,7 @@ impl Elev {
 
     /// True when no point was recorded (fused or below the surface).
     #[inline]
-    pub fn no_points(&self) -> bool {
+    pub(crate) fn no_points(&self) -> bool {
         self.hits == 0 && self.below == 0
     }
 }
@@ -314,7 +314,8 @@ impl Layers {
 
     /// Bytes of layer storage per cell: 1 for occupancy, 64 for the elevation record, the
     /// rest evidence.
-    pub const BYTES_PER_CELL: usize = 1 + std::mem::size_of::<Elev>() + EVIDENCE_BYTES_PER_CELL;
+    pub(crate) const BYTES_PER_CELL: usize =
+        1 + std::mem::size_of::<Elev>() + EVIDENCE_BYTES_PER_CELL;
 
     /// Bytes allocated by the layers (their capacities).
     fn heap_bytes(&self) -> usize {
@@ -331,7 +332,7 @@ impl Layers {
     }
 
     #[inline]
-    pub fn get_ev(&self, i: usize) -> Evidence {
+    pub(crate) fn get_ev(&self, i: usize) -> Evidence {
         let d = self.ev_depth[i];
         let mut e = Evidence {
             level_n: self.ev_level_n[i],
@@ -347,7 +348,7 @@ impl Layers {
     }
 
     #[inline]
-    pub fn set_ev(&mut self, i: usize, e: &Evidence) {
+    pub(crate) fn set_ev(&mut self, i: usize, e: &Evidence) {
         self.occupied[i] = !self.elev[i].no_points() || !e.is_empty();
         self.ev_counts[i] = e.counts();
         self.ev_level_n[i] = e.level_n;
@@ -360,7 +361,7 @@ impl Layers {
     /// [`CellStats::mean_mm`], [`CellStats::elevation_std_m`] and
     /// [`CellStats::range_bound_std_m`] read.
     #[inline]
-    pub fn elevation_stats(&self, i: usize) -> CellStats {
+    pub(crate) fn elevation_stats(&self, i: usize) -> CellStats {
         let e = &self.elev[i];
         CellStats {
             hits: e.hits,
@@ -388,7 +389,7 @@ impl Layers {
     }
 
     #[inline]
-    pub fn merge_at(&mut self, i: usize, c: &CellStats) {
+    pub(crate) fn merge_at(&mut self, i: usize, c: &CellStats) {
         self.elev[i].merge(&Elev::of(c));
         self.occupied[i] |= c.hits != 0 || c.below != 0;
         if !c.ev.is_empty() {
@@ -397,14 +398,14 @@ impl Layers {
     }
 
     #[inline]
-    pub fn merge_ev_at(&mut self, i: usize, e: &Evidence) {
+    pub(crate) fn merge_ev_at(&mut self, i: usize, e: &Evidence) {
         let mut m = self.get_ev(i);
         m.merge(e);
         self.set_ev(i, &m);
     }
 
     #[inline]
-    pub fn is_empty_at(&self, i: usize) -> bool {
+    pub(crate) fn is_empty_at(&self, i: usize) -> bool {
         !self.occupied[i]
     }
 }
@@ -472,7 +473,7 @@ impl RollingGrid {
     /// of every allocation (the layers are per cell; the scratch is the binned and sorted
     /// points of the largest batch so far, and the accumulators of a bucket of cells per
     /// thread once a batch has had a dense bucket).
-    pub fn heap_bytes(&self) -> (usize, usize) {
+    pub(crate) fn heap_bytes(&self) -> (usize, usize) {
         (self.layers.heap_bytes(), self.scratch.heap_bytes())
     }
 
@@ -510,7 +511,7 @@ impl RollingGrid {
     }
 
     /// Statistics of the cell under the map point `(x, y)`.
-    pub fn cell_at(&self, x: f64, y: f64) -> Option<CellStats> {
+    pub(crate) fn cell_at(&self, x: f64, y: f64) -> Option<CellStats> {
         self.cell(self.key_of(x, y))
     }
 
@@ -726,7 +727,7 @@ impl RollingGrid {
 impl RollingGrid {
     /// Merges water evidence into the cell `k`; `false` (and nothing recorded) when `k` is
     /// outside the window.
-    pub fn add_evidence(&mut self, k: CellKey, e: &Evidence) -> bool {
+    pub(crate) fn add_evidence(&mut self, k: CellKey, e: &Evidence) -> bool {
         match self.index(k) {
             Some(i) => {
                 self.layers.merge_ev_at(i, e);

@@ -15,7 +15,7 @@ use crate::hazard::{HazardMap, MapCell};
 
 /// The files of one build, in the order they are moved into place when they cannot be moved
 /// as one folder (`report.json`, which names the set, last).
-pub const OUTPUT_FILES: [&str; 5] = [
+pub(crate) const OUTPUT_FILES: [&str; 5] = [
     "map.ply",
     "terrain.ply",
     "water.ply",
@@ -271,7 +271,7 @@ fn sweep_stale(parent: &Path, prefix: &str, own: &Path) -> Vec<PathBuf> {
 /// Beyond this distance (metres) of the map frame's origin a `float` coordinate is no
 /// longer within 0.5 mm of the value it stands for (its step is 2^-10 m below 2^14 m, and
 /// doubles beyond); `map.ply`, `terrain.ply` and `water.ply` then store `double` x y z.
-pub const FLOAT_COORDINATE_LIMIT_M: f64 = 16384.0;
+pub(crate) const FLOAT_COORDINATE_LIMIT_M: f64 = 16384.0;
 
 /// Whether vertices at these map-frame coordinates need `double` x y z
 /// ([`FLOAT_COORDINATE_LIMIT_M`]).
@@ -323,7 +323,7 @@ pub fn write_map_ply(path: &Path, map: &HazardMap) -> Result<()> {
 
 /// [`write_map_ply`] with extra header comment lines (e.g. the mark of a map built from a
 /// damaged input: `damaged input: …`).
-pub fn write_map_ply_with(path: &Path, map: &HazardMap, comments: &[String]) -> Result<()> {
+pub(crate) fn write_map_ply_with(path: &Path, map: &HazardMap, comments: &[String]) -> Result<()> {
     let double = needs_double(map.cells.iter().map(|c| [c.x, c.y, c.z]));
     let extra: String = comments.iter().map(|c| comment_line(c)).collect();
     write_atomic(path, |w| {
@@ -412,7 +412,7 @@ pub fn write_mesh_ply(
 
 /// A triangle mesh in the map frame: `double` x y z where a `float` would lose
 /// millimetres ([`needs_double`]), `float` otherwise.
-pub fn write_map_mesh_ply(
+pub(crate) fn write_map_mesh_ply(
     path: &Path,
     comment: &str,
     vertices: &[([f64; 3], [u8; 3], u8)],
@@ -467,7 +467,7 @@ fn write_mesh(
 
 /// `terrain.ply`: the terrain surface over observed cells, coloured by class, in the map
 /// frame.
-pub fn write_terrain_ply(path: &Path, map: &HazardMap) -> Result<()> {
+pub(crate) fn write_terrain_ply(path: &Path, map: &HazardMap) -> Result<()> {
     let verts: Vec<_> = map
         .cells
         .iter()
@@ -494,7 +494,7 @@ fn water_vertex_colour(top: bool, known: bool) -> [u8; 3] {
 /// [`crate::water::mesh`]); others are their open top sheet. Vertex properties: `x y z`,
 /// `red green blue`, `int body` (the body id), `float depth` (below the surface at that
 /// vertex: 0 on the top sheet).
-pub fn write_water_ply(path: &Path, map: &HazardMap) -> Result<()> {
+pub(crate) fn write_water_ply(path: &Path, map: &HazardMap) -> Result<()> {
     let mut verts: Vec<([f64; 3], [u8; 3], i32, f32)> = Vec::new();
     let mut tris: Vec<[u32; 3]> = Vec::new();
     for b in &map.bodies {

@@ -98,7 +98,7 @@ fn band_names() -> String {
 }
 
 /// The bytes of the GeoTIFF of `map`.
-pub fn encode_geotiff(map: &HazardMap, opts: &GeoTiffOptions) -> Result<Vec<u8>> {
+pub(crate) fn encode_geotiff(map: &HazardMap, opts: &GeoTiffOptions) -> Result<Vec<u8>> {
     let raster = MapRaster::new(map)?;
     let (w, h) = (raster.nx, raster.ny);
     if w == 0 {

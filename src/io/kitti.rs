@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::geom::PointCloud;
 
 /// Bytes per point: four little-endian `f32`.
-pub const POINT_BYTES: usize = 16;
+pub(crate) const POINT_BYTES: usize = 16;
 
 /// Reads a KITTI scan as an unorganized cloud with intensity.
 pub fn read(path: &Path) -> Result<PointCloud> {

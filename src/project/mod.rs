@@ -79,7 +79,7 @@ impl LabelVotes {
     }
 
     /// Adds counts to a cell.
-    pub fn add_counts(&mut self, key: CellKey, counts: &Counts) {
+    pub(crate) fn add_counts(&mut self, key: CellKey, counts: &Counts) {
         let c = self.cells.entry(key).or_insert([0; 4]);
         for (a, b) in c.iter_mut().zip(counts) {
             *a = a.saturating_add(*b);

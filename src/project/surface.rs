@@ -76,7 +76,7 @@ impl GridSurface {
     /// ([`crate::grid::CellStats::range_bound_std_m`]) exceeds `max_std_m` counts as
     /// unobserved: a cell seen only by a few far stereo points (σ grows with range²) holds
     /// an elevation that may belong to a cell metres nearer, and would stop rays short.
-    pub fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
+    pub(crate) fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
         Self::from_grid_gated_in(grid, max_std_m, Vec::new())
     }
 
@@ -197,7 +197,7 @@ impl GridSurface {
 
     /// Raster index of the cell under `(x, y)`, if inside the window.
     #[inline]
-    pub fn index_of(&self, x: f64, y: f64) -> Option<usize> {
+    pub(crate) fn index_of(&self, x: f64, y: f64) -> Option<usize> {
         self.cell_of(x, y).map(|(i, j)| j * self.n + i)
     }
 

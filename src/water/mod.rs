@@ -550,7 +550,7 @@ impl WaterBody {
 }
 
 /// The `report.json` record of all bodies.
-pub fn bodies_report(bodies: &[WaterBody]) -> serde_json::Value {
+pub(crate) fn bodies_report(bodies: &[WaterBody]) -> serde_json::Value {
     serde_json::Value::Array(bodies.iter().map(WaterBody::report).collect())
 }
 

@@ -48,7 +48,7 @@ impl SurfaceModel {
     }
 
     /// An evaluator of the surface (builds the triangulation once).
-    pub fn evaluator(&self) -> Surface {
+    pub(crate) fn evaluator(&self) -> Surface {
         match self {
             SurfaceModel::Level { z } => Surface::Level(*z),
             SurfaceModel::Delaunay {
@@ -179,7 +179,7 @@ impl Surface {
     /// How far `(x, y)` lies outside the samples' convex hull, metres: 0 inside it, and
     /// for a level plane (which holds everywhere). Beyond the hull a triangulated surface
     /// is the hull's edge carried on level: a guess, not a fit.
-    pub fn outside_hull_m(&self, x: f64, y: f64) -> f64 {
+    pub(crate) fn outside_hull_m(&self, x: f64, y: f64) -> f64 {
         match self {
             Surface::Level(_) => 0.0,
             Surface::Tin { cdt, hull } => match cdt.locate(Point2::new(x, y)) {
@@ -232,7 +232,7 @@ const SIGMA_FLOOR_M: f64 = 0.01;
 /// 1 / max(σ, 1 cm)² (`sigma`, one per sample; non-finite σ weighs nothing unless no
 /// sample has a finite one), with the weighted RMS about it as the residual. `None` without
 /// a finite sample.
-pub fn weighted_level(samples: &[ShoreSample], sigma: &[f64]) -> Option<Fit> {
+pub(crate) fn weighted_level(samples: &[ShoreSample], sigma: &[f64]) -> Option<Fit> {
     let mut v: Vec<(f64, f64)> = samples
         .iter()
         .zip(sigma)
@@ -277,7 +277,7 @@ pub fn weighted_level(samples: &[ShoreSample], sigma: &[f64]) -> Option<Fit> {
 /// those of the shore samples (itself included) and of `ground`, dry cells near the shore:
 /// where a bush covers a stretch of shore, every shore sample there is bush, but the ground
 /// beside it is not. Returns the indices of the samples kept, in input order.
-pub fn reject_occluders(
+pub(crate) fn reject_occluders(
     samples: &[ShoreSample],
     ground: &[ShoreSample],
     cfg: &WaterConfig,
@@ -325,7 +325,11 @@ fn local_quantiles(
 /// water beside them can stand: `z_j + max_surface_slope · d_ij` for every other kept
 /// sample j within `spill_radius_m` (module documentation, section 2). Indices into
 /// `samples`, in the order of `kept`.
-pub fn reject_spilling(samples: &[ShoreSample], kept: &[usize], cfg: &WaterConfig) -> Vec<usize> {
+pub(crate) fn reject_spilling(
+    samples: &[ShoreSample],
+    kept: &[usize],
+    cfg: &WaterConfig,
+) -> Vec<usize> {
     let r = cfg.spill_radius_m;
     if r <= 0.0 {
         return kept.to_vec();
@@ -361,7 +365,7 @@ pub fn reject_spilling(samples: &[ShoreSample], kept: &[usize], cfg: &WaterConfi
 /// of it (itself included): what that stretch of shore says, for the vertices of a
 /// Delaunay surface, which would otherwise carry each sample's own error to the water
 /// around it (module documentation, section 3). Order and positions are kept.
-pub fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
+pub(crate) fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
     if radius.is_nan() || radius <= 0.0 {
         return samples.to_vec();
     }
