@@ -7,10 +7,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cues::prior::{PriorLevel, WaterPrior};
 use crate::error::Result;
-use crate::grid::{
-    centre_of, BuildKeyHasher, CellKey, CellStats, Evidence, Fusion, FusionLogs, TileMap,
-};
-use crate::water::{find_bodies_and_void, HazardConfig, Vehicle, WaterBody};
+use crate::grid::{centre_of, BuildKeyHasher, CellKey, CellStats, Evidence, FusionLogs, TileMap};
+use crate::water::{find_bodies_and_void, HazardConfig, WaterBody};
 
 mod region;
 mod window;
@@ -701,23 +699,6 @@ impl HazardMap {
         crate::water::bodies_report(&self.bodies)
     }
 
-    /// The map with water from the cues' evidence, with the default water and vehicle
-    /// configuration and the given fusion rule and fording depth: a thin wrapper over
-    /// [`HazardMap::from_tiles`], kept for callers written before the water stage. Invalid
-    /// settings (a fusion probability outside 0..1, a negative fording depth) give the
-    /// geometry-only map.
-    pub fn with_water(tiles: &TileMap, fusion: &Fusion, fording_depth_m: f64) -> Self {
-        let cfg = HazardConfig {
-            fusion: *fusion,
-            vehicle: Vehicle {
-                fording_depth_m,
-                ..Vehicle::default()
-            },
-            ..HazardConfig::default()
-        };
-        Self::from_tiles(tiles, &cfg).unwrap_or_else(|_| Self::from_elevation(tiles))
-    }
-
     /// The hazard map of a tile map: water bodies (see [`crate::water`]), then one record
     /// per observed cell with class, hazard, water probability, z (the fitted water surface
     /// for water cells, else the terrain elevation, else the cues' water level) and depth
@@ -1226,7 +1207,7 @@ mod tests {
                 t.add(CellKey::new(x, y), &c);
             }
         }
-        let m = HazardMap::with_water(&t, &Fusion::default(), 0.3);
+        let m = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
         assert_eq!(m.cells.len(), 26);
         let g = m
             .cells

@@ -87,7 +87,11 @@ fn cues_put_water_evidence_at_the_pond() {
     assert!(reps
         .iter()
         .all(|r| r.cues.lidar.is_some_and(|l| l.diag_ret > 0)));
-    let map = HazardMap::with_water(&tiles, &cfg.fusion, 0.3);
+    let hazard = tarn::water::HazardConfig {
+        fusion: cfg.fusion,
+        ..Default::default()
+    };
+    let map = HazardMap::from_tiles(&tiles, &hazard).unwrap();
     // Cells the evidence makes more likely water than not lie at the pond (centre (22, 6),
     // radius about 7 × 5 m).
     let wet: Vec<_> = map.cells.iter().filter(|c| c.water > 0.5).collect();
