@@ -54,7 +54,7 @@ use crate::sensor::Frame;
 mod config;
 mod report;
 
-pub use config::{LidarConfig, MapperConfig, StereoConfig};
+pub use config::{LidarConfig, MapperConfig, StereoConfig, CUE_NAMES};
 pub use report::{FrameReport, StageTimes};
 
 /// A handle on the mapper's latest published hazard map, for other threads.
@@ -372,7 +372,7 @@ impl Mapper {
     }
 
     /// The water the lidar cue reads as a prior in the next frame ([`WaterPrior`]): `None`
-    /// before the first refresh or without one ([`LidarCueConfig::prior_every_frames`]).
+    /// before the first refresh or without one ([`crate::cues::LidarCueConfig::prior_every_frames`]).
     pub fn water_prior(&self) -> Option<&WaterPrior> {
         self.cues.prior.as_ref()
     }

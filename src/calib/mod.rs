@@ -35,7 +35,7 @@ pub(crate) use stereo::StereoMeasurement;
 
 /// A stated value and a measurement of it disagree when one exceeds the other by more than
 /// this factor.
-pub(crate) const DISAGREEMENT: f64 = 1.5;
+pub const DISAGREEMENT: f64 = 1.5;
 
 /// The stereo noise coefficient (1/m, σ_z = a + c·z²) taken while it is neither stated nor
 /// measured: a small binned pair (f ≈ 230 px, B = 6 cm, σ_d = 0.4 px) or a noisy matcher;
@@ -44,7 +44,7 @@ pub const NOISY_STEREO_PER_M2: f64 = 0.03;
 
 /// The lidar range noise taken while it is neither stated nor measured: 3 cm plus 1 mm per
 /// metre, the noisy end of spinning lidars' datasheets.
-pub(crate) const NOISY_LIDAR: RangeNoise = RangeNoise {
+pub const NOISY_LIDAR: RangeNoise = RangeNoise {
     sigma0: 0.03,
     per_m: 0.001,
     per_m2: 0.0,
@@ -256,7 +256,7 @@ impl Calibration {
     /// Whether every sensor seen has its measurement held, after at least
     /// [`Calibration::FRAMES`] frames: an offline build measures the log's first frames
     /// until then before it maps any ([`crate::mapper::Mapper::calibrate`]).
-    pub(crate) fn is_settled(&self) -> bool {
+    pub fn is_settled(&self) -> bool {
         let held = |seen: u64, measured: bool| seen == 0 || (seen >= Self::FRAMES && measured);
         self.frames >= Self::FRAMES
             && held(self.lidar_frames, self.lidar_estimate.is_some())

@@ -49,7 +49,7 @@ const PIXELS_PER_FRAME: usize = 30_000;
 /// Samples kept per method (the newest).
 const POOL: usize = 60_000;
 /// Samples a method needs before its estimate counts.
-pub(crate) const MIN_SAMPLES: usize = 1_000;
+pub const MIN_SAMPLES: usize = 1_000;
 
 /// How a stereo noise measurement was made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -84,7 +84,7 @@ impl CameraModel {
     }
 
     /// Normalized undistorted image coordinates (x/z, y/z) → distorted normalized ones.
-    pub(crate) fn distort(&self, a: f64, b: f64) -> [f64; 2] {
+    pub fn distort(&self, a: f64, b: f64) -> [f64; 2] {
         match self.distortion {
             Distortion::None => [a, b],
             Distortion::PlumbBob([k1, k2, p1, p2, k3]) => {

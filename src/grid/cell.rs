@@ -154,7 +154,7 @@ impl CellStats {
     /// along its ray, so a grazing return's height is far better known than its range),
     /// or the empirical standard error when the points disagree more than that. What the
     /// map publishes as `elevation_std`.
-    pub(crate) fn elevation_std_m(&self) -> Option<f64> {
+    pub fn elevation_std_m(&self) -> Option<f64> {
         self.with_spread(self.vertical_var_m2())
     }
 
@@ -178,7 +178,7 @@ impl CellStats {
     /// (on a bank facing the sensor the range error moves the height at a fixed place
     /// fully), which the map's own quality gates use (the ray march's holes, the water's
     /// shore cells, the step test).
-    pub(crate) fn range_bound_std_m(&self) -> Option<f64> {
+    pub fn range_bound_std_m(&self) -> Option<f64> {
         self.with_spread((SIGMA_REF_M * SIGMA_REF_M) * W_UNIT / self.sw as f64)
     }
 

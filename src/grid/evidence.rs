@@ -213,7 +213,7 @@ impl Evidence {
 
     /// Mean bottom-return depth below the level `level_mm` (relative to `z_ref`), metres:
     /// each return's depth moved by its gain times the change of level. Not clamped.
-    pub(crate) fn depth_at_m(&self, level_mm: f64) -> Option<f64> {
+    pub fn depth_at_m(&self, level_mm: f64) -> Option<f64> {
         (self.depth_n > 0).then(|| {
             let shift = self.depth_gain_sum as f64 * 1e-3 * level_mm
                 - self.depth_gain_level_sum as f64 * 1e-3;
@@ -312,7 +312,7 @@ impl Evidence {
 
     /// [`Self::water_probability`] with the rule's logarithms computed once for many cells
     /// (the water stage asks every observed cell every frame): the same value, bit for bit.
-    pub(crate) fn water_probability_in(&self, f: &FusionLogs) -> f64 {
+    pub fn water_probability_in(&self, f: &FusionLogs) -> f64 {
         if *self == Evidence::default() {
             return f.prior_p;
         }

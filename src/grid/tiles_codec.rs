@@ -372,7 +372,7 @@ impl TileMap {
 
     /// The part (of `parts`) that tile `key` belongs to in [`TileMap::partition`]: a fixed
     /// hash of the key, the same in every process.
-    pub(crate) fn part_of(key: (i64, i64), parts: usize) -> usize {
+    pub fn part_of(key: (i64, i64), parts: usize) -> usize {
         let h = (key.0 as u64)
             .wrapping_mul(0x9E37_79B9_7F4A_7C15)
             .rotate_left(29)

@@ -15,7 +15,7 @@ use crate::hazard::{HazardMap, MapCell};
 
 /// The files of one build, in the order they are moved into place when they cannot be moved
 /// as one folder (`report.json`, which names the set, last).
-pub(crate) const OUTPUT_FILES: [&str; 5] = [
+pub const OUTPUT_FILES: [&str; 5] = [
     "map.ply",
     "terrain.ply",
     "water.ply",
@@ -271,7 +271,7 @@ fn sweep_stale(parent: &Path, prefix: &str, own: &Path) -> Vec<PathBuf> {
 /// Beyond this distance (metres) of the map frame's origin a `float` coordinate is no
 /// longer within 0.5 mm of the value it stands for (its step is 2^-10 m below 2^14 m, and
 /// doubles beyond); `map.ply`, `terrain.ply` and `water.ply` then store `double` x y z.
-pub(crate) const FLOAT_COORDINATE_LIMIT_M: f64 = 16384.0;
+pub const FLOAT_COORDINATE_LIMIT_M: f64 = 16384.0;
 
 /// Whether vertices at these map-frame coordinates need `double` x y z
 /// ([`FLOAT_COORDINATE_LIMIT_M`]).

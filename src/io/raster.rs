@@ -11,7 +11,7 @@ use crate::hazard::{HazardMap, MapCell};
 
 /// Largest raster written, cells: 2^28 cells (a 1.6 km square at 0.10 m) is 1 GiB per
 /// float layer. A sparse map over a larger box is refused rather than allocated.
-pub(crate) const MAX_RASTER_CELLS: usize = 1 << 28;
+pub const MAX_RASTER_CELLS: usize = 1 << 28;
 
 /// A layer of the exports, in the order they are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -32,7 +32,7 @@ pub struct LidarConfig {
     /// sensitivity).
     pub dry_limit_m: f64,
     /// Height of the sensor above the ground (m). Absent: estimated from the first scan
-    /// with enough ground returns ([`estimate_sensor_height`]) and kept.
+    /// with enough ground returns ([`crate::cues::estimate_sensor_height`]) and kept.
     pub height_m: Option<f64>,
     /// Lambertian albedo of bottom and ground at the wavelength.
     pub albedo: f64,
@@ -60,7 +60,7 @@ pub struct LidarConfig {
 
 impl LidarConfig {
     /// The lidar cue model of this lidar mounted `height_m` above the ground, as the
-    /// [`Mapper`] runs it.
+    /// [`super::Mapper`] runs it.
     pub fn cue_model(&self, height_m: f64) -> Result<LidarCueModel> {
         LidarCueModel::new(
             MapperConfig::lidar_optics(self, height_m),
@@ -186,7 +186,7 @@ impl StereoConfig {
     }
 }
 
-/// Everything the [`Mapper`] needs. Loadable from TOML or JSON ([`MapperConfig::load`]);
+/// Everything the [`super::Mapper`] needs. Loadable from TOML or JSON ([`MapperConfig::load`]);
 /// unknown keys are errors; [`MapperConfig::validate`] names the field that is wrong.
 ///
 /// In a file, a sensor whose section is absent (`[lidar]`, `[stereo]`, `[labels]`) is off:
@@ -215,7 +215,7 @@ pub struct MapperConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub labels: Option<crate::project::LabelsConfig>,
     /// The compiled form of `labels` (lookup tables), for code that builds its own; when
-    /// absent, [`Mapper::new`] compiles `labels`.
+    /// absent, [`super::Mapper::new`] compiles `labels`.
     #[serde(skip)]
     pub label_models: Option<crate::project::FrameLabelConfig>,
 }
@@ -236,7 +236,7 @@ impl Default for MapperConfig {
 }
 
 /// The cue names of [`MapperConfig::set_cues`].
-const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
+pub const CUE_NAMES: [&str; 4] = ["lidar", "reflectivity", "stereo", "mirror"];
 
 impl MapperConfig {
     /// The cues a mapper of this config runs on every frame, with `labels` its compiled

@@ -76,7 +76,7 @@ impl GridSurface {
     /// ([`crate::grid::CellStats::range_bound_std_m`]) exceeds `max_std_m` counts as
     /// unobserved: a cell seen only by a few far stereo points (σ grows with range²) holds
     /// an elevation that may belong to a cell metres nearer, and would stop rays short.
-    pub(crate) fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
+    pub fn from_grid_gated(grid: &RollingGrid, max_std_m: f64) -> Self {
         Self::from_grid_gated_in(grid, max_std_m, Vec::new())
     }
 

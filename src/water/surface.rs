@@ -365,7 +365,7 @@ pub(crate) fn reject_spilling(
 /// of it (itself included): what that stretch of shore says, for the vertices of a
 /// Delaunay surface, which would otherwise carry each sample's own error to the water
 /// around it (module documentation, section 3). Order and positions are kept.
-pub(crate) fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
+pub fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
     if radius.is_nan() || radius <= 0.0 {
         return samples.to_vec();
     }
