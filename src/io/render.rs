@@ -175,45 +175,97 @@ const BG: [u8; 3] = [24, 24, 28];
 /// a wider map is drawn with several cells per pixel (water and obstacles drawn over the
 /// rest, so a hazard never disappears), and the scale bar says so.
 pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
-    let Some((lo, hi)) = map.key_bounds() else {
+    let Some(layout) = Layout::of(map) else {
         let mut img = RgbImage::from_pixel(320, 60, Rgb(BG));
         draw_text(&mut img, 10, 25, "no observed cells", 1, [220, 220, 220]);
         return img;
     };
-    // Extents in i128: keys of any i64 value cannot overflow here.
-    let span = |a: i64, b: i64| (b as i128 - a as i128 + 1) as u128;
-    let (wc, hc) = (span(lo.x, hi.x), span(lo.y, hi.y));
-    let long = wc.max(hc);
-    // Cells per pixel side (d) and pixels per cell side (s): one of them is 1.
-    let d = long.div_ceil(MAP_PNG_MAX_SIDE as u128).max(1);
-    let s = if d > 1 {
-        1
-    } else {
-        (900 / long as u32).clamp(1, 8)
-    };
-    let (wc, hc) = (wc.div_ceil(d) as u32, hc.div_ceil(d) as u32);
-    let d64 = d as i128;
-    // Pixel column and row of a cell (row 0 at the top).
-    let pixel_of = |k: CellKey| {
-        (
-            ((k.x as i128 - lo.x as i128) / d64) as u32 * s,
-            ((hi.y as i128 - k.y as i128) / d64) as u32 * s,
-        )
-    };
-    let (mw, mh) = (wc * s, hc * s);
-    let legend_h = LEGEND_H;
-    let width = mw.max(640);
-    let mut img = RgbImage::from_pixel(width, mh + legend_h, Rgb(BG));
-
-    let elev: HashMap<CellKey, f64> = map.cells.iter().map(|c| (c.key, c.z)).collect();
-    let res = map.resolution;
+    let mut img = RgbImage::from_pixel(layout.width, layout.mh + LEGEND_H, Rgb(BG));
     let (zlo, zhi) = ramp_range(&map.cells);
+    draw_cells(&mut img, map, &layout, zlo, zhi);
+    let path_points = draw_path(&mut img, path, &layout);
+    draw_body_labels(&mut img, map, &layout);
+    let ly = draw_legend_items(&mut img, map, &layout, path_points > 1);
+    let by = draw_colourbar(&mut img, &layout, ly, zlo, zhi);
+    draw_scale_bar(&mut img, map, &layout, by);
+    img
+}
+
+/// Where the map's cells fall in the picture.
+struct Layout {
+    /// The lowest and highest cell keys of the map.
+    lo: CellKey,
+    hi: CellKey,
+    /// Cells per pixel side (d) and pixels per cell side (s): one of them is 1.
+    d: u128,
+    s: u32,
+    /// The map part of the picture, pixels (the legend goes below it).
+    mw: u32,
+    mh: u32,
+    /// The picture's width: the map's, and at least the legend's.
+    width: u32,
+    /// The map's cell edge length, metres.
+    res: f64,
+}
+
+impl Layout {
+    /// The layout of `map`'s cells; `None` when it has none.
+    fn of(map: &HazardMap) -> Option<Self> {
+        let (lo, hi) = map.key_bounds()?;
+        // Extents in i128: keys of any i64 value cannot overflow here.
+        let span = |a: i64, b: i64| (b as i128 - a as i128 + 1) as u128;
+        let (wc, hc) = (span(lo.x, hi.x), span(lo.y, hi.y));
+        let long = wc.max(hc);
+        let d = long.div_ceil(MAP_PNG_MAX_SIDE as u128).max(1);
+        let s = if d > 1 {
+            1
+        } else {
+            (900 / long as u32).clamp(1, 8)
+        };
+        let (wc, hc) = (wc.div_ceil(d) as u32, hc.div_ceil(d) as u32);
+        let (mw, mh) = (wc * s, hc * s);
+        Some(Layout {
+            lo,
+            hi,
+            d,
+            s,
+            mw,
+            mh,
+            width: mw.max(640),
+            res: map.resolution,
+        })
+    }
+
+    /// Pixel column and row of a cell (row 0 at the top).
+    fn pixel_of(&self, k: CellKey) -> (u32, u32) {
+        let d64 = self.d as i128;
+        (
+            ((k.x as i128 - self.lo.x as i128) / d64) as u32 * self.s,
+            ((self.hi.y as i128 - k.y as i128) / d64) as u32 * self.s,
+        )
+    }
+
+    /// Pixel coordinates of the centre of the cell holding map point `p` (x, y metres).
+    fn to_pixel(&self, p: &[f64; 2]) -> (f64, f64) {
+        let (d, s, res) = (self.d, self.s, self.res);
+        (
+            ((p[0] / res).floor() - self.lo.x as f64 + 0.5) / d as f64 * s as f64,
+            (self.hi.y as f64 - (p[1] / res).floor() + 0.5) / d as f64 * s as f64,
+        )
+    }
+}
+
+/// The cells: each filled with its colour ([`map_colour`], the elevation ramp spanning
+/// `zlo..zhi`), drivable ones shaded by a hillshade, hazards flat.
+fn draw_cells(img: &mut RgbImage, map: &HazardMap, layout: &Layout, zlo: f64, zhi: f64) {
+    let elev: HashMap<CellKey, f64> = map.cells.iter().map(|c| (c.key, c.z)).collect();
+    let res = layout.res;
     let zspan = (zhi - zlo).max(1e-6);
     // Light from the upper left (north-west), 45° up.
     let l = nalgebra::Vector3::new(-1.0, 1.0, 2f64.sqrt()).normalize();
     // Several cells per pixel: drivable cells first, hazards over them.
     let mut order: Vec<usize> = (0..map.cells.len()).collect();
-    if d > 1 {
+    if layout.d > 1 {
         let hazard = |c: &MapCell| c.class == Class::Water || c.hazard != Hazard::Free;
         order.sort_by_key(|&i| hazard(&map.cells[i]));
     }
@@ -250,31 +302,28 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
             let shade = 0.45 + 0.55 * n.dot(&l).max(0.0) / l.z;
             base.map(|v| (v as f64 * shade.clamp(0.0, 1.2)).min(255.0) as u8)
         };
-        let (px, py) = pixel_of(c.key);
-        fill_rect(&mut img, px, py, s, s, col);
+        let (px, py) = layout.pixel_of(c.key);
+        fill_rect(img, px, py, layout.s, layout.s, col);
     }
+}
 
-    // The vehicle's path over the cells, under the labels.
-    let to_pixel = |p: &[f64; 2]| {
-        (
-            ((p[0] / res).floor() - lo.x as f64 + 0.5) / d as f64 * s as f64,
-            (hi.y as f64 - (p[1] / res).floor() + 0.5) / d as f64 * s as f64,
-        )
-    };
+/// The vehicle's path over the cells (under the labels): a line through its finite points
+/// from a square at the first. Returns how many points it has.
+fn draw_path(img: &mut RgbImage, path: &[[f64; 2]], layout: &Layout) -> usize {
     let pts: Vec<(f64, f64)> = path
         .iter()
         .filter(|p| p[0].is_finite() && p[1].is_finite())
-        .map(to_pixel)
+        .map(|p| layout.to_pixel(p))
         .collect();
-    let thick = (s / 2).max(1) + 1;
+    let thick = (layout.s / 2).max(1) + 1;
     for w in pts.windows(2) {
-        draw_line(&mut img, w[0], w[1], thick, mw, mh, PATH);
+        draw_line(img, w[0], w[1], thick, layout.mw, layout.mh, PATH);
     }
     if let Some(&(x, y)) = pts.first() {
         let r = 2 * thick;
         if x >= 0.0 && y >= 0.0 {
             fill_rect(
-                &mut img,
+                img,
                 (x as u32).saturating_sub(r),
                 (y as u32).saturating_sub(r),
                 2 * r,
@@ -283,11 +332,16 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
             );
         }
     }
+    pts.len()
+}
 
-    // Body labels: "#id" and the depth, centred above the body (below it when there is no
-    // room above), so the label never hides the water it names; the largest bodies first,
-    // and a label that would cover another or leave the map is not drawn.
-    let text_scale = if mw >= 400 { 2 } else { 1 };
+/// Body labels: "#id" and the depth, centred above the body (below it when there is no
+/// room above), so the label never hides the water it names; the largest bodies first,
+/// and a label that would cover another or leave the map is not drawn ([`place_labels`]).
+fn draw_body_labels(img: &mut RgbImage, map: &HazardMap, layout: &Layout) {
+    let Layout { lo, hi, d, s, .. } = *layout;
+    let d64 = d as i128;
+    let text_scale = if layout.mw >= 400 { 2 } else { 1 };
     let line = 9 * text_scale as i64;
     let wanted: Vec<LabelWanted> = map
         .bodies
@@ -318,24 +372,20 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
             }
         })
         .collect();
-    for (l, x, y) in place_labels(&wanted, width as i64, mh as i64) {
+    for (l, x, y) in place_labels(&wanted, layout.width as i64, layout.mh as i64) {
         for (row, text) in l.lines.iter().enumerate() {
             let tw = text.len() as u32 * 8 * text_scale;
             let y = y as u32 + row as u32 * line as u32;
             // A dark box behind the text keeps it readable on any colour.
-            fill_rect(&mut img, x as u32, y, tw + 2, 8 * text_scale + 2, [0, 0, 0]);
-            draw_text(
-                &mut img,
-                x as u32 + 1,
-                y + 1,
-                text,
-                text_scale,
-                [255, 255, 255],
-            );
+            fill_rect(img, x as u32, y, tw + 2, 8 * text_scale + 2, [0, 0, 0]);
+            draw_text(img, x as u32 + 1, y + 1, text, text_scale, [255, 255, 255]);
         }
     }
+}
 
-    // Legend: what is drivable, the water by hazard, the other classes; then the scale bar.
+/// The legend's swatches below the map: what is drivable, the water by hazard, the other
+/// classes, the path when `has_path`. Returns the row of the last line of swatches.
+fn draw_legend_items(img: &mut RgbImage, map: &HazardMap, layout: &Layout, has_path: bool) -> u32 {
     let counts = map.class_counts();
     let has = |h: Hazard| map.cells.iter().any(|c| c.hazard == h);
     let has_unknown = map
@@ -358,7 +408,7 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
         }
     }
     items.push((BG, "unobserved".into()));
-    if pts.len() > 1 {
+    if has_path {
         items.push((PATH, "vehicle path".into()));
     }
     if has(Hazard::ShallowWater) {
@@ -379,52 +429,57 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
             "#id: water body, its deepest measured cell (+?: some depth unknown)".into(),
         ));
     }
-    let (mut lx, mut ly) = (8u32, mh + 8);
+    let (mut lx, mut ly) = (8u32, layout.mh + 8);
     for (colour, name) in &items {
         let w = 16 + 8 * name.len() as u32 + 14;
-        if lx + w > width {
+        if lx + w > layout.width {
             lx = 8;
             ly += 18;
         }
         // A light frame, so the background's swatch shows.
-        fill_rect(&mut img, lx, ly, 12, 12, [200, 200, 200]);
-        fill_rect(&mut img, lx + 1, ly + 1, 10, 10, *colour);
-        draw_text(&mut img, lx + 16, ly + 2, name, 1, [230, 230, 230]);
+        fill_rect(img, lx, ly, 12, 12, [200, 200, 200]);
+        fill_rect(img, lx + 1, ly + 1, 10, 10, *colour);
+        draw_text(img, lx + 16, ly + 2, name, 1, [230, 230, 230]);
         lx += w;
     }
-    // The elevation colourbar of drivable cells, lowest to highest.
-    ly += 20;
-    let bar_w = 200.min(width.saturating_sub(200)).max(64);
+    ly
+}
+
+/// The elevation colourbar of drivable cells, lowest (`zlo`) to highest (`zhi`), on the
+/// line below the swatches' last row `ly`. Returns the colourbar's row.
+fn draw_colourbar(img: &mut RgbImage, layout: &Layout, ly: u32, zlo: f64, zhi: f64) -> u32 {
+    let ly = ly + 20;
+    let bar_w = 200.min(layout.width.saturating_sub(200)).max(64);
     let low = format!("<{zlo:.2} m");
-    draw_text(&mut img, 8, ly + 2, &low, 1, [230, 230, 230]);
+    draw_text(img, 8, ly + 2, &low, 1, [230, 230, 230]);
     let bx = 16 + 8 * low.len() as u32;
     for i in 0..bar_w {
-        fill_rect(
-            &mut img,
-            bx + i,
-            ly,
-            1,
-            12,
-            ramp(i as f64 / (bar_w - 1) as f64),
-        );
+        fill_rect(img, bx + i, ly, 1, 12, ramp(i as f64 / (bar_w - 1) as f64));
     }
     draw_text(
-        &mut img,
+        img,
         bx + bar_w + 8,
         ly + 2,
         &format!(">{zhi:.2} m  elevation of drivable cells"),
         1,
         [230, 230, 230],
     );
+    ly
+}
+
+/// The scale bar (a nice length near a third of the map's width) below the colourbar at
+/// row `ly`, and the map's size in cells and water bodies under it.
+fn draw_scale_bar(img: &mut RgbImage, map: &HazardMap, layout: &Layout, ly: u32) {
+    let (d, s, res) = (layout.d, layout.s, layout.res);
     // Metres per pixel.
     let mpp = res * d as f64 / s as f64;
-    let bar_m = nice_length(0.35 * mw as f64 * mpp);
+    let bar_m = nice_length(0.35 * layout.mw as f64 * mpp);
     let bar_px = ((bar_m / mpp) as u32).max(1);
     let by = ly + 34;
-    fill_rect(&mut img, 8, by, bar_px, 4, [240, 240, 240]);
-    fill_rect(&mut img, 8, by - 4, 2, 12, [240, 240, 240]);
+    fill_rect(img, 8, by, bar_px, 4, [240, 240, 240]);
+    fill_rect(img, 8, by - 4, 2, 12, [240, 240, 240]);
     fill_rect(
-        &mut img,
+        img,
         8 + bar_px.saturating_sub(2),
         by - 4,
         2,
@@ -436,7 +491,7 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
     } else {
         format!("{:.0} cm", bar_m * 100.0)
     };
-    draw_text(&mut img, 16 + bar_px, by - 2, &label, 1, [240, 240, 240]);
+    draw_text(img, 16 + bar_px, by - 2, &label, 1, [240, 240, 240]);
     let per_pixel = if d > 1 {
         format!(" ({d}x{d} cells per pixel)")
     } else {
@@ -448,8 +503,7 @@ pub fn render_map_png(map: &HazardMap, path: &[[f64; 2]]) -> RgbImage {
         res,
         map.bodies.len()
     );
-    draw_text(&mut img, 8, by + 14, &info, 1, [170, 170, 170]);
-    img
+    draw_text(img, 8, by + 14, &info, 1, [170, 170, 170]);
 }
 
 /// A water body's label as it would be drawn: two lines of text in a box `w` × `h`
