@@ -24,12 +24,13 @@
 //! exact ray). Bands of cell rows are drawn in parallel, each into its own buffer, and the
 //! buffers are merged by their minimum: the result does not depend on the thread count.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Point3, Rotation3, Vector3};
 use rayon::prelude::*;
 
 use super::surface::GridSurface;
 use crate::geom::camera::CameraModel;
 use crate::geom::{ceil_i64, floor_i64, Pose};
+use crate::grid::CellKey;
 
 /// Cells per side of the blocks over which the rims' heights are taken.
 const BLOCK: usize = 8;
@@ -154,7 +155,23 @@ struct Samples<'a> {
     width: usize,
 }
 
-impl Samples<'_> {
+impl<'a> Samples<'a> {
+    /// The samples `rows` × `cols` of an image `width` pixels wide (`cols` evenly spaced).
+    fn of(rows: &'a [usize], cols: &'a [usize], width: usize) -> Self {
+        let uniform = |v: &[usize]| {
+            let s = v.get(1).map_or(1, |b| b - v[0]);
+            (s > 0 && v.windows(2).all(|p| p[1] - p[0] == s)).then_some(s)
+        };
+        Samples {
+            rows,
+            row_step: uniform(rows),
+            cols0: cols[0],
+            col_step: uniform(cols).unwrap_or(1),
+            nc: cols.len(),
+            width,
+        }
+    }
+
     /// The sampled rows with `lo ≤ y ≤ hi`, as a range of row indices; `y` is the row
     /// index itself when the rows are uniform, else the pixel row.
     #[inline]
@@ -207,7 +224,7 @@ impl ZBuffer {
         }
         self.region = [0; 4];
         let origin = Point3::from(cam_to_map.translation.vector);
-        let (n, res, o) = (surface.size(), surface.resolution(), surface.origin());
+        let (n, res) = (surface.size(), surface.resolution());
         if nr == 0 || nc == 0 || n == 0 || !origin.coords.iter().all(|v| v.is_finite()) {
             return;
         }
@@ -219,9 +236,82 @@ impl ZBuffer {
             .filter_map(|(r, c)| map_rays[rows[r] * w + cols[c]])
             .collect();
         let wedge = Wedge::of_rays(&border, &origin, res);
-        // The cells within the range (and the wedge) around the camera, in the window.
         let reach = max_range + 2.0 * res;
-        let [x0, x1, y0, y1] = wedge.as_ref().map_or(
+        if !self.set_region(surface, wedge.as_ref(), &origin, reach) {
+            return;
+        }
+        self.find_covers(surface.raster(), n, res);
+        let view = View::new(
+            camera,
+            cam_to_map,
+            map_rays,
+            Samples::of(rows, cols, w),
+            &border,
+            wedge,
+            reach,
+            surface,
+            self.region,
+        );
+        // The heights drawn, per cell of the region: its elevation, or its hole's cover
+        // (NaN: not drawn); then the same pooled by their maximum over 2 × 2 and 4 × 4
+        // cells, drawn farther away where a cell is much smaller than a sample (the mesh
+        // stays nowhere below the cells' tops).
+        let [_, _, sw, sh] = self.region;
+        let fine = self.heights(surface.raster(), n);
+        let (half, hw2, hh2) = pool(&fine, sw, sh);
+        let (quarter, hw4, hh4) = pool(&half, hw2, hh2);
+        let lod = |m: f64| m * res;
+        let levels = [
+            Level {
+                h: &fine,
+                w: sw,
+                hh: sh,
+                sc: 1,
+                rmin: 0.0,
+                rmax: lod(LOD_CELLS[0]) + 4.0 * res,
+            },
+            Level {
+                h: &half,
+                w: hw2,
+                hh: hh2,
+                sc: 2,
+                rmin: lod(LOD_CELLS[0]) - 8.0 * res,
+                rmax: lod(LOD_CELLS[1]) + 8.0 * res,
+            },
+            Level {
+                h: &quarter,
+                w: hw4,
+                hh: hh4,
+                sc: 4,
+                rmin: lod(LOD_CELLS[1]) - 16.0 * res,
+                rmax: f64::INFINITY,
+            },
+        ];
+        let mut bufs = std::mem::take(&mut self.t);
+        for level in &levels {
+            view.draw_level(&mut bufs, level);
+        }
+        // The nearest over the bands.
+        let (first, rest) = bufs.split_at_mut(1);
+        for other in rest.iter() {
+            for (a, &b) in first[0].iter_mut().zip(other) {
+                *a = a.min(b);
+            }
+        }
+        self.t = bufs;
+    }
+
+    /// Sets the region drawn: the window's cells within `reach` (and the `wedge`) of
+    /// `origin`, with a margin. Returns whether it holds a square of cells.
+    fn set_region(
+        &mut self,
+        surface: &GridSurface,
+        wedge: Option<&Wedge>,
+        origin: &Point3<f64>,
+        reach: f64,
+    ) -> bool {
+        let (n, res, o) = (surface.size(), surface.resolution(), surface.origin());
+        let [x0, x1, y0, y1] = wedge.map_or(
             [
                 origin.x - reach,
                 origin.x + reach,
@@ -238,215 +328,28 @@ impl ZBuffer {
         let (i0, i1) = span(x0, x1, o.x);
         let (j0, j1) = span(y0, y1, o.y);
         if i0 + 1 >= i1 || j0 + 1 >= j1 {
-            return;
+            return false;
         }
         self.region = [i0, j0, i1 - i0, j1 - j0];
-        let z = surface.raster();
-        self.find_covers(z, n, res);
+        true
+    }
 
-        let uniform = |v: &[usize]| {
-            let s = v.get(1).map_or(1, |b| b - v[0]);
-            (s > 0 && v.windows(2).all(|p| p[1] - p[0] == s)).then_some(s)
-        };
-        let samples = Samples {
-            rows,
-            row_step: uniform(rows),
-            cols0: cols[0],
-            col_step: uniform(cols).unwrap_or(1),
-            nc,
-            width: w,
-        };
-        let to_cam = cam_to_map.inverse();
-        // The horizontal field of view in the optical frame: the sampled border rays'
-        // largest |x/z|, widened so that a triangle at the image's edge keeps its corners
-        // outside it (a cell 0.5 m from the camera spans 0.2 of these units at 0.1 m).
-        // Corners above or below the image are kept: a tree's crown stands above it, and
-        // its side is drawn from there.
-        let lim_x = border
-            .iter()
-            .map(|r| to_cam.rotation * r)
-            .filter(|c| c.z > 1e-6)
-            .fold(0.0f64, |m, c| m.max((c.x / c.z).abs()))
-            * 1.2
-            + 0.25;
-        let r_max = camera.fold_radius();
-        let mut bufs = std::mem::take(&mut self.t);
-        let this = &*self;
-        let rot = to_cam.rotation.to_rotation_matrix();
-        let ez = rot * Vector3::z();
-        let (row_step, col_step) = (samples.row_step, samples.col_step as f64);
-        // The heights drawn, per cell of the region: its elevation, or its hole's cover
-        // (NaN: not drawn); then the same pooled by their maximum over 2 × 2 and 4 × 4
-        // cells, drawn farther away where a cell is much smaller than a sample (the mesh
-        // stays nowhere below the cells' tops).
-        let (sw, sh) = (i1 - i0, j1 - j0);
+    /// Per cell of the region, row-major: its elevation in the raster `z` (`n` cells
+    /// wide), or for a hole its cover (NaN: not drawn).
+    fn heights(&self, z: &[f32], n: usize) -> Vec<f32> {
+        let [i0, j0, sw, sh] = self.region;
         let mut fine = Vec::with_capacity(sw * sh);
-        for j in j0..j1 {
-            fine.extend((i0..i1).map(|i| {
+        for j in j0..j0 + sh {
+            fine.extend((i0..i0 + sw).map(|i| {
                 let v = z[j * n + i];
                 if v.is_nan() {
-                    this.cover(i, j)
+                    self.cover(i, j)
                 } else {
                     v
                 }
             }));
         }
-        let pool = |h: &[f32], w: usize, hh: usize| {
-            let (pw, ph) = (w.div_ceil(2), hh.div_ceil(2));
-            let mut out = vec![f32::NAN; pw * ph];
-            for j in 0..hh {
-                for i in 0..w {
-                    // `max` passes over NaN (not drawn) on either side.
-                    let o = &mut out[(j / 2) * pw + i / 2];
-                    *o = o.max(h[j * w + i]);
-                }
-            }
-            (out, pw, ph)
-        };
-        let (half, hw2, hh2) = pool(&fine, sw, sh);
-        let (quarter, hw4, hh4) = pool(&half, hw2, hh2);
-        let lod = |m: f64| m * res;
-        // (heights, width, height, cells per side, nearest and farthest distance drawn)
-        #[allow(clippy::type_complexity)]
-        let levels: [(&[f32], usize, usize, usize, f64, f64); 3] = [
-            (&fine, sw, sh, 1, 0.0, lod(LOD_CELLS[0]) + 4.0 * res),
-            (
-                &half,
-                hw2,
-                hh2,
-                2,
-                lod(LOD_CELLS[0]) - 8.0 * res,
-                lod(LOD_CELLS[1]) + 8.0 * res,
-            ),
-            (
-                &quarter,
-                hw4,
-                hh4,
-                4,
-                lod(LOD_CELLS[1]) - 16.0 * res,
-                f64::INFINITY,
-            ),
-        ];
-        for (h, hw, hh, sc, rmin, rmax) in levels {
-            let cres = sc as f64 * res;
-            let ex = rot * Vector3::new(cres, 0.0, 0.0);
-            // The heights of row j of this level (NaN: not drawn, or outside).
-            let cell_row = |v: &mut Vec<f32>, j: usize| {
-                v.clear();
-                if j < hh {
-                    v.extend_from_slice(&h[j * hw..(j + 1) * hw]);
-                } else {
-                    v.resize(hw, f32::NAN);
-                }
-            };
-            // Corner row j of this level (between its cell rows j - 1, `below`, and j,
-            // `above`), projected: sample-space coordinates (column index, row index when
-            // rows are uniform, else the pixel row), NaN where not drawn.
-            let corner_row = |v: &mut Vec<Vertex>, below: &[f32], above: &[f32], j: usize| {
-                v.clear();
-                let y = (o.y + (j0 + sc * j) as i64) as f64 * res;
-                let x0 = (o.x + i0 as i64) as f64 * res;
-                let base = to_cam * Point3::new(x0, y, 0.0);
-                let dy2 = (y - origin.y) * (y - origin.y);
-                v.extend((0..=hw).map(|k| {
-                    let x = x0 + k as f64 * cres;
-                    let dx = x - origin.x;
-                    let d2 = dx * dx + dy2;
-                    let off = ([f64::NAN; 2], Point3::new(x, y, f64::NAN));
-                    if d2 > (reach + 2.0 * cres) * (reach + 2.0 * cres)
-                        || d2 < rmin * rmin
-                        || d2 > rmax * rmax
-                        || wedge.as_ref().is_some_and(|w| !w.contains(x, y))
-                    {
-                        return off;
-                    }
-                    // The corner's height: the highest of the (up to four) cells that
-                    // share it, so that the mesh is nowhere below a cell's flat top.
-                    let mut zc = f32::NEG_INFINITY;
-                    for row in [below, above] {
-                        for h in [k.checked_sub(1).map(|c| row[c]), row.get(k).copied()] {
-                            if let Some(h) = h.filter(|&h| h > zc) {
-                                zc = h;
-                            }
-                        }
-                    }
-                    let zv = zc as f64;
-                    if !zv.is_finite() {
-                        return off;
-                    }
-                    let p = Point3::new(x, y, zv);
-                    let pc = base + ex * k as f64 + ez * zv;
-                    if pc.z < 0.05
-                        || pc.x.abs() > lim_x * pc.z
-                        || (pc.x * pc.x + pc.y * pc.y).sqrt() > r_max * pc.z
-                    {
-                        return off;
-                    }
-                    let [u, vv] = camera.project(&pc).unwrap_or([f64::NAN; 2]);
-                    let su = (u - samples.cols0 as f64) / col_step;
-                    let sv = match row_step {
-                        Some(rs) => (vv - samples.rows[0] as f64) / rs as f64,
-                        None => vv,
-                    };
-                    ([su, sv], p)
-                }));
-            };
-            // Bands of cell rows, each drawn into its own buffer (a band's last row of
-            // squares reaches into the next band's first row of corners).
-            let rows_per = hh.div_ceil(BANDS).max(1);
-            bufs.par_iter_mut().enumerate().for_each(|(b, t)| {
-                let ja = b * rows_per;
-                let jb = (ja + rows_per).min(hh);
-                if ja >= jb {
-                    return;
-                }
-                let mut prev: Vec<Vertex> = Vec::with_capacity(hw + 1);
-                let mut cur: Vec<Vertex> = Vec::with_capacity(hw + 1);
-                let (mut below, mut above) = (Vec::new(), Vec::new());
-                cell_row(&mut below, ja.wrapping_sub(1));
-                cell_row(&mut above, ja);
-                corner_row(&mut prev, &below, &above, ja);
-                for j in ja + 1..=jb {
-                    std::mem::swap(&mut below, &mut above);
-                    cell_row(&mut above, j);
-                    corner_row(&mut cur, &below, &above, j);
-                    for k in 0..hw {
-                        let q = [prev[k], prev[k + 1], cur[k], cur[k + 1]];
-                        // No sample in the square's box: nothing to fill (most squares
-                        // far away are smaller than the sample spacing). NaN fails every
-                        // test.
-                        let (mut u0, mut u1, mut v0, mut v1) =
-                            (q[0].0[0], q[0].0[0], q[0].0[1], q[0].0[1]);
-                        for (s, _) in &q[1..] {
-                            u0 = u0.min(s[0]);
-                            u1 = u1.max(s[0]);
-                            v0 = v0.min(s[1]);
-                            v1 = v1.max(s[1]);
-                        }
-                        if q.iter().any(|v| v.0[0].is_nan())
-                            || ceil_i64(u0 - TOLERANCE) > floor_i64(u1 + TOLERANCE)
-                            || (row_step.is_some()
-                                && ceil_i64(v0 - TOLERANCE) > floor_i64(v1 + TOLERANCE))
-                        {
-                            continue;
-                        }
-                        for tri in [[0, 1, 3], [0, 3, 2]] {
-                            let v = tri.map(|i| q[i]);
-                            fill(t, v, &origin, map_rays, &samples, cres);
-                        }
-                    }
-                    std::mem::swap(&mut prev, &mut cur);
-                }
-            });
-        }
-        // The nearest over the bands.
-        let (first, rest) = bufs.split_at_mut(1);
-        for other in rest.iter() {
-            for (a, &b) in first[0].iter_mut().zip(other) {
-                *a = a.min(b);
-            }
-        }
-        self.t = bufs;
+        fine
     }
 
     /// Each hole block's cover: per block of [`BLOCK`] × [`BLOCK`] cells of the region its
@@ -513,6 +416,245 @@ impl ZBuffer {
     pub(crate) fn first(&self, k: usize) -> Option<f64> {
         let t = *self.t.first()?.get(k)?;
         t.is_finite().then_some(t as f64)
+    }
+}
+
+/// The heights `h` (`w` × `hh`) pooled by their maximum over 2 × 2 cells, with the pooled
+/// width and height.
+fn pool(h: &[f32], w: usize, hh: usize) -> (Vec<f32>, usize, usize) {
+    let (pw, ph) = (w.div_ceil(2), hh.div_ceil(2));
+    let mut out = vec![f32::NAN; pw * ph];
+    for j in 0..hh {
+        for i in 0..w {
+            // `max` passes over NaN (not drawn) on either side.
+            let o = &mut out[(j / 2) * pw + i / 2];
+            *o = o.max(h[j * w + i]);
+        }
+    }
+    (out, pw, ph)
+}
+
+/// One level of detail of the region's heights.
+struct Level<'a> {
+    /// Heights, row-major (NaN: not drawn).
+    h: &'a [f32],
+    /// Width and height, in pooled cells.
+    w: usize,
+    hh: usize,
+    /// Cells per side of a pooled cell.
+    sc: usize,
+    /// The nearest and farthest horizontal distance (metres) this level is drawn at.
+    rmin: f64,
+    rmax: f64,
+}
+
+impl Level<'_> {
+    /// The heights of row `j` of this level into `v` (NaN: not drawn, or outside).
+    fn cell_row(&self, v: &mut Vec<f32>, j: usize) {
+        v.clear();
+        if j < self.hh {
+            v.extend_from_slice(&self.h[j * self.w..(j + 1) * self.w]);
+        } else {
+            v.resize(self.w, f32::NAN);
+        }
+    }
+}
+
+/// What drawing the region into the samples needs of the camera and the map: the
+/// transform into the optical frame, the field of view, the samples.
+struct View<'a> {
+    camera: &'a CameraModel,
+    map_rays: &'a [Option<Vector3<f64>>],
+    samples: Samples<'a>,
+    wedge: Option<Wedge>,
+    origin: Point3<f64>,
+    /// Map frame to optical frame, and its rotation and the map's z axis in it.
+    to_cam: Pose,
+    rot: Rotation3<f64>,
+    ez: Vector3<f64>,
+    /// Corners farther than this (plus two cells) are not drawn.
+    reach: f64,
+    /// The field of view's largest |x/z| in the optical frame, widened.
+    lim_x: f64,
+    /// The lens's largest radius (|(x, y)|/z) that still projects.
+    r_max: f64,
+    /// The surface's cell size and origin, and the region's first cell (window column, row).
+    res: f64,
+    o: CellKey,
+    i0: usize,
+    j0: usize,
+}
+
+impl<'a> View<'a> {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        camera: &'a CameraModel,
+        cam_to_map: &Pose,
+        map_rays: &'a [Option<Vector3<f64>>],
+        samples: Samples<'a>,
+        border: &[Vector3<f64>],
+        wedge: Option<Wedge>,
+        reach: f64,
+        surface: &GridSurface,
+        region: [usize; 4],
+    ) -> Self {
+        let to_cam = cam_to_map.inverse();
+        // The horizontal field of view in the optical frame: the sampled border rays'
+        // largest |x/z|, widened so that a triangle at the image's edge keeps its corners
+        // outside it (a cell 0.5 m from the camera spans 0.2 of these units at 0.1 m).
+        // Corners above or below the image are kept: a tree's crown stands above it, and
+        // its side is drawn from there.
+        let lim_x = border
+            .iter()
+            .map(|r| to_cam.rotation * r)
+            .filter(|c| c.z > 1e-6)
+            .fold(0.0f64, |m, c| m.max((c.x / c.z).abs()))
+            * 1.2
+            + 0.25;
+        let rot = to_cam.rotation.to_rotation_matrix();
+        let ez = rot * Vector3::z();
+        View {
+            camera,
+            map_rays,
+            samples,
+            wedge,
+            origin: Point3::from(cam_to_map.translation.vector),
+            to_cam,
+            rot,
+            ez,
+            reach,
+            lim_x,
+            r_max: camera.fold_radius(),
+            res: surface.resolution(),
+            o: surface.origin(),
+            i0: region[0],
+            j0: region[1],
+        }
+    }
+
+    /// Draws `level` into the bands' buffers `bufs`: bands of cell rows, each into its own
+    /// buffer (a band's last row of squares reaches into the next band's first row of
+    /// corners).
+    fn draw_level(&self, bufs: &mut [Vec<f32>], level: &Level<'_>) {
+        let cres = level.sc as f64 * self.res;
+        let ex = self.rot * Vector3::new(cres, 0.0, 0.0);
+        let hw = level.w;
+        let rows_per = level.hh.div_ceil(BANDS).max(1);
+        bufs.par_iter_mut().enumerate().for_each(|(b, t)| {
+            let ja = b * rows_per;
+            let jb = (ja + rows_per).min(level.hh);
+            if ja >= jb {
+                return;
+            }
+            let mut prev: Vec<Vertex> = Vec::with_capacity(hw + 1);
+            let mut cur: Vec<Vertex> = Vec::with_capacity(hw + 1);
+            let (mut below, mut above) = (Vec::new(), Vec::new());
+            level.cell_row(&mut below, ja.wrapping_sub(1));
+            level.cell_row(&mut above, ja);
+            self.corner_row(&mut prev, level, &ex, &below, &above, ja);
+            for j in ja + 1..=jb {
+                std::mem::swap(&mut below, &mut above);
+                level.cell_row(&mut above, j);
+                self.corner_row(&mut cur, level, &ex, &below, &above, j);
+                for k in 0..hw {
+                    self.fill_square(t, [prev[k], prev[k + 1], cur[k], cur[k + 1]], cres);
+                }
+                std::mem::swap(&mut prev, &mut cur);
+            }
+        });
+    }
+
+    /// Corner row `j` of `level` (between its cell rows j - 1, `below`, and j, `above`;
+    /// `ex` a pooled cell's step along x in the optical frame), projected into `v`:
+    /// sample-space coordinates (column index, row index when rows are uniform, else the
+    /// pixel row), NaN where not drawn.
+    fn corner_row(
+        &self,
+        v: &mut Vec<Vertex>,
+        level: &Level<'_>,
+        ex: &Vector3<f64>,
+        below: &[f32],
+        above: &[f32],
+        j: usize,
+    ) {
+        let (o, res, origin, reach) = (self.o, self.res, self.origin, self.reach);
+        let (rmin, rmax) = (level.rmin, level.rmax);
+        let cres = level.sc as f64 * res;
+        let samples = &self.samples;
+        let (row_step, col_step) = (samples.row_step, samples.col_step as f64);
+        v.clear();
+        let y = (o.y + (self.j0 + level.sc * j) as i64) as f64 * res;
+        let x0 = (o.x + self.i0 as i64) as f64 * res;
+        let base = self.to_cam * Point3::new(x0, y, 0.0);
+        let dy2 = (y - origin.y) * (y - origin.y);
+        v.extend((0..=level.w).map(|k| {
+            let x = x0 + k as f64 * cres;
+            let dx = x - origin.x;
+            let d2 = dx * dx + dy2;
+            let off = ([f64::NAN; 2], Point3::new(x, y, f64::NAN));
+            if d2 > (reach + 2.0 * cres) * (reach + 2.0 * cres)
+                || d2 < rmin * rmin
+                || d2 > rmax * rmax
+                || self.wedge.as_ref().is_some_and(|w| !w.contains(x, y))
+            {
+                return off;
+            }
+            // The corner's height: the highest of the (up to four) cells that
+            // share it, so that the mesh is nowhere below a cell's flat top.
+            let mut zc = f32::NEG_INFINITY;
+            for row in [below, above] {
+                for h in [k.checked_sub(1).map(|c| row[c]), row.get(k).copied()] {
+                    if let Some(h) = h.filter(|&h| h > zc) {
+                        zc = h;
+                    }
+                }
+            }
+            let zv = zc as f64;
+            if !zv.is_finite() {
+                return off;
+            }
+            let p = Point3::new(x, y, zv);
+            let pc = base + ex * k as f64 + self.ez * zv;
+            if pc.z < 0.05
+                || pc.x.abs() > self.lim_x * pc.z
+                || (pc.x * pc.x + pc.y * pc.y).sqrt() > self.r_max * pc.z
+            {
+                return off;
+            }
+            let [u, vv] = self.camera.project(&pc).unwrap_or([f64::NAN; 2]);
+            let su = (u - samples.cols0 as f64) / col_step;
+            let sv = match row_step {
+                Some(rs) => (vv - samples.rows[0] as f64) / rs as f64,
+                None => vv,
+            };
+            ([su, sv], p)
+        }));
+    }
+
+    /// Fills the square of projected corners `q` (row j: 0, 1; row j + 1: 2, 3) into the
+    /// band's buffer `t` as two triangles, unless no sample lies in its box.
+    #[inline]
+    fn fill_square(&self, t: &mut [f32], q: [Vertex; 4], cres: f64) {
+        // No sample in the square's box: nothing to fill (most squares far away are
+        // smaller than the sample spacing). NaN fails every test.
+        let (mut u0, mut u1, mut v0, mut v1) = (q[0].0[0], q[0].0[0], q[0].0[1], q[0].0[1]);
+        for (s, _) in &q[1..] {
+            u0 = u0.min(s[0]);
+            u1 = u1.max(s[0]);
+            v0 = v0.min(s[1]);
+            v1 = v1.max(s[1]);
+        }
+        if q.iter().any(|v| v.0[0].is_nan())
+            || ceil_i64(u0 - TOLERANCE) > floor_i64(u1 + TOLERANCE)
+            || (self.samples.row_step.is_some()
+                && ceil_i64(v0 - TOLERANCE) > floor_i64(v1 + TOLERANCE))
+        {
+            return;
+        }
+        for tri in [[0, 1, 3], [0, 3, 2]] {
+            let v = tri.map(|i| q[i]);
+            fill(t, v, &self.origin, self.map_rays, &self.samples, cres);
+        }
     }
 }
 
