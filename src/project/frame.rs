@@ -27,7 +27,7 @@ use crate::classify::horizon::GroundGeometry;
 use crate::classify::lut::ColorLut;
 use crate::classify::thermal::{classify_mwir, classify_swir, MwirConfig, SwirConfig};
 use crate::classify::{Label, LabelImage, MonoImage};
-use crate::cues::{ScanSurface, StereoSeen};
+use crate::cues::{DryReach, ScanSurface, StereoSeen};
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{ceil_i64, floor_i64, pose_is_finite, PointCloud, Pose};
@@ -461,6 +461,27 @@ impl RayCache {
             rays: camera.pixel_rays(),
             in_map: Vec::new(),
         }
+    }
+
+    /// `camera`'s pixel rays rotated into the map frame by `cam_to_map`, from the cache in
+    /// `slot` (rebuilt when the camera changed).
+    fn rays_in_map<'a>(
+        slot: &'a mut Option<RayCache>,
+        camera: &CameraModel,
+        cam_to_map: &Pose,
+    ) -> &'a [Option<Vector3<f64>>] {
+        if slot.as_ref().is_none_or(|c| &c.camera != camera) {
+            *slot = Some(RayCache::new(camera));
+        }
+        let cache = slot.as_mut().expect("just set");
+        cache.in_map.clear();
+        cache.in_map.extend(
+            cache
+                .rays
+                .iter()
+                .map(|r| r.map(|r| cam_to_map.rotation * r)),
+        );
+        &cache.in_map
     }
 }
 
@@ -1114,6 +1135,10 @@ impl FrameLabels {
         Ok(rep)
     }
 
+    /// One sensor's image in the frame: classified ([`Self::classify`]), its sampled pixels
+    /// placed on the map ([`Placer`]), each pixel's votes spread over the cells its quad
+    /// covers ([`quad_votes`]), tallied per cell, and one vote per cell added to `grid`
+    /// ([`add_cell_votes`]). Returns the votes that fell outside the window.
     #[allow(clippy::too_many_arguments)]
     fn run(
         &mut self,
@@ -1129,243 +1154,71 @@ impl FrameLabels {
         grid: &mut RollingGrid,
         st: &mut SensorLabelStats,
     ) -> Result<u64> {
-        let slot = cue as usize;
-        if self.caches[slot]
-            .as_ref()
-            .is_none_or(|c| &c.camera != camera)
-        {
-            self.caches[slot] = Some(RayCache::new(camera));
-        }
-        let cache = self.caches[slot].as_mut().expect("just set");
-        cache.in_map.clear();
-        cache.in_map.extend(
-            cache
-                .rays
-                .iter()
-                .map(|r| r.map(|r| cam_to_map.rotation * r)),
-        );
-        let map_rays = &cache.in_map;
-        let (w, h) = (camera.width, camera.height);
-        let labels = match cue {
-            Cue::Colour => {
-                let lut = self.cfg.colour.as_ref().expect("configured");
-                let Pixels::Rgb8(px) = &img.image.pixels else {
-                    return Err(Error::invalid(
-                        "colour image",
-                        format!("{}: not a colour image", img.image.frame_id),
-                    ));
-                };
-                if px.len() != w * h {
-                    return Err(Error::invalid(
-                        "colour image",
-                        format!("{} pixels for {w} × {h}", px.len()),
-                    ));
-                }
-                let mut data = std::mem::take(&mut self.bufs.labels);
-                data.resize(w * h, Label::Other);
-                // Rows in parallel; every label is written.
-                data.par_chunks_mut(w.max(1))
-                    .zip(px.par_chunks(w.max(1)))
-                    .try_for_each(|(l, p)| lut.classify_into(p.as_flattened(), l))?;
-                let mut l = LabelImage {
-                    width: w,
-                    height: h,
-                    data,
-                };
-                apply_horizon(&mut l, map_rays);
-                if let Some(enc) = self.cfg.reflection_check {
-                    st.reflection_vetoed +=
-                        reflection_check(&mut l, px, map_rays, camera, cam_to_map, enc);
-                }
-                if let Some(samples) = samples.filter(|_| self.cfg.colour_check) {
-                    let stereo = stereo.and_then(|c| Some((c, stereo_factor(c, w, h)?)));
-                    st.colour_check_vetoed += self
-                        .colour_check
-                        .run(&mut l, px, camera, cam_to_map, samples, stereo);
-                }
-                l
-            }
-            Cue::Swir => {
-                let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
-                classify_swir(
-                    &mono_of(img),
-                    &g,
-                    None,
-                    self.cfg.swir.as_ref().expect("cfg"),
-                )?
-            }
-            Cue::Mwir => {
-                let m = self.cfg.mwir.as_ref().expect("configured");
-                let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
-                let hour = hour.expect("an MWIR frame without an hour is skipped");
-                classify_mwir(&mono_of(img), &g, hour, &m.classifier)?
-            }
+        let FrameLabels {
+            cfg,
+            caches,
+            tally,
+            touched,
+            colour_check,
+            bufs,
+            zbuf,
+            ..
+        } = self;
+        let map_rays = RayCache::rays_in_map(&mut caches[cue as usize], camera, cam_to_map);
+        let view = SensorView {
+            cue,
+            img,
+            camera,
+            cam_to_map,
+            map_rays,
+            stereo,
+            hour,
+            ground_z,
+            samples,
         };
-        let k = stereo.and_then(|c| stereo_factor(c, w, h));
+        let labels = Self::classify(cfg, &view, &mut bufs.labels, colour_check, st)?;
+        let (w, h) = (camera.width, camera.height);
         let origin = Point3::from(cam_to_map.translation.vector);
-        let reach = samples.and_then(|l| l.reach.as_ref());
-        let (s, max_range) = (self.cfg.ray_stride, self.cfg.max_range);
-        let stereo_range = self.cfg.stereo_max_range.min(max_range);
-        let mut buf = std::mem::take(&mut self.bufs);
+        let max_range = cfg.max_range;
+        let mut buf = std::mem::take(bufs);
         buf.cols.clear();
-        buf.cols.extend((0..w).step_by(s));
-        if self.cfg.wide_rows {
+        buf.cols.extend((0..w).step_by(cfg.ray_stride));
+        if cfg.wide_rows {
             buf.rows = sampled_rows(
                 map_rays,
                 w,
-                s,
+                cfg.ray_stride,
                 cam_to_map.translation.z - ground_z,
                 surface.resolution(),
             );
         } else {
             buf.rows.clear();
-            buf.rows.extend((0..h).step_by(s));
+            buf.rows.extend((0..h).step_by(cfg.ray_stride));
         }
-        let (rows, cols) = (&buf.rows, &buf.cols);
-        let (nr, nc) = (rows.len(), cols.len());
-        let zbuf = (self.cfg.sampler == Sampler::Zbuffer).then(|| {
-            self.zbuf
-                .draw(surface, camera, cam_to_map, map_rays, rows, cols, max_range);
-            &self.zbuf
-        });
-        // Per sampled pixel: its hit, whether it is water (`None`: no vote), and the water
-        // level it gives (see `tighten_hole_levels`); rows in parallel, into the buffers
-        // of the last frame.
-        buf.hits.resize(nr * nc, None);
-        // Zeroed here, not per row: a row without sampled columns (an image 0 pixels wide)
-        // is never visited.
-        buf.counts.clear();
-        buf.counts.resize(nr, [0; 4]);
-        buf.hits
-            .par_chunks_mut(nc.max(1))
-            .zip(buf.counts[..nr].par_iter_mut())
-            .zip(rows.par_iter())
-            .enumerate()
-            .for_each(|(r, ((out, n), &y))| {
-                // n: via point, via ray, no hit, beyond reach
-                for (ci, (slot, &x)) in out.iter_mut().zip(cols).enumerate() {
-                    *slot = (|| {
-                        let i = y * w + x;
-                        let water = match labels.data[i] {
-                            Label::Water => true,
-                            Label::Other | Label::SnowIce => false,
-                            Label::Sky | Label::Unknown => return None,
-                        };
-                        if let (Some(c), Some(k)) = (stereo, k) {
-                            let e = (y / k) * c.cols + x / k;
-                            if c.is_valid(e) {
-                                let p = c.point_in_map(e);
-                                if (p - origin).norm() <= stereo_range {
-                                    n[0] += 1;
-                                    return Some(Hit::at(p, water));
-                                }
-                            }
-                        }
-                        // With the z-buffer, the march starts where the ray first meets
-                        // the drawn map; a ray that meets nothing drawn meets no ground, and
-                        // only water (placed in a hole at its near rim's level) is marched.
-                        let mut after = 0.0;
-                        if let Some(zb) = zbuf {
-                            match zb.first(r * nc + ci) {
-                                Some(t) => after = t,
-                                None if water => {}
-                                None => {
-                                    n[2] += 1;
-                                    return None;
-                                }
-                            }
-                        }
-                        let cast = map_rays[i].and_then(|d| {
-                            surface
-                                .cast_through_holes_after(&origin, &d, max_range, after)
-                                .map(|h| (d, h))
-                        });
-                        // A hole beyond the dry reach is explained by range alone.
-                        if let (Some((_, (p, _, Some(_)))), Some(r)) = (cast, reach) {
-                            if !r.covers(p.x, p.y, 2.0 * surface.resolution()) {
-                                n[3] += 1;
-                                return None;
-                            }
-                        }
-                        match cast {
-                            // Only water is placed where the ray crosses a hole's rim level:
-                            // whatever else a pixel there shows (a bank the map has not
-                            // seen, terrain reflected in the water) is not at that level,
-                            // and its vote would land on the water.
-                            Some((d, (p, _, hole))) if water || hole.is_none() => {
-                                n[1] += 1;
-                                let floor = hole.map(|t| origin.z + d.z * t);
-                                Some(Hit {
-                                    floor,
-                                    ..Hit::at(p, water)
-                                })
-                            }
-                            _ => {
-                                n[2] += 1;
-                                None
-                            }
-                        }
-                    })();
-                }
-            });
+        let (nr, nc) = (buf.rows.len(), buf.cols.len());
+        let zbuf = if cfg.sampler == Sampler::Zbuffer {
+            zbuf.draw(
+                surface, camera, cam_to_map, map_rays, &buf.rows, &buf.cols, max_range,
+            );
+            Some(&*zbuf)
+        } else {
+            None
+        };
+        let placer = Placer {
+            labels: &labels,
+            width: w,
+            stereo: stereo.and_then(|c| Some((c, stereo_factor(c, w, h)?))),
+            stereo_range: cfg.stereo_max_range.min(max_range),
+            origin,
+            zbuf,
+            map_rays,
+            surface,
+            max_range,
+            reach: samples.and_then(|l| l.reach.as_ref()),
+        };
+        placer.place_all(&buf.rows, &buf.cols, &mut buf.hits, &mut buf.counts);
         tighten_hole_levels(&mut buf.hits, nc, origin, &mut buf.levels);
-        // Each sampled pixel stands for the quad spanned by its hit and those of its right,
-        // lower and diagonal neighbours: when all four agree and the quad is no larger than
-        // `QUAD_MAX_M` (larger ones straddle an occlusion edge), every cell the quad
-        // overlaps gets the vote once (a pixel row covers a metre of ground at 20 m, far more
-        // than a cell; `quad_cells`); otherwise only the pixel's own cell.
-        const QUAD_MAX_M: f64 = 3.0;
-        if buf.votes.len() < nr {
-            buf.votes.resize_with(nr, Vec::new);
-        }
-        let per_row = &buf.hits;
-        buf.votes[..nr]
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(r, out)| {
-                out.clear();
-                let row = &per_row[r * nc..(r + 1) * nc];
-                let next = per_row.get((r + 1) * nc..(r + 2) * nc);
-                for c in 0..nc {
-                    let Some(h00) = row[c] else { continue };
-                    let wet = h00.wet;
-                    let quad = next.and_then(|nx| {
-                        let q = [*row.get(c + 1)?.as_ref()?, nx[c]?, (*nx.get(c + 1)?)?];
-                        q.iter()
-                            .all(|h| h.wet == wet)
-                            .then_some([h00, q[0], q[1], q[2]])
-                    });
-                    // |a − b| ≤ QUAD_MAX_M as |a − b|² ≤ QUAD_MAX_M², the same verdict:
-                    // the root is correctly rounded and QUAD_MAX_M² exact.
-                    let quad = quad.filter(|q| {
-                        [(0, 1), (0, 2), (1, 3), (2, 3)].iter().all(|&(a, b)| {
-                            (q[a].p - q[b].p).norm_squared() <= QUAD_MAX_M * QUAD_MAX_M
-                        })
-                    });
-                    match quad {
-                        None => {
-                            if let Some(j) = surface.index_of(h00.p.x, h00.p.y) {
-                                out.push((j as u32, wet, h00.level as f32));
-                            }
-                        }
-                        Some(q) => {
-                            let before = out.len();
-                            quad_cells(
-                                surface,
-                                q.map(|h| Vector4::new(h.p.x, h.p.y, h.p.z, h.level)),
-                                |j, level| out.push((j as u32, wet, level as f32)),
-                            );
-                            if out.len() == before {
-                                // A degenerate quad (no area, or a corner not finite):
-                                // the pixel's own cell.
-                                if let Some(j) = surface.index_of(h00.p.x, h00.p.y) {
-                                    out.push((j as u32, wet, h00.level as f32));
-                                }
-                            }
-                        }
-                    }
-                }
-            });
+        quad_votes(surface, &buf.hits, nr, nc, &mut buf.votes);
         for n in &buf.counts[..nr] {
             st.via_point += n[0];
             st.via_ray += n[1];
@@ -1379,63 +1232,387 @@ impl FrameLabels {
                 _ => {}
             }
         }
-        for out in &buf.votes[..nr] {
-            for &(j, water, z) in out {
-                let t = &mut self.tally[j as usize];
-                if t.0 == 0 && t.1 == 0 {
-                    self.touched.push(j);
-                }
-                if water {
-                    t.0 += 1;
-                    t.2 += z as f64;
-                } else {
-                    t.1 += 1;
-                }
-            }
-        }
-        // Cells in raster order: deterministic whatever the thread count.
-        self.touched.sort_unstable();
-        let (nw, o) = (surface.size(), surface.origin());
-        let z_ref = grid.config().z_ref;
-        let mut dropped = 0;
-        for &j in &self.touched {
-            let (wn, dn, zs) = std::mem::take(&mut self.tally[j as usize]);
-            let mut e = Evidence::default();
-            let vote = match wn.cmp(&dn) {
-                std::cmp::Ordering::Greater => Some(true),
-                std::cmp::Ordering::Less => Some(false),
-                std::cmp::Ordering::Equal => None,
-            };
-            let Some(water) = vote else { continue };
-            let (fw, fd) = match cue {
-                Cue::Colour => (&mut e.colour_water, &mut e.colour_dry),
-                Cue::Swir => (&mut e.swir_dark, &mut e.swir_lit),
-                Cue::Mwir => (&mut e.mwir_water, &mut e.mwir_dry),
-            };
-            if water {
-                *fw = 1;
-                st.cells_water += 1;
-                let level = zs / wn as f64;
-                e.add_level(((level - z_ref) * 1000.0).round() as i32);
-            } else {
-                *fd = 1;
-                st.cells_dry += 1;
-            }
-            let key = CellKey::new(
-                o.x + (j as usize % nw) as i64,
-                o.y + (j as usize / nw) as i64,
-            );
-            if !grid.add_evidence(key, &e) {
-                dropped += 1;
-            }
-        }
-        self.touched.clear();
+        tally_votes(tally, touched, &buf.votes[..nr]);
+        let dropped = add_cell_votes(tally, touched, cue, surface, grid, st);
         if cue == Cue::Colour {
             buf.labels = labels.data;
         }
         self.bufs = buf;
         Ok(dropped)
     }
+
+    /// The labels of the view's image: colour through the lookup table
+    /// ([`Self::classify_colour`]), SWIR darkness and MWIR thermal contrast over the ground
+    /// geometry of the camera's rays.
+    fn classify(
+        cfg: &FrameLabelConfig,
+        view: &SensorView<'_>,
+        buf: &mut Vec<Label>,
+        colour_check: &mut ColourCheck,
+        st: &mut SensorLabelStats,
+    ) -> Result<LabelImage> {
+        let SensorView {
+            img,
+            camera,
+            cam_to_map,
+            map_rays,
+            ground_z,
+            ..
+        } = *view;
+        Ok(match view.cue {
+            Cue::Colour => Self::classify_colour(cfg, view, buf, colour_check, st)?,
+            Cue::Swir => {
+                let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
+                classify_swir(&mono_of(img), &g, None, cfg.swir.as_ref().expect("cfg"))?
+            }
+            Cue::Mwir => {
+                let m = cfg.mwir.as_ref().expect("configured");
+                let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
+                let hour = view.hour.expect("an MWIR frame without an hour is skipped");
+                classify_mwir(&mono_of(img), &g, hour, &m.classifier)?
+            }
+        })
+    }
+
+    /// The colour image's labels, into the storage `buf` (taken): each pixel through the
+    /// lookup table, the horizon rule ([`apply_horizon`]), then the checks that veto colour
+    /// water: against the sky it would reflect ([`reflection_check`]) and against what the
+    /// log's lidar and stereo found under its colour ([`ColourCheck`]).
+    fn classify_colour(
+        cfg: &FrameLabelConfig,
+        view: &SensorView<'_>,
+        buf: &mut Vec<Label>,
+        colour_check: &mut ColourCheck,
+        st: &mut SensorLabelStats,
+    ) -> Result<LabelImage> {
+        let SensorView {
+            img,
+            camera,
+            cam_to_map,
+            map_rays,
+            ..
+        } = *view;
+        let (w, h) = (camera.width, camera.height);
+        let lut = cfg.colour.as_ref().expect("configured");
+        let Pixels::Rgb8(px) = &img.image.pixels else {
+            return Err(Error::invalid(
+                "colour image",
+                format!("{}: not a colour image", img.image.frame_id),
+            ));
+        };
+        if px.len() != w * h {
+            return Err(Error::invalid(
+                "colour image",
+                format!("{} pixels for {w} × {h}", px.len()),
+            ));
+        }
+        let mut data = std::mem::take(buf);
+        data.resize(w * h, Label::Other);
+        // Rows in parallel; every label is written.
+        data.par_chunks_mut(w.max(1))
+            .zip(px.par_chunks(w.max(1)))
+            .try_for_each(|(l, p)| lut.classify_into(p.as_flattened(), l))?;
+        let mut l = LabelImage {
+            width: w,
+            height: h,
+            data,
+        };
+        apply_horizon(&mut l, map_rays);
+        if let Some(enc) = cfg.reflection_check {
+            st.reflection_vetoed += reflection_check(&mut l, px, map_rays, camera, cam_to_map, enc);
+        }
+        if let Some(samples) = view.samples.filter(|_| cfg.colour_check) {
+            let stereo = view.stereo.and_then(|c| Some((c, stereo_factor(c, w, h)?)));
+            st.colour_check_vetoed +=
+                colour_check.run(&mut l, px, camera, cam_to_map, samples, stereo);
+        }
+        Ok(l)
+    }
+}
+
+/// One sensor's image in one frame, and what its labels are placed with.
+struct SensorView<'a> {
+    cue: Cue,
+    img: &'a SensorImage,
+    camera: &'a CameraModel,
+    cam_to_map: &'a Pose,
+    /// The camera's unit pixel rays in the map frame, row-major.
+    map_rays: &'a [Option<Vector3<f64>>],
+    /// The stereo cloud registered to the image (colour only).
+    stereo: Option<&'a PointCloud>,
+    /// The local solar hour (MWIR only).
+    hour: Option<f64>,
+    /// The ground's height under the vehicle.
+    ground_z: f64,
+    /// Where the frame's lidar found the surface dry or wet.
+    samples: Option<&'a ScanSurface>,
+}
+
+/// How a sampled pixel finds its hit on the map: through its stereo point where it has
+/// one within range, else by the march over the map, started where the z-buffer says its
+/// ray first meets the map.
+struct Placer<'a> {
+    labels: &'a LabelImage,
+    /// Image width, pixels.
+    width: usize,
+    /// The stereo cloud and the factor by which the image upsamples it.
+    stereo: Option<(&'a PointCloud, usize)>,
+    /// A stereo point places its pixel only up to this range (metres).
+    stereo_range: f64,
+    /// The camera's position in the map.
+    origin: Point3<f64>,
+    zbuf: Option<&'a ZBuffer>,
+    map_rays: &'a [Option<Vector3<f64>>],
+    surface: &'a GridSurface,
+    max_range: f64,
+    /// The lidar's dry reach: a hole beyond it is explained by range alone.
+    reach: Option<&'a DryReach>,
+}
+
+impl Placer<'_> {
+    /// Per sampled pixel (`rows` × `cols`, row-major into `hits`): its hit, whether it is
+    /// water (`None`: no vote), and the water level it gives (see `tighten_hole_levels`);
+    /// per sampled row into `counts`: pixels placed via a point, via a ray, not placed,
+    /// beyond reach. Rows in parallel, into the buffers of the last frame.
+    fn place_all(
+        &self,
+        rows: &[usize],
+        cols: &[usize],
+        hits: &mut Vec<Option<Hit>>,
+        counts: &mut Vec<[u64; 4]>,
+    ) {
+        let (nr, nc) = (rows.len(), cols.len());
+        hits.resize(nr * nc, None);
+        // Zeroed here, not per row: a row without sampled columns (an image 0 pixels wide)
+        // is never visited.
+        counts.clear();
+        counts.resize(nr, [0; 4]);
+        hits.par_chunks_mut(nc.max(1))
+            .zip(counts[..nr].par_iter_mut())
+            .zip(rows.par_iter())
+            .enumerate()
+            .for_each(|(r, ((out, n), &y))| {
+                for (ci, (slot, &x)) in out.iter_mut().zip(cols).enumerate() {
+                    *slot = self.place(r * nc + ci, x, y, n);
+                }
+            });
+    }
+
+    /// The hit of pixel (x, y), sample `k` of the z-buffer, counted in `n` (via point, via
+    /// ray, no hit, beyond reach); `None`: no vote.
+    fn place(&self, k: usize, x: usize, y: usize, n: &mut [u64; 4]) -> Option<Hit> {
+        let (origin, surface) = (self.origin, self.surface);
+        let i = y * self.width + x;
+        let water = match self.labels.data[i] {
+            Label::Water => true,
+            Label::Other | Label::SnowIce => false,
+            Label::Sky | Label::Unknown => return None,
+        };
+        if let Some((c, f)) = self.stereo {
+            let e = (y / f) * c.cols + x / f;
+            if c.is_valid(e) {
+                let p = c.point_in_map(e);
+                if (p - origin).norm() <= self.stereo_range {
+                    n[0] += 1;
+                    return Some(Hit::at(p, water));
+                }
+            }
+        }
+        // With the z-buffer, the march starts where the ray first meets the drawn map; a
+        // ray that meets nothing drawn meets no ground, and only water (placed in a hole at
+        // its near rim's level) is marched.
+        let mut after = 0.0;
+        if let Some(zb) = self.zbuf {
+            match zb.first(k) {
+                Some(t) => after = t,
+                None if water => {}
+                None => {
+                    n[2] += 1;
+                    return None;
+                }
+            }
+        }
+        let cast = self.map_rays[i].and_then(|d| {
+            surface
+                .cast_through_holes_after(&origin, &d, self.max_range, after)
+                .map(|h| (d, h))
+        });
+        // A hole beyond the dry reach is explained by range alone.
+        if let (Some((_, (p, _, Some(_)))), Some(r)) = (cast, self.reach) {
+            if !r.covers(p.x, p.y, 2.0 * surface.resolution()) {
+                n[3] += 1;
+                return None;
+            }
+        }
+        match cast {
+            // Only water is placed where the ray crosses a hole's rim level: whatever else
+            // a pixel there shows (a bank the map has not seen, terrain reflected in the
+            // water) is not at that level, and its vote would land on the water.
+            Some((d, (p, _, hole))) if water || hole.is_none() => {
+                n[1] += 1;
+                let floor = hole.map(|t| origin.z + d.z * t);
+                Some(Hit {
+                    floor,
+                    ..Hit::at(p, water)
+                })
+            }
+            _ => {
+                n[2] += 1;
+                None
+            }
+        }
+    }
+}
+
+/// Largest side (metres) of a pixel's quad that votes over the cells it covers: larger
+/// ones straddle an occlusion edge.
+const QUAD_MAX_M: f64 = 3.0;
+
+/// The cell votes (raster index, water, level) of each sampled row of `hits` (`nr` × `nc`)
+/// into `votes`, rows in parallel. Each sampled pixel stands for the quad spanned by its
+/// hit and those of its right, lower and diagonal neighbours: when all four agree and the
+/// quad is no larger than [`QUAD_MAX_M`], every cell the quad overlaps gets the vote once
+/// (a pixel row covers a metre of ground at 20 m, far more than a cell; [`quad_cells`]);
+/// otherwise only the pixel's own cell.
+fn quad_votes(
+    surface: &GridSurface,
+    hits: &[Option<Hit>],
+    nr: usize,
+    nc: usize,
+    votes: &mut Vec<Vec<(u32, bool, f32)>>,
+) {
+    if votes.len() < nr {
+        votes.resize_with(nr, Vec::new);
+    }
+    votes[..nr].par_iter_mut().enumerate().for_each(|(r, out)| {
+        out.clear();
+        let row = &hits[r * nc..(r + 1) * nc];
+        let next = hits.get((r + 1) * nc..(r + 2) * nc);
+        for c in 0..nc {
+            row_vote(surface, row, next, c, out);
+        }
+    });
+}
+
+/// The votes of sampled pixel `c` of `row` (the next row below: `next`) into `out`.
+fn row_vote(
+    surface: &GridSurface,
+    row: &[Option<Hit>],
+    next: Option<&[Option<Hit>]>,
+    c: usize,
+    out: &mut Vec<(u32, bool, f32)>,
+) {
+    let Some(h00) = row[c] else { return };
+    let wet = h00.wet;
+    let quad = next.and_then(|nx| {
+        let q = [*row.get(c + 1)?.as_ref()?, nx[c]?, (*nx.get(c + 1)?)?];
+        q.iter()
+            .all(|h| h.wet == wet)
+            .then_some([h00, q[0], q[1], q[2]])
+    });
+    // |a − b| ≤ QUAD_MAX_M as |a − b|² ≤ QUAD_MAX_M², the same verdict: the root is
+    // correctly rounded and QUAD_MAX_M² exact.
+    let quad = quad.filter(|q| {
+        [(0, 1), (0, 2), (1, 3), (2, 3)]
+            .iter()
+            .all(|&(a, b)| (q[a].p - q[b].p).norm_squared() <= QUAD_MAX_M * QUAD_MAX_M)
+    });
+    match quad {
+        None => {
+            if let Some(j) = surface.index_of(h00.p.x, h00.p.y) {
+                out.push((j as u32, wet, h00.level as f32));
+            }
+        }
+        Some(q) => {
+            let before = out.len();
+            quad_cells(
+                surface,
+                q.map(|h| Vector4::new(h.p.x, h.p.y, h.p.z, h.level)),
+                |j, level| out.push((j as u32, wet, level as f32)),
+            );
+            if out.len() == before {
+                // A degenerate quad (no area, or a corner not finite): the pixel's own
+                // cell.
+                if let Some(j) = surface.index_of(h00.p.x, h00.p.y) {
+                    out.push((j as u32, wet, h00.level as f32));
+                }
+            }
+        }
+    }
+}
+
+/// Adds the rows' `votes` to the per-cell `tally` (water pixels, other pixels, Σ level of
+/// the water pixels), noting in `touched` each cell as it gets its first vote.
+fn tally_votes(
+    tally: &mut [(u32, u32, f64)],
+    touched: &mut Vec<u32>,
+    votes: &[Vec<(u32, bool, f32)>],
+) {
+    for out in votes {
+        for &(j, water, z) in out {
+            let t = &mut tally[j as usize];
+            if t.0 == 0 && t.1 == 0 {
+                touched.push(j);
+            }
+            if water {
+                t.0 += 1;
+                t.2 += z as f64;
+            } else {
+                t.1 += 1;
+            }
+        }
+    }
+}
+
+/// One vote per `touched` cell of the `tally` (emptied), for the cue's water or dry
+/// evidence: the majority of its pixels, a tie no vote, water with the mean of its levels
+/// as a level sample. Returns the votes that fell outside `grid`'s window.
+fn add_cell_votes(
+    tally: &mut [(u32, u32, f64)],
+    touched: &mut Vec<u32>,
+    cue: Cue,
+    surface: &GridSurface,
+    grid: &mut RollingGrid,
+    st: &mut SensorLabelStats,
+) -> u64 {
+    // Cells in raster order: deterministic whatever the thread count.
+    touched.sort_unstable();
+    let (nw, o) = (surface.size(), surface.origin());
+    let z_ref = grid.config().z_ref;
+    let mut dropped = 0;
+    for &j in touched.iter() {
+        let (wn, dn, zs) = std::mem::take(&mut tally[j as usize]);
+        let mut e = Evidence::default();
+        let vote = match wn.cmp(&dn) {
+            std::cmp::Ordering::Greater => Some(true),
+            std::cmp::Ordering::Less => Some(false),
+            std::cmp::Ordering::Equal => None,
+        };
+        let Some(water) = vote else { continue };
+        let (fw, fd) = match cue {
+            Cue::Colour => (&mut e.colour_water, &mut e.colour_dry),
+            Cue::Swir => (&mut e.swir_dark, &mut e.swir_lit),
+            Cue::Mwir => (&mut e.mwir_water, &mut e.mwir_dry),
+        };
+        if water {
+            *fw = 1;
+            st.cells_water += 1;
+            let level = zs / wn as f64;
+            e.add_level(((level - z_ref) * 1000.0).round() as i32);
+        } else {
+            *fd = 1;
+            st.cells_dry += 1;
+        }
+        let key = CellKey::new(
+            o.x + (j as usize % nw) as i64,
+            o.y + (j as usize / nw) as i64,
+        );
+        if !grid.add_evidence(key, &e) {
+            dropped += 1;
+        }
+    }
+    touched.clear();
+    dropped
 }
 
 #[cfg(test)]
