@@ -1,10 +1,16 @@
+use super::place::HOLE_LEVEL_WINDOW;
+use super::quad::quad_cells;
 use super::*;
 use crate::classify::color::RuleClassifier;
 use crate::classify::horizon::{optical_pose, Horizon};
+use crate::classify::lut::ColorLut;
+use crate::classify::thermal::{MwirConfig, SwirConfig};
+use crate::cues::StereoSeen;
 use crate::geom::camera::Distortion;
 use crate::geom::pose_xyz_rpy;
 use crate::grid::{Fusion, GridConfig, RangeNoise};
 use crate::sensor::Image;
+use nalgebra::Vector4;
 
 const SKY: [u8; 3] = [250, 250, 252];
 const GRASS: [u8; 3] = [60, 120, 40];
