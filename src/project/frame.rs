@@ -45,18 +45,30 @@ use crate::cues::ScanSurface;
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{pose_is_finite, PointCloud, Pose};
-use crate::grid::{CellKey, Evidence, RollingGrid};
+use crate::grid::{CellKey, Cue, Evidence, RollingGrid};
 use crate::sensor::{Frame, Pixels, SensorImage};
 use colour_check::ColourCheck;
 use place::{sampled_rows, tighten_hole_levels, Hit, Placer};
 use quad::quad_votes;
 use sky::apply_horizon;
 
+/// The image cues, a camera each: the label stage's part of the fusion's [`Cue`]s.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Cue {
+enum ImageCue {
     Colour,
     Swir,
     Mwir,
+}
+
+impl ImageCue {
+    /// The fusion cue its votes count for.
+    const fn cue(self) -> Cue {
+        match self {
+            ImageCue::Colour => Cue::Colour,
+            ImageCue::Swir => Cue::Swir,
+            ImageCue::Mwir => Cue::Mwir,
+        }
+    }
 }
 
 /// A camera's unit pixel rays (optical frame), computed once per camera model.
@@ -215,11 +227,11 @@ impl FrameLabels {
             z if z.is_finite() => z as f64,
             _ => base.z,
         };
-        for cue in [Cue::Colour, Cue::Swir, Cue::Mwir] {
+        for cue in [ImageCue::Colour, ImageCue::Swir, ImageCue::Mwir] {
             let (configured, img) = match cue {
-                Cue::Colour => (self.cfg.colour.is_some(), &frame.image),
-                Cue::Swir => (self.cfg.swir.is_some(), &frame.swir),
-                Cue::Mwir => (self.cfg.mwir.is_some(), &frame.mwir),
+                ImageCue::Colour => (self.cfg.colour.is_some(), &frame.image),
+                ImageCue::Swir => (self.cfg.swir.is_some(), &frame.swir),
+                ImageCue::Mwir => (self.cfg.mwir.is_some(), &frame.mwir),
             };
             if !configured {
                 continue;
@@ -232,12 +244,12 @@ impl FrameLabels {
                     .then_some((i, cam, pose))
             });
             let hour = match (cue, &self.cfg.mwir) {
-                (Cue::Mwir, Some(m)) => m.hour_of(frame),
+                (ImageCue::Mwir, Some(m)) => m.hour_of(frame),
                 _ => None,
             };
             match usable {
                 None => st.frames_skipped += 1,
-                Some(_) if cue == Cue::Mwir && hour.is_none() => st.frames_no_hour += 1,
+                Some(_) if cue == ImageCue::Mwir && hour.is_none() => st.frames_no_hour += 1,
                 Some((img, cam, pose)) => {
                     if let Some(h) = hour {
                         let r = rep.mwir_hours.get_or_insert([h, h]);
@@ -246,7 +258,7 @@ impl FrameLabels {
                             u64::from(self.cfg.mwir.as_ref().is_some_and(|m| m.hour.is_none()));
                     }
                     st.frames = 1;
-                    let stereo = if cue == Cue::Colour {
+                    let stereo = if cue == ImageCue::Colour {
                         frame.stereo.as_ref()
                     } else {
                         None
@@ -258,9 +270,9 @@ impl FrameLabels {
                 }
             }
             match cue {
-                Cue::Colour => rep.colour = Some(st),
-                Cue::Swir => rep.swir = Some(st),
-                Cue::Mwir => rep.mwir = Some(st),
+                ImageCue::Colour => rep.colour = Some(st),
+                ImageCue::Swir => rep.swir = Some(st),
+                ImageCue::Mwir => rep.mwir = Some(st),
             }
         }
         self.raster = surface.into_raster();
@@ -274,7 +286,7 @@ impl FrameLabels {
     #[allow(clippy::too_many_arguments)]
     fn run(
         &mut self,
-        cue: Cue,
+        cue: ImageCue,
         img: &SensorImage,
         camera: &CameraModel,
         cam_to_map: &Pose,
@@ -366,7 +378,7 @@ impl FrameLabels {
         }
         tally_votes(tally, touched, &buf.votes[..nr]);
         let dropped = add_cell_votes(tally, touched, cue, surface, grid, st);
-        if cue == Cue::Colour {
+        if cue == ImageCue::Colour {
             buf.labels = labels.data;
         }
         self.bufs = buf;
@@ -392,12 +404,12 @@ impl FrameLabels {
             ..
         } = *view;
         Ok(match view.cue {
-            Cue::Colour => Self::classify_colour(cfg, view, buf, colour_check, st)?,
-            Cue::Swir => {
+            ImageCue::Colour => Self::classify_colour(cfg, view, buf, colour_check, st)?,
+            ImageCue::Swir => {
                 let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
                 classify_swir(&mono_of(img), &g, None, cfg.swir.as_ref().expect("cfg"))?
             }
-            Cue::Mwir => {
+            ImageCue::Mwir => {
                 let m = cfg.mwir.as_ref().expect("configured");
                 let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
                 let hour = view.hour.expect("an MWIR frame without an hour is skipped");
@@ -464,7 +476,7 @@ impl FrameLabels {
 
 /// One sensor's image in one frame, and what its labels are placed with.
 struct SensorView<'a> {
-    cue: Cue,
+    cue: ImageCue,
     img: &'a SensorImage,
     camera: &'a CameraModel,
     cam_to_map: &'a Pose,
@@ -509,7 +521,7 @@ fn tally_votes(
 fn add_cell_votes(
     tally: &mut [(u32, u32, f64)],
     touched: &mut Vec<u32>,
-    cue: Cue,
+    cue: ImageCue,
     surface: &GridSurface,
     grid: &mut RollingGrid,
     st: &mut SensorLabelStats,
@@ -528,18 +540,12 @@ fn add_cell_votes(
             std::cmp::Ordering::Equal => None,
         };
         let Some(water) = vote else { continue };
-        let (fw, fd) = match cue {
-            Cue::Colour => (&mut e.colour_water, &mut e.colour_dry),
-            Cue::Swir => (&mut e.swir_dark, &mut e.swir_lit),
-            Cue::Mwir => (&mut e.mwir_water, &mut e.mwir_dry),
-        };
+        e.add_image_vote(cue.cue(), water);
         if water {
-            *fw = 1;
             st.cells_water += 1;
             let level = zs / wn as f64;
             e.add_level(((level - z_ref) * 1000.0).round() as i32);
         } else {
-            *fd = 1;
             st.cells_dry += 1;
         }
         let key = CellKey::new(
