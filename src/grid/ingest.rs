@@ -33,8 +33,6 @@ mod fuse;
 mod gate;
 mod noise;
 mod sample;
-#[cfg(test)]
-mod tests;
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -279,3 +277,6 @@ impl RollingGrid {
         Ok(stats)
     }
 }
+
+#[cfg(test)]
+mod tests;
