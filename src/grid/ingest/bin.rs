@@ -6,6 +6,7 @@ use super::{weight_of, Binned, IngestStats, RangeNoise, RollingGrid, BUCKET_SHIF
 use crate::geom::{cell_coord, PointCloud};
 use crate::grid::cell::{quantize_mm, SIGMA_REF_M, W_MAX, W_UNIT};
 
+/// What [`Ctx::classify`] makes of one point.
 pub(super) enum Classified {
     Sample(Sample),
     NonFinite,
