@@ -219,9 +219,10 @@ impl HazardMap {
         Self::from_cells_after(tiles, tiles.observed().collect(), cfg, previous)
     }
 
-    /// [`HazardMap::from_tiles_after`] of the cells `observed` (unique keys, in the order the
-    /// map's cells should have); of `tiles` only the resolution and reference height are
-    /// read. The mapper's window snapshot takes this path with an empty tile map, skipping
+    /// [`HazardMap::from_tiles`] of the cells `observed` (unique keys, in the order the
+    /// map's cells should have), with body ids carried over from the bodies of an earlier
+    /// snapshot, `previous` (a body that grew or merged keeps its largest ancestor's id); of
+    /// `tiles` only the resolution and reference height are read. The mapper's window snapshot takes this path with an empty tile map, skipping
     /// the copy of the window into tiles.
     pub fn from_cells_after(
         tiles: &TileMap,
