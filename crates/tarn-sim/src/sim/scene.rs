@@ -434,6 +434,66 @@ fn need<T: Copy>(what: String, v: Option<T>, kind: &str) -> Result<T> {
     v.ok_or_else(|| bad(what, format!("missing: a {kind} needs it")))
 }
 
+/// Every material by name: the built-in ones and the scene's.
+type Materials = BTreeMap<String, MaterialSpec>;
+
+/// `name` is one of `mats`; the error (under `what`) lists the known ones.
+fn known(mats: &Materials, what: String, name: &str) -> Result<()> {
+    if mats.contains_key(name) {
+        Ok(())
+    } else {
+        Err(bad(
+            what,
+            format!(
+                "unknown material {name:?} (known: {})",
+                mats.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        ))
+    }
+}
+
+/// Terrain feature `i`: its material, rim, and the dimensions of its kind.
+fn validate_feature(i: usize, f: &FeatureSpec, mats: &Materials) -> Result<()> {
+    let w = |k: &str| format!("terrain.features[{i}].{k}");
+    let kind = format!("{:?}", f.kind).to_lowercase();
+    if let Some(m) = &f.material {
+        known(mats, w("material"), m)?;
+    }
+    unit(&w("flat"), f.flat)?;
+    if f.flat >= 1.0 {
+        return Err(bad(w("flat"), "must be < 1"));
+    }
+    match f.kind {
+        FeatureKind::Depression | FeatureKind::Mound => {
+            all_finite(&w("centre"), &need(w("centre"), f.centre, &kind)?)?;
+            let r = need(w("radius"), f.radius, &kind)?;
+            positive(&w("radius[0]"), r[0])?;
+            positive(&w("radius[1]"), r[1])?;
+            if f.kind == FeatureKind::Depression {
+                positive(&w("depth"), need(w("depth"), f.depth, &kind)?)?;
+            } else {
+                positive(&w("height"), need(w("height"), f.height, &kind)?)?;
+            }
+        }
+        FeatureKind::Ditch | FeatureKind::Curb => {
+            let a = need(w("from"), f.from, &kind)?;
+            let b = need(w("to"), f.to, &kind)?;
+            all_finite(&w("from"), &a)?;
+            all_finite(&w("to"), &b)?;
+            if a == b {
+                return Err(bad(w("to"), "must differ from `from`"));
+            }
+            positive(&w("width"), need(w("width"), f.width, &kind)?)?;
+            if f.kind == FeatureKind::Ditch {
+                positive(&w("depth"), need(w("depth"), f.depth, &kind)?)?;
+            } else {
+                positive(&w("height"), need(w("height"), f.height, &kind)?)?;
+            }
+        }
+    }
+    Ok(())
+}
+
 impl Scene {
     /// Parses and validates a scene; errors name the key.
     pub fn from_toml_str(text: &str) -> Result<Scene> {
@@ -493,6 +553,18 @@ impl Scene {
         positive("truth_resolution", self.truth_resolution)?;
         non_negative("fording_depth", self.fording_depth)?;
         let mats = self.all_materials();
+        self.validate_materials()?;
+        self.validate_terrain(&mats)?;
+        self.validate_water()?;
+        self.validate_objects(&mats)?;
+        self.validate_patches(&mats)?;
+        self.validate_sky()?;
+        self.validate_trajectory()?;
+        self.rig.validate()
+    }
+
+    /// The scene's own materials: colours, reflectances and temperatures in range.
+    fn validate_materials(&self) -> Result<()> {
         for (k, m) in &self.materials {
             let w = |f: &str| format!("materials.{k}.{f}");
             for (i, c) in m.rgb.iter().enumerate() {
@@ -515,20 +587,12 @@ impl Scene {
             positive(&w("temperature"), m.temperature)?;
             non_negative(&w("temperature_swing"), m.temperature_swing)?;
         }
-        let known = |what: String, name: &str| -> Result<()> {
-            if mats.contains_key(name) {
-                Ok(())
-            } else {
-                Err(bad(
-                    what,
-                    format!(
-                        "unknown material {name:?} (known: {})",
-                        mats.keys().cloned().collect::<Vec<_>>().join(", ")
-                    ),
-                ))
-            }
-        };
+        Ok(())
+    }
 
+    /// The terrain's extent, resolution, surface and features; `mats` are the materials a
+    /// name may refer to.
+    fn validate_terrain(&self, mats: &Materials) -> Result<()> {
         let t = &self.terrain;
         all_finite("terrain.origin", &t.origin)?;
         positive("terrain.size[0]", t.size[0])?;
@@ -548,46 +612,15 @@ impl Scene {
         all_finite("terrain.slope", &t.slope)?;
         non_negative("terrain.roughness", t.roughness)?;
         positive("terrain.roughness_scale", t.roughness_scale)?;
-        known("terrain.material".into(), &t.material)?;
+        known(mats, "terrain.material".into(), &t.material)?;
         for (i, f) in t.features.iter().enumerate() {
-            let w = |k: &str| format!("terrain.features[{i}].{k}");
-            let kind = format!("{:?}", f.kind).to_lowercase();
-            if let Some(m) = &f.material {
-                known(w("material"), m)?;
-            }
-            unit(&w("flat"), f.flat)?;
-            if f.flat >= 1.0 {
-                return Err(bad(w("flat"), "must be < 1"));
-            }
-            match f.kind {
-                FeatureKind::Depression | FeatureKind::Mound => {
-                    all_finite(&w("centre"), &need(w("centre"), f.centre, &kind)?)?;
-                    let r = need(w("radius"), f.radius, &kind)?;
-                    positive(&w("radius[0]"), r[0])?;
-                    positive(&w("radius[1]"), r[1])?;
-                    if f.kind == FeatureKind::Depression {
-                        positive(&w("depth"), need(w("depth"), f.depth, &kind)?)?;
-                    } else {
-                        positive(&w("height"), need(w("height"), f.height, &kind)?)?;
-                    }
-                }
-                FeatureKind::Ditch | FeatureKind::Curb => {
-                    let a = need(w("from"), f.from, &kind)?;
-                    let b = need(w("to"), f.to, &kind)?;
-                    all_finite(&w("from"), &a)?;
-                    all_finite(&w("to"), &b)?;
-                    if a == b {
-                        return Err(bad(w("to"), "must differ from `from`"));
-                    }
-                    positive(&w("width"), need(w("width"), f.width, &kind)?)?;
-                    if f.kind == FeatureKind::Ditch {
-                        positive(&w("depth"), need(w("depth"), f.depth, &kind)?)?;
-                    } else {
-                        positive(&w("height"), need(w("height"), f.height, &kind)?)?;
-                    }
-                }
-            }
+            validate_feature(i, f, mats)?;
         }
+        Ok(())
+    }
+
+    /// Every water body: its region by kind, ripple, attenuation, colour and temperature.
+    fn validate_water(&self) -> Result<()> {
         for (i, b) in self.water.iter().enumerate() {
             let w = |k: &str| format!("water[{i}].{k}");
             let kind = format!("{:?} water body", b.kind).to_lowercase();
@@ -624,13 +657,18 @@ impl Scene {
             positive(&w("temperature"), b.temperature)?;
             non_negative(&w("temperature_swing"), b.temperature_swing)?;
         }
+        Ok(())
+    }
+
+    /// Every object: its position, material and the dimensions of its kind.
+    fn validate_objects(&self, mats: &Materials) -> Result<()> {
         for (i, o) in self.objects.iter().enumerate() {
             let w = |k: &str| format!("objects[{i}].{k}");
             let kind = format!("{:?}", o.kind).to_lowercase();
             all_finite(&w("position"), &o.position)?;
             finite(&w("yaw_deg"), o.yaw_deg)?;
             if let Some(m) = &o.material {
-                known(w("material"), m)?;
+                known(mats, w("material"), m)?;
             }
             match o.kind {
                 ObjectKind::Tree => {
@@ -645,12 +683,22 @@ impl Scene {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Every material patch: its disc and material.
+    fn validate_patches(&self, mats: &Materials) -> Result<()> {
         for (i, p) in self.patches.iter().enumerate() {
             let w = |k: &str| format!("patches[{i}].{k}");
             all_finite(&w("centre"), &p.centre)?;
             positive(&w("radius"), p.radius)?;
-            known(w("material"), &p.material)?;
+            known(mats, w("material"), &p.material)?;
         }
+        Ok(())
+    }
+
+    /// The sky: a time of day within the day.
+    fn validate_sky(&self) -> Result<()> {
         let s = &self.sky;
         if !(0.0..24.0).contains(&s.time_of_day) {
             return Err(bad(
@@ -658,6 +706,12 @@ impl Scene {
                 format!("{} must be in 0..24 (hours)", s.time_of_day),
             ));
         }
+        Ok(())
+    }
+
+    /// The trajectory: at least two waypoints, all over the terrain, and its timing.
+    fn validate_trajectory(&self) -> Result<()> {
+        let t = &self.terrain;
         let tr = &self.trajectory;
         if tr.waypoints.len() < 2 {
             return Err(bad(
@@ -684,6 +738,6 @@ impl Scene {
         if tr.frames == Some(0) {
             return Err(bad("trajectory.frames", "must be ≥ 1"));
         }
-        self.rig.validate()
+        Ok(())
     }
 }
