@@ -326,108 +326,10 @@ impl RigSpec {
             ));
         }
         if let Some(l) = &r.lidar {
-            let w = |k: &str| format!("rig.lidar.{k}");
-            all_finite(&w("position"), &l.position)?;
-            all_finite(&w("rpy_deg"), &l.rpy_deg)?;
-            if l.rings == 0 || l.rings > 512 {
-                return Err(Error::invalid(
-                    w("rings"),
-                    format!("{} must be in 1..=512", l.rings),
-                ));
-            }
-            if l.columns == 0 || l.columns > 8192 {
-                return Err(Error::invalid(
-                    w("columns"),
-                    format!("{} must be in 1..=8192", l.columns),
-                ));
-            }
-            let [lo, hi] = l.elevation_deg;
-            if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo >= -90.0 && hi <= 90.0) {
-                return Err(Error::invalid(
-                    w("elevation_deg"),
-                    format!("{:?} must be [low, high] within ±90", l.elevation_deg),
-                ));
-            }
-            let [a0, a1] = l.azimuth_deg;
-            if !(a0.is_finite() && a1.is_finite() && a0 <= a1 && a1 - a0 <= 360.0) {
-                return Err(Error::invalid(
-                    w("azimuth_deg"),
-                    format!("{:?} must be [from, to] spanning ≤ 360", l.azimuth_deg),
-                ));
-            }
-            positive(&w("wavelength_nm"), l.wavelength_nm)?;
-            positive(&w("aperture_m"), l.aperture_m)?;
-            positive(&w("dry_limit_m"), l.dry_limit_m)?;
-            unit(&w("reference_albedo"), l.reference_albedo)?;
-            positive(&w("reference_albedo"), l.reference_albedo)?;
-            positive(&w("max_range_m"), l.max_range_m)?;
-            non_negative(&w("range_noise_m"), l.range_noise_m)?;
-            if l.position[2] <= 0.0 {
-                return Err(Error::invalid(
-                    w("position"),
-                    "z must be above the ground (> 0)",
-                ));
-            }
+            validate_lidar(l)?;
         }
-        let cam = |w: &dyn Fn(&str) -> String,
-                   pos: &[f64; 3],
-                   rpy: &[f64; 3],
-                   width: usize,
-                   height: usize,
-                   hfov: f64,
-                   noise: f64,
-                   distortion: &Option<[f64; 5]>|
-         -> Result<()> {
-            if let Some(d) = distortion {
-                all_finite(&w("distortion"), d)?;
-                if d.iter().any(|k| k.abs() > 1.0) {
-                    return Err(Error::invalid(
-                        w("distortion"),
-                        format!("{d:?}: plumb_bob coefficients beyond ±1 are not a lens"),
-                    ));
-                }
-            }
-            all_finite(&w("position"), pos)?;
-            all_finite(&w("rpy_deg"), rpy)?;
-            if width == 0 || height == 0 || width > 4096 || height > 4096 {
-                return Err(Error::invalid(
-                    w("width"),
-                    format!("{width} × {height} must be within 1..=4096"),
-                ));
-            }
-            if !(hfov > 1.0 && hfov < 170.0) {
-                return Err(Error::invalid(
-                    w("hfov_deg"),
-                    format!("{hfov} must be in (1, 170)"),
-                ));
-            }
-            non_negative(&w("image_noise"), noise)
-        };
         if let Some(s) = &r.stereo {
-            let w = |k: &str| format!("rig.stereo.{k}");
-            cam(
-                &w,
-                &s.position,
-                &s.rpy_deg,
-                s.width,
-                s.height,
-                s.hfov_deg,
-                s.image_noise,
-                &s.distortion,
-            )?;
-            positive(&w("baseline_m"), s.baseline_m)?;
-            non_negative(&w("disparity_noise_px"), s.disparity_noise_px)?;
-            positive(&w("min_disparity_px"), s.min_disparity_px)?;
-            if s.bin == 0 || s.width % s.bin != 0 || s.height % s.bin != 0 {
-                return Err(Error::invalid(
-                    w("bin"),
-                    format!(
-                        "{} must be ≥ 1 and divide {} × {}",
-                        s.bin, s.width, s.height
-                    ),
-                ));
-            }
-            positive(&w("max_range_m"), s.max_range_m)?;
+            validate_stereo(s)?;
         }
         if r.stereo.is_some() && r.camera.is_some() {
             return Err(Error::invalid(
@@ -446,7 +348,7 @@ impl RigSpec {
         for (name, c) in [("camera", &r.camera), ("swir", &r.swir), ("mwir", &r.mwir)] {
             if let Some(c) = c {
                 let w = |k: &str| format!("rig.{name}.{k}");
-                cam(
+                validate_camera(
                     &w,
                     &c.position,
                     &c.rpy_deg,
@@ -460,4 +362,118 @@ impl RigSpec {
         }
         Ok(())
     }
+}
+
+/// The lidar's mount, scan pattern and optics.
+fn validate_lidar(l: &LidarSpec) -> Result<()> {
+    let w = |k: &str| format!("rig.lidar.{k}");
+    all_finite(&w("position"), &l.position)?;
+    all_finite(&w("rpy_deg"), &l.rpy_deg)?;
+    if l.rings == 0 || l.rings > 512 {
+        return Err(Error::invalid(
+            w("rings"),
+            format!("{} must be in 1..=512", l.rings),
+        ));
+    }
+    if l.columns == 0 || l.columns > 8192 {
+        return Err(Error::invalid(
+            w("columns"),
+            format!("{} must be in 1..=8192", l.columns),
+        ));
+    }
+    let [lo, hi] = l.elevation_deg;
+    if !(lo.is_finite() && hi.is_finite() && lo <= hi && lo >= -90.0 && hi <= 90.0) {
+        return Err(Error::invalid(
+            w("elevation_deg"),
+            format!("{:?} must be [low, high] within ±90", l.elevation_deg),
+        ));
+    }
+    let [a0, a1] = l.azimuth_deg;
+    if !(a0.is_finite() && a1.is_finite() && a0 <= a1 && a1 - a0 <= 360.0) {
+        return Err(Error::invalid(
+            w("azimuth_deg"),
+            format!("{:?} must be [from, to] spanning ≤ 360", l.azimuth_deg),
+        ));
+    }
+    positive(&w("wavelength_nm"), l.wavelength_nm)?;
+    positive(&w("aperture_m"), l.aperture_m)?;
+    positive(&w("dry_limit_m"), l.dry_limit_m)?;
+    unit(&w("reference_albedo"), l.reference_albedo)?;
+    positive(&w("reference_albedo"), l.reference_albedo)?;
+    positive(&w("max_range_m"), l.max_range_m)?;
+    non_negative(&w("range_noise_m"), l.range_noise_m)?;
+    if l.position[2] <= 0.0 {
+        return Err(Error::invalid(
+            w("position"),
+            "z must be above the ground (> 0)",
+        ));
+    }
+    Ok(())
+}
+
+/// The stereo pair: its left camera, baseline, disparities and binning.
+fn validate_stereo(s: &StereoSpec) -> Result<()> {
+    let w = |k: &str| format!("rig.stereo.{k}");
+    validate_camera(
+        &w,
+        &s.position,
+        &s.rpy_deg,
+        s.width,
+        s.height,
+        s.hfov_deg,
+        s.image_noise,
+        &s.distortion,
+    )?;
+    positive(&w("baseline_m"), s.baseline_m)?;
+    non_negative(&w("disparity_noise_px"), s.disparity_noise_px)?;
+    positive(&w("min_disparity_px"), s.min_disparity_px)?;
+    if s.bin == 0 || s.width % s.bin != 0 || s.height % s.bin != 0 {
+        return Err(Error::invalid(
+            w("bin"),
+            format!(
+                "{} must be ≥ 1 and divide {} × {}",
+                s.bin, s.width, s.height
+            ),
+        ));
+    }
+    positive(&w("max_range_m"), s.max_range_m)?;
+    Ok(())
+}
+
+/// A camera's mount, lens, image size, field of view and noise; `w` names a key of it.
+#[allow(clippy::too_many_arguments)]
+fn validate_camera(
+    w: &dyn Fn(&str) -> String,
+    pos: &[f64; 3],
+    rpy: &[f64; 3],
+    width: usize,
+    height: usize,
+    hfov: f64,
+    noise: f64,
+    distortion: &Option<[f64; 5]>,
+) -> Result<()> {
+    if let Some(d) = distortion {
+        all_finite(&w("distortion"), d)?;
+        if d.iter().any(|k| k.abs() > 1.0) {
+            return Err(Error::invalid(
+                w("distortion"),
+                format!("{d:?}: plumb_bob coefficients beyond ±1 are not a lens"),
+            ));
+        }
+    }
+    all_finite(&w("position"), pos)?;
+    all_finite(&w("rpy_deg"), rpy)?;
+    if width == 0 || height == 0 || width > 4096 || height > 4096 {
+        return Err(Error::invalid(
+            w("width"),
+            format!("{width} × {height} must be within 1..=4096"),
+        ));
+    }
+    if !(hfov > 1.0 && hfov < 170.0) {
+        return Err(Error::invalid(
+            w("hfov_deg"),
+            format!("{hfov} must be in (1, 170)"),
+        ));
+    }
+    non_negative(&w("image_noise"), noise)
 }
