@@ -207,7 +207,7 @@ struct Scored<'a> {
     d: f64,
     /// The true terrain makes the cell an obstacle ([`ObstacleLimits`]).
     obstacle: bool,
-    /// A lidar return of the log fell in the cell ([`lidar_cells`]).
+    /// A lidar return of the log fell in the cell ([`lidar_cells`](super::lidar_cells)).
     lidar: bool,
     /// A truth cell within one map cell of the cell's centre is an obstacle.
     near_object: bool,
