@@ -1,8 +1,17 @@
+use std::collections::VecDeque;
+
+use super::beams::fit_line;
+use super::below::{mirror_refuted, ScanLine};
+use super::bright::bright_reference;
+use super::walk::{
+    below_gate, SlopeWindow, GATE_MIN, GATE_WINDOW, SLOPE_BASELINE_M, SLOPE_WINDOW_M,
+};
 use super::*;
 use crate::cues::prior::{PriorLevel, WaterPrior};
+use crate::cues::reflectivity::ReflectivityConfig;
 use crate::cues::testutil::TestRng;
-use crate::grid::{key_of, CellKey, Evidence, GridConfig, RollingGrid};
-use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig};
+use crate::grid::{key_of, CellKey, Evidence, GridConfig, RangeNoise, RollingGrid};
+use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig, LidarWaterModel};
 
 const RES: f64 = 0.1;
 
