@@ -273,11 +273,9 @@ pub fn stereo_reflections(
 /// image labels' colour check reads it).
 ///
 /// A frame goes through four phases, in the order its data flows: the candidate runs up
-/// each column ([`Frame::candidate_runs`]); the frame's water level, at the waterline
-/// ([`level::waterline_level`]) and by symmetry ([`Frame::symmetry_level`]); the runs
-/// confirmed against that level and the image, with their evidence and mirrored points
-/// ([`Frame::confirm_runs`]); and the points below the known level up the columns with
-/// confirmed water ([`Frame::below_known_level`]).
+/// each column; the frame's water level, at the waterline and by symmetry; the runs
+/// confirmed against that level and the image, with their evidence and mirrored points;
+/// and the points below the known level up the columns with confirmed water.
 pub fn stereo_reflections_with(
     cloud: &PointCloud,
     resolution: f64,
