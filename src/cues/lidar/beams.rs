@@ -43,8 +43,6 @@ pub(super) fn beam_directions_into(
         let nv = v.norm();
         (nv > 0.0).then(|| v / nv)
     };
-    let from_angles =
-        |az: f64, el: f64| Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
     local.clear();
     local.extend((0..cloud.len()).map(|i| {
         if cloud.is_valid(i) {
@@ -84,48 +82,65 @@ pub(super) fn beam_directions_into(
             infer_single_column(local);
         }
         BeamModel::Infer { max_gap_fraction } => {
-            let cyclic = rows > 1;
-            let max_gap = ((cols as f64 * max_gap_fraction).floor() as usize).max(1);
-            let angles = |v: &Vector3<f64>| (v.y.atan2(v.x), v.z.clamp(-1.0, 1.0).asin());
-            for r in 0..rows {
-                let row = &local[r * cols..(r + 1) * cols];
-                let valid: Vec<usize> = (0..cols).filter(|&c| row[c].is_some()).collect();
-                if valid.is_empty() {
-                    continue;
-                }
-                let mut fill: Vec<(usize, Vector3<f64>)> = Vec::new();
-                // Consecutive valid pairs (and the wrap-around pair when cyclic).
-                let mut pairs: Vec<(usize, usize)> =
-                    valid.windows(2).map(|w| (w[0], w[1])).collect();
-                if cyclic {
-                    pairs.push((valid[valid.len() - 1], valid[0] + cols));
-                }
-                for (a, b) in pairs {
-                    let gap = b - a;
-                    if gap < 2 || gap - 1 > max_gap {
-                        continue;
-                    }
-                    let (az_a, el_a) = angles(&row[a].unwrap());
-                    let (az_b, el_b) = angles(&row[b % cols].unwrap());
-                    let mut daz = az_b - az_a;
-                    let tau = 2.0 * std::f64::consts::PI;
-                    daz -= tau * (daz / tau).round();
-                    for k in 1..gap {
-                        let t = k as f64 / gap as f64;
-                        fill.push((
-                            (a + k) % cols,
-                            from_angles(az_a + daz * t, el_a + (el_b - el_a) * t),
-                        ));
-                    }
-                }
-                for (c, v) in fill {
-                    local[r * cols + c] = Some(v);
-                }
-            }
+            infer_from_rows(local, rows, cols, *max_gap_fraction);
         }
     }
     for d in local.iter_mut() {
         *d = d.map(|v| rot * v);
+    }
+}
+
+/// The unit direction of azimuth `az` and elevation `el` (radians).
+fn from_angles(az: f64, el: f64) -> Vector3<f64> {
+    Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
+}
+
+/// Fills the missing beams of each row (sensor frame) by interpolating azimuth and
+/// elevation, linearly in column index, between the nearest valid beams either side, across
+/// gaps of at most `max_gap_fraction` of the row (cyclic across the row's ends when the
+/// scan has more than one row).
+fn infer_from_rows(
+    local: &mut [Option<Vector3<f64>>],
+    rows: usize,
+    cols: usize,
+    max_gap_fraction: f64,
+) {
+    let cyclic = rows > 1;
+    let max_gap = ((cols as f64 * max_gap_fraction).floor() as usize).max(1);
+    let angles = |v: &Vector3<f64>| (v.y.atan2(v.x), v.z.clamp(-1.0, 1.0).asin());
+    for r in 0..rows {
+        let row = &local[r * cols..(r + 1) * cols];
+        let valid: Vec<usize> = (0..cols).filter(|&c| row[c].is_some()).collect();
+        if valid.is_empty() {
+            continue;
+        }
+        let mut fill: Vec<(usize, Vector3<f64>)> = Vec::new();
+        // Consecutive valid pairs (and the wrap-around pair when cyclic).
+        let mut pairs: Vec<(usize, usize)> = valid.windows(2).map(|w| (w[0], w[1])).collect();
+        if cyclic {
+            pairs.push((valid[valid.len() - 1], valid[0] + cols));
+        }
+        for (a, b) in pairs {
+            let gap = b - a;
+            if gap < 2 || gap - 1 > max_gap {
+                continue;
+            }
+            let (az_a, el_a) = angles(&row[a].unwrap());
+            let (az_b, el_b) = angles(&row[b % cols].unwrap());
+            let mut daz = az_b - az_a;
+            let tau = 2.0 * std::f64::consts::PI;
+            daz -= tau * (daz / tau).round();
+            for k in 1..gap {
+                let t = k as f64 / gap as f64;
+                fill.push((
+                    (a + k) % cols,
+                    from_angles(az_a + daz * t, el_a + (el_b - el_a) * t),
+                ));
+            }
+        }
+        for (c, v) in fill {
+            local[r * cols + c] = Some(v);
+        }
     }
 }
 
