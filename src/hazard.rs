@@ -8,8 +8,9 @@ use serde::{Deserialize, Serialize};
 use crate::cues::prior::{PriorLevel, WaterPrior};
 use crate::error::Result;
 use crate::grid::{BuildKeyHasher, CellKey, CellStats, TileMap};
-use crate::water::{find_bodies_and_void, HazardConfig, WaterBody};
+use crate::water::{find_bodies_and_void, WaterBody};
 
+mod config;
 mod dry;
 mod lookup;
 mod record;
@@ -17,6 +18,7 @@ mod region;
 mod terrain;
 mod window;
 
+pub use config::{HazardConfig, Vehicle};
 use dry::{dry_terrain, Dry, DryCells, NOT_DRY};
 pub use lookup::{MapIndex, MapLookup};
 use record::{cell_records, voided_water, water_surface, CellRule, Seen};
@@ -230,7 +232,9 @@ impl HazardMap {
         cfg: &HazardConfig,
         previous: &[WaterBody],
     ) -> Result<Self> {
-        let (bodies, void) = find_bodies_and_void(tiles, &observed, cfg, previous)?;
+        cfg.validate()?;
+        let (bodies, void) =
+            find_bodies_and_void(tiles, &observed, &cfg.fusion, &cfg.water, previous);
         let res = tiles.resolution();
         let water = water_surface(&bodies, res);
         let cells = cell_records(tiles, &observed, cfg, &water, &void, |_| true);

@@ -273,8 +273,8 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
         };
         tiles.add(k, &c);
     }
-    let map =
-        tarn::hazard::HazardMap::from_tiles(&tiles, &tarn::water::HazardConfig::default()).unwrap();
+    let map = tarn::hazard::HazardMap::from_tiles(&tiles, &tarn::hazard::HazardConfig::default())
+        .unwrap();
     let water: std::collections::BTreeSet<CellKey> = map
         .cells
         .iter()

@@ -6,9 +6,9 @@
 use std::path::PathBuf;
 
 use tarn::grid::{CellKey, CellStats, Evidence, TileMap};
+use tarn::hazard::HazardConfig;
 use tarn::hazard::{Class, HazardMap};
 use tarn::io::export;
-use tarn::water::HazardConfig;
 
 const RES: f64 = 0.1;
 

@@ -5,9 +5,9 @@ use std::collections::BTreeSet;
 
 use super::dry::{dry_terrain, DryCells};
 use super::terrain::{centre_std, terrain_hazard};
-use super::{CellMap, Class, Hazard, MapCell};
+use super::{CellMap, Class, Hazard, HazardConfig, MapCell};
 use crate::grid::{centre_of, CellKey, CellStats, Evidence, FusionLogs, TileMap};
-use crate::water::{HazardConfig, WaterBody};
+use crate::water::WaterBody;
 
 /// The depth written for a cell outside every water body: 0 (dry) where its water
 /// probability is below one half, else unknown (NaN): evidence says water, but no body

@@ -44,11 +44,11 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use rayon::prelude::*;
 
-use super::{cell_records, water_surface, Class, Hazard, HazardMap, MapCell};
+use super::{cell_records, water_surface, Class, Hazard, HazardConfig, HazardMap, MapCell};
 use crate::error::{Error, Result};
 use crate::grid::{ByteReader, CellKey, CellStats, TileMap, TILE_CELLS};
 use crate::water::{
-    bodies_in_part, DepthStats, HazardConfig, ShoreSample, SurfaceModel, SurfaceSource, WaterBody,
+    bodies_in_part, DepthStats, ShoreSample, SurfaceModel, SurfaceSource, WaterBody,
 };
 
 /// A tile key `(tx, ty)`: the tile of cells `tx·64 ..< tx·64 + 64` along x, likewise y.
@@ -200,7 +200,8 @@ pub fn finish_region(
     let part = bodies_in_part(
         &sub,
         &observed,
-        cfg,
+        &cfg.fusion,
+        &cfg.water,
         margin,
         |k, m| dom.deep(k, m),
         in_region,

@@ -186,7 +186,7 @@ mod tests {
 
     use super::*;
     use crate::grid::{DiscardSink, Evidence, GridConfig};
-    use crate::water::Vehicle;
+    use crate::hazard::Vehicle;
 
     /// Bit-for-bit equality of two maps (NaN depths included; `==` says NaN ≠ NaN).
     fn same_map(a: &HazardMap, b: &HazardMap) -> bool {

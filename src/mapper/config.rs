@@ -11,8 +11,9 @@ use crate::cues::{
 };
 use crate::error::{Error, Result};
 use crate::grid::{Fusion, GridConfig, RangeNoise};
+use crate::hazard::{HazardConfig, Vehicle};
 use crate::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
-use crate::water::{HazardConfig, Vehicle, WaterConfig};
+use crate::water::WaterConfig;
 
 /// The lidar: how its scans are fused and which of its cues run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -4,7 +4,7 @@
 //! The cues leave per-cell evidence in the map ([`crate::grid::Evidence`]); this stage turns
 //! it into bodies of water with a surface, a depth, an area and a volume, and the hazard map
 //! ([`crate::hazard::HazardMap::from_tiles`]) into one class and hazard per cell. The knobs
-//! are the fields of [`WaterConfig`] and [`Vehicle`], each named below with its default in
+//! are the fields of [`WaterConfig`] and [`Vehicle`](crate::hazard::Vehicle), each named below with its default in
 //! parentheses. Measured results are in docs/accuracy.md and docs/limits.md.
 //!
 //! ## 1. Bodies: connected components with hysteresis
@@ -194,7 +194,7 @@ pub mod surface;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::grid::{CellKey, Fusion};
+use crate::grid::CellKey;
 
 pub use search::find_bodies;
 // The water stage's seam for other map stores (the rolling window, a region of tiles):
@@ -371,89 +371,6 @@ impl WaterConfig {
     fn min_bottom_depth(&self) -> f64 {
         self.min_bottom_depth_m
             .unwrap_or(2.0 * crate::grid::RangeNoise::LIDAR.sigma0)
-    }
-}
-
-/// What the vehicle can drive through.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Vehicle {
-    /// Deepest water the vehicle may ford (m).
-    pub fording_depth_m: f64,
-    /// Highest step between neighbouring cells it can climb (m).
-    pub max_step_m: f64,
-    /// Steepest slope it can drive (degrees).
-    pub max_slope_deg: f64,
-}
-
-impl Default for Vehicle {
-    fn default() -> Self {
-        Vehicle {
-            fording_depth_m: 0.3,
-            max_step_m: 0.25,
-            max_slope_deg: 25.0,
-        }
-    }
-}
-
-impl Vehicle {
-    /// Checks that the depth and step are finite and non-negative (the step positive) and the
-    /// slope strictly between 0 and 90 degrees; the error names the bad field.
-    pub fn validate(&self) -> Result<()> {
-        let nonneg = |v: f64| v.is_finite() && v >= 0.0;
-        check(
-            "vehicle.fording_depth_m",
-            nonneg(self.fording_depth_m),
-            self.fording_depth_m,
-            "must be a finite number ≥ 0",
-        )?;
-        check(
-            "vehicle.max_step_m",
-            self.max_step_m.is_finite() && self.max_step_m > 0.0,
-            self.max_step_m,
-            "must be a finite number > 0",
-        )?;
-        check(
-            "vehicle.max_slope_deg",
-            self.max_slope_deg > 0.0 && self.max_slope_deg < 90.0,
-            self.max_slope_deg,
-            "must lie strictly between 0 and 90",
-        )
-    }
-}
-
-/// Everything the water and hazard stage needs.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
-#[serde(deny_unknown_fields, default)]
-pub struct HazardConfig {
-    /// The evidence fusion rule.
-    pub fusion: Fusion,
-    /// Water body segmentation and surface fitting.
-    pub water: WaterConfig,
-    /// What the vehicle can drive through.
-    pub vehicle: Vehicle,
-}
-
-impl HazardConfig {
-    /// Checks every part; the error names the bad field.
-    pub fn validate(&self) -> Result<()> {
-        self.fusion.validate()?;
-        self.water.validate()?;
-        self.vehicle.validate()
-    }
-
-    /// Reads a JSON config; unknown fields are errors naming the file.
-    pub fn from_json_file(path: &std::path::Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let cfg: HazardConfig = serde_json::from_str(&text).map_err(|e| {
-            Error::format(
-                path,
-                format!("line {} column {}", e.line(), e.column()),
-                e.to_string(),
-            )
-        })?;
-        cfg.validate()?;
-        Ok(cfg)
     }
 }
 

@@ -7,9 +7,9 @@ use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 use rayon::prelude::*;
 
 use super::body::body_of;
-use super::{HazardConfig, WaterBody, WaterConfig};
+use super::{WaterBody, WaterConfig};
 use crate::error::Result;
-use crate::grid::{CellKey, CellStats, FusionLogs, TileMap};
+use crate::grid::{CellKey, CellStats, Fusion, FusionLogs, TileMap};
 
 /// The eight neighbours of a cell, as key offsets.
 pub(crate) const N8: [(i64, i64); 8] = [
@@ -229,36 +229,33 @@ pub(crate) fn components_seeded(
 /// (empty for the first): ids follow the rule in the module documentation.
 pub fn find_bodies(
     tiles: &TileMap,
-    cfg: &HazardConfig,
+    fusion: &Fusion,
+    cfg: &WaterConfig,
     previous: &[WaterBody],
 ) -> Result<Vec<WaterBody>> {
+    fusion.validate()?;
+    cfg.validate()?;
     let observed: Vec<(CellKey, CellStats)> = tiles.observed().collect();
-    Ok(find_bodies_and_void(tiles, &observed, cfg, previous)?.0)
+    Ok(find_bodies_and_void(tiles, &observed, fusion, cfg, previous).0)
 }
 
 /// [`find_bodies`] given the tile map's observed cells, collected once by a caller that
 /// reads them again (a scan of the tiles reads every cell slot, observed or not), and the
 /// cells whose bottom returns the search found to be no evidence of water (see
-/// [`bodies_from`]).
+/// [`bodies_from`]). The caller has validated `fusion` and `cfg`.
 pub(crate) fn find_bodies_and_void(
     tiles: &TileMap,
     observed: &[(CellKey, CellStats)],
-    cfg: &HazardConfig,
+    fusion: &Fusion,
+    cfg: &WaterConfig,
     previous: &[WaterBody],
-) -> Result<(Vec<WaterBody>, BTreeSet<CellKey>)> {
-    cfg.validate()?;
-    let info = infos(tiles, observed, cfg);
+) -> (Vec<WaterBody>, BTreeSet<CellKey>) {
+    let info = infos(tiles, observed, fusion, cfg);
     let seeds = info
         .iter()
-        .filter(|(_, i)| seeds_body(i.p, &cfg.water))
+        .filter(|(_, i)| seeds_body(i.p, cfg))
         .map(|(&k, _)| k);
-    Ok(bodies_from(
-        &info,
-        seeds,
-        tiles.resolution(),
-        &cfg.water,
-        previous,
-    ))
+    bodies_from(&info, seeds, tiles.resolution(), cfg, previous)
 }
 
 /// The bodies a part of a map decides: the body search run on the part's observed cells,
@@ -283,14 +280,14 @@ pub(crate) struct PartBodies {
 pub(crate) fn bodies_in_part(
     tiles: &TileMap,
     observed: &[(CellKey, CellStats)],
-    cfg: &HazardConfig,
+    fusion: &Fusion,
+    w: &WaterConfig,
     margin: i64,
     mut known: impl FnMut(CellKey, i64) -> bool,
     wanted: impl Fn(CellKey) -> bool,
 ) -> PartBodies {
     let res = tiles.resolution();
-    let w = &cfg.water;
-    let info = infos(tiles, observed, cfg);
+    let info = infos(tiles, observed, fusion, w);
     let seeds = info
         .iter()
         .filter(|(_, i)| seeds_body(i.p(), w))
@@ -352,7 +349,8 @@ pub(crate) fn bodies_in_part(
 pub(crate) fn infos(
     tiles: &TileMap,
     observed: &[(CellKey, CellStats)],
-    cfg: &HazardConfig,
+    fusion: &Fusion,
+    cfg: &WaterConfig,
 ) -> BTreeMap<CellKey, Info> {
     let res = tiles.resolution();
     // Only the neighbourhood of possible water matters: the cells a body can grow over
@@ -361,16 +359,16 @@ pub(crate) fn infos(
     // resolution⌉. So only cells in
     // blocks of 2n + 2 cells next to such a cell's block are looked at (most of a map is
     // dry and far from water: every frame, this skips an ordered map of all of it).
-    let b = 2 * cfg.water.shore_radius_cells(res) + 2;
+    let b = 2 * cfg.shore_radius_cells(res) + 2;
     let block = |k: CellKey| (k.x.div_euclid(b), k.y.div_euclid(b));
-    let logs = cfg.fusion.logs();
+    let logs = fusion.logs();
     let p: Vec<f64> = observed
         .iter()
         .map(|(_, c)| c.ev.water_probability_in(&logs))
         .collect();
     let mut near: HashSet<(i64, i64)> = HashSet::new();
     for ((k, c), &p) in observed.iter().zip(&p) {
-        if p >= cfg.water.p_low || c.ev.depth_n > 0 {
+        if p >= cfg.p_low || c.ev.depth_n > 0 {
             let (bx, by) = block(*k);
             for dx in -1..=1 {
                 for dy in -1..=1 {

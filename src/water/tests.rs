@@ -5,8 +5,8 @@ use proptest::prelude::*;
 use super::body::in_small_hole;
 use super::search::{add, assign_ids, N4};
 use super::*;
-use crate::grid::{CellStats, Evidence, TileMap};
-use crate::hazard::{Class, Hazard, HazardMap, MapCell};
+use crate::grid::{CellStats, Evidence, Fusion, TileMap};
+use crate::hazard::{Class, Hazard, HazardConfig, HazardMap, MapCell, Vehicle};
 
 const RES: f64 = 0.1;
 

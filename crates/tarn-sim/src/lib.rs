@@ -8,7 +8,7 @@
 // The core's modules under their own names, so that paths inside the simulator read as they
 // do in the core.
 pub(crate) use tarn::{
-    classify, error, geom, grid, hazard, io, mapper, optics, project, rig, sensor, water,
+    classify, error, geom, grid, hazard, io, mapper, optics, project, rig, sensor,
 };
 
 pub mod eval;

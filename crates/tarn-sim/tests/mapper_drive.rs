@@ -87,7 +87,7 @@ fn cues_put_water_evidence_at_the_pond() {
     assert!(reps
         .iter()
         .all(|r| r.cues.lidar.is_some_and(|l| l.diag_ret > 0)));
-    let hazard = tarn::water::HazardConfig {
+    let hazard = tarn::hazard::HazardConfig {
         fusion: cfg.fusion,
         ..Default::default()
     };

@@ -94,7 +94,7 @@ pub struct LogBuildConfig {
 struct ConfigFile {
     grid: crate::grid::GridConfig,
     fusion: crate::grid::Fusion,
-    vehicle: crate::water::Vehicle,
+    vehicle: crate::hazard::Vehicle,
     water: crate::water::WaterConfig,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     lidar: Option<crate::mapper::LidarConfig>,

@@ -181,7 +181,7 @@ fn ratio(a: usize, b: usize) -> Option<f64> {
 }
 
 /// The vehicle's limits that make true terrain an obstacle: the mapper's defaults
-/// ([`crate::water::Vehicle`]).
+/// ([`crate::hazard::Vehicle`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ObstacleLimits {
     pub max_step_m: f64,
@@ -190,7 +190,7 @@ pub struct ObstacleLimits {
 
 impl Default for ObstacleLimits {
     fn default() -> Self {
-        let v = crate::water::Vehicle::default();
+        let v = crate::hazard::Vehicle::default();
         ObstacleLimits {
             max_step_m: v.max_step_m,
             max_slope_deg: v.max_slope_deg,

@@ -1005,7 +1005,7 @@ fn a_rig_cannot_carry_scene_truth() {
             .unwrap()
             .mapper_config();
         assert_eq!(cfg.lidar.as_ref().unwrap().attenuation_per_m, None);
-        assert_eq!(cfg.vehicle, crate::water::Vehicle::default());
+        assert_eq!(cfg.vehicle, crate::hazard::Vehicle::default());
         outs.push((std::fs::read(out.join("rig.toml")).unwrap(), cfg));
     }
     assert!(outs[0].0 == outs[1].0, "rig.toml differs between scenes");
