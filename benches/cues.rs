@@ -6,8 +6,8 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use tarn::cues::{
-    stereo_reflections, BeamModel, GrayImage, LidarCueConfig, LidarCueModel, MirrorCheck,
-    ReflectivityConfig, StereoCueConfig,
+    stereo_reflections, BeamModel, CueRun, GrayImage, LidarBuffers, LidarCueConfig, LidarCueModel,
+    MirrorCheck, ReflectivityConfig, StereoCueConfig,
 };
 use tarn::geom::camera::{CameraModel, Distortion};
 use tarn::geom::{PointCloud, Pose};
@@ -136,29 +136,46 @@ fn bench(c: &mut Criterion) {
         Some(ReflectivityConfig::default()),
     )
     .unwrap();
+    // A scan's run as the mapper asks it (the surface points for the image labels), with
+    // fresh buffers each time.
+    let lidar_run = CueRun {
+        surface_points: true,
+        ..CueRun::new(0.1, 0.0)
+    };
+    let stereo_run = CueRun::new(0.1, 0.0);
     let mut g = c.benchmark_group("cues");
     g.sample_size(20);
     g.bench_function("lidar 64x2048: no-return + bottom/specular", |b| {
-        b.iter(|| plain.run(&scan, 0.1, 0.0).unwrap())
+        b.iter(|| {
+            plain
+                .run(&scan, &lidar_run, &mut LidarBuffers::default())
+                .unwrap()
+        })
     });
     g.bench_function("lidar 64x2048: + reflectivity", |b| {
-        b.iter(|| with_refl.run(&scan, 0.1, 0.0).unwrap())
+        b.iter(|| {
+            with_refl
+                .run(&scan, &lidar_run, &mut LidarBuffers::default())
+                .unwrap()
+        })
     });
     let (cloud, img, cam) = stereo_cloud();
     let cfg = StereoCueConfig::default();
     g.bench_function("stereo 640x480: reflections", |b| {
-        b.iter(|| stereo_reflections(&cloud, 0.1, 0.0, None, &cfg).unwrap())
+        b.iter(|| stereo_reflections(&cloud, &stereo_run, None, &cfg).unwrap())
     });
     let chk = MirrorCheck {
         camera: &cam,
         image: &img,
     };
     g.bench_function("stereo 640x480: reflections + mirror check", |b| {
-        b.iter(|| stereo_reflections(&cloud, 0.1, 0.0, Some(chk), &cfg).unwrap())
+        b.iter(|| stereo_reflections(&cloud, &stereo_run, Some(chk), &cfg).unwrap())
     });
     g.finish();
-    let r = plain.run(&scan, 0.1, 0.0).unwrap();
-    let s = stereo_reflections(&cloud, 0.1, 0.0, Some(chk), &cfg).unwrap();
+    let r = plain
+        .run(&scan, &lidar_run, &mut LidarBuffers::default())
+        .unwrap();
+    let s = stereo_reflections(&cloud, &stereo_run, Some(chk), &cfg).unwrap();
     eprintln!(
         "lidar: {:?}\nstereo: {} runs, {} reflected points, {} evidence cells",
         r.stats,

@@ -6,8 +6,8 @@
 use std::path::Path;
 
 use tarn::cues::{
-    estimate_sensor_height, normalised_reflectivity, BeamModel, LidarCueConfig, LidarCueModel,
-    ReflectivityConfig,
+    estimate_sensor_height, normalised_reflectivity, BeamModel, CueRun, LidarBuffers,
+    LidarCueConfig, LidarCueModel, ReflectivityConfig,
 };
 use tarn::geom::PointCloud;
 use tarn::grid::{key_of, CellKey, Cue};
@@ -112,7 +112,13 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
     )
     .unwrap();
     eprintln!("diagnostic interval {:?}", model.interval());
-    let out = model.run(&cloud, RES, 0.0).unwrap();
+    let run = CueRun {
+        surface_points: true,
+        ..CueRun::new(RES, 0.0)
+    };
+    let out = model
+        .run(&cloud, &run, &mut LidarBuffers::default())
+        .unwrap();
     eprintln!("{:?}", out.stats);
 
     // Cells holding returns labelled as dry ground.
@@ -384,7 +390,13 @@ fn rellis_missing_returns_past_where_concrete_stops_returning_say_nothing() {
             None,
         )
         .unwrap();
-        let out = model.run(&cloud, RES, 0.0).unwrap();
+        let run = CueRun {
+            surface_points: true,
+            ..CueRun::new(RES, 0.0)
+        };
+        let out = model
+            .run(&cloud, &run, &mut LidarBuffers::default())
+            .unwrap();
         let mut by_label: std::collections::BTreeMap<u32, usize> = Default::default();
         let mut lookahead = Vec::new();
         for (k, e) in out.evidence.iter() {

@@ -9,7 +9,8 @@ use serde::Serialize;
 
 use super::lidar::{LidarBuffers, LidarCueModel, LidarCueStats, ScanSurface};
 use super::prior::WaterPrior;
-use super::stereo::{stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig};
+use super::stereo::{stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig};
+use super::CueRun;
 use crate::error::Result;
 use crate::grid::{CellKey, Evidence, IngestStats, RangeNoise, RollingGrid};
 use crate::sensor::{Frame, Image, Pixels};
@@ -133,14 +134,12 @@ impl FrameCues {
     ) -> Result<Option<ScanSurface>> {
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
         if let (Some(model), Some(cloud)) = (&self.cfg.lidar, &frame.lidar) {
-            let mut out = model.run_in(
-                cloud,
-                res,
-                z_ref,
-                self.cfg.surface_points,
-                self.prior.as_ref(),
-                &mut self.lidar_bufs,
-            )?;
+            let run = CueRun {
+                surface_points: self.cfg.surface_points,
+                prior: self.prior.as_ref(),
+                ..CueRun::new(res, z_ref)
+            };
+            let mut out = model.run(cloud, &run, &mut self.lidar_bufs)?;
             rep.lidar_ingest = Some(grid.ingest(&out.corrected, &self.cfg.lidar_noise)?);
             rep.lidar = Some(out.stats);
             out.evidence.drain_batch_into(&mut self.batch);
@@ -165,8 +164,11 @@ impl FrameCues {
         if let (Some(scfg), Some(cloud)) = (&self.cfg.stereo, &frame.stereo) {
             let gray = mirror_gray(frame, self.cfg.mirror_check)?;
             let check = mirror_check_of(frame, gray.as_ref());
-            let out =
-                stereo_reflections_with(cloud, res, z_ref, check, scfg, self.cfg.surface_points)?;
+            let run = CueRun {
+                surface_points: self.cfg.surface_points,
+                ..CueRun::new(res, z_ref)
+            };
+            let out = stereo_reflections(cloud, &run, check, scfg)?;
             rep.stereo_ingest = Some(grid.ingest(&out.corrected, &scfg.noise)?);
             rep.stereo_runs = out.runs;
             rep.stereo_reflected_points = out.reflected_points;

@@ -41,8 +41,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::prior::WaterPrior;
-use super::EvidenceMap;
+use super::{CueRun, EvidenceMap};
 use crate::error::{Error, Result};
 use crate::geom::PointCloud;
 
@@ -239,7 +238,7 @@ pub struct LidarCues {
     pub surface: ScanSurface,
 }
 
-/// Storage of [`LidarCueModel::run_in`] kept from scan to scan: the beam directions, and
+/// Storage of [`LidarCueModel::run`] kept from scan to scan: the beam directions, and
 /// the evidence map and corrected cloud of a run once given back
 /// ([`LidarBuffers::recycle`]).
 #[derive(Debug, Clone, Default)]
@@ -280,43 +279,26 @@ pub struct ScanSurface {
 }
 
 impl LidarCueModel {
-    /// Runs the cues on one organized scan. `resolution` and `z_ref` are the grid's.
-    pub fn run(&self, cloud: &PointCloud, resolution: f64, z_ref: f64) -> Result<LidarCues> {
-        self.run_with(cloud, resolution, z_ref, true, None)
-    }
-
-    /// [`Self::run`], collecting the dry and wet points of [`ScanSurface`] only when
-    /// `surface_points` (the image labels' colour check reads them; nothing else does), and
-    /// reading the water level an earlier map found where `prior` has one: a return under
-    /// it by more than the noise of both is a bottom return.
-    pub fn run_with(
-        &self,
-        cloud: &PointCloud,
-        resolution: f64,
-        z_ref: f64,
-        surface_points: bool,
-        prior: Option<&WaterPrior>,
-    ) -> Result<LidarCues> {
-        let mut bufs = LidarBuffers::default();
-        self.run_in(cloud, resolution, z_ref, surface_points, prior, &mut bufs)
-    }
-
-    /// [`Self::run_with`] in the storage of earlier scans (`bufs`; give a run's evidence map
-    /// and corrected cloud back with [`LidarBuffers::recycle`] once used): the same
-    /// result, without a scan's worth of fresh memory.
+    /// Runs the cues on one organized scan, in the storage of earlier scans (`bufs`, which
+    /// may be fresh; give a run's evidence map and corrected cloud back with
+    /// [`LidarBuffers::recycle`] once used): the same result, without a scan's worth of
+    /// fresh memory.
     ///
     /// Each scan line is walked on its own (in parallel); their
     /// events are then tallied in line order, the reflectivity cue reads the ground
     /// returns, and the lines' dry reach closes the scan's surface.
-    pub fn run_in(
+    pub fn run(
         &self,
         cloud: &PointCloud,
-        resolution: f64,
-        z_ref: f64,
-        surface_points: bool,
-        prior: Option<&WaterPrior>,
+        run: &CueRun,
         bufs: &mut LidarBuffers,
     ) -> Result<LidarCues> {
+        let CueRun {
+            resolution,
+            z_ref,
+            surface_points,
+            prior,
+        } = *run;
         cloud.validate()?;
         self.check_beams_fit(cloud)?;
         beam_directions_into(cloud, &self.beams, &mut bufs.dirs);

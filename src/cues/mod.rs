@@ -42,14 +42,42 @@ use crate::grid::{key_of, quantize_mm, BuildKeyHasher, CellKey, Evidence};
 pub use frame::FrameCuesReport;
 pub use frame::{FrameCueConfig, FrameCues};
 pub use lidar::{
-    estimate_sensor_height, BeamModel, DryReach, LidarCueConfig, LidarCueModel, LidarCues,
-    ScanSurface,
+    estimate_sensor_height, BeamModel, DryReach, LidarBuffers, LidarCueConfig, LidarCueModel,
+    LidarCues, ScanSurface,
 };
 pub use reflectivity::{normalised_reflectivity, ChannelLaw, ReflectivityConfig};
 pub use stereo::{
-    stereo_reflections, stereo_reflections_with, GrayImage, MirrorCheck, StereoCueConfig,
-    StereoCues, StereoSeen,
+    stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig, StereoCues, StereoSeen,
 };
+
+/// The options of one run of a cue: the grid its events are keyed to, and what else it is
+/// asked for.
+#[derive(Debug, Clone, Copy)]
+pub struct CueRun<'a> {
+    /// Cell size of the grid, metres.
+    pub resolution: f64,
+    /// The grid's reference height (`z_ref`), metres.
+    pub z_ref: f64,
+    /// Also say what the run finds of the surface under each return or pixel
+    /// ([`ScanSurface`], [`StereoCues::seen`]): the image labels' colour check reads it,
+    /// nothing else does.
+    pub surface_points: bool,
+    /// The water levels an earlier map found (the lidar cue reads them: a return under one
+    /// by more than the noise of both is a bottom return).
+    pub prior: Option<&'a prior::WaterPrior>,
+}
+
+impl CueRun<'_> {
+    /// Events keyed to a grid of `resolution` m at `z_ref`; nothing else asked for.
+    pub fn new(resolution: f64, z_ref: f64) -> Self {
+        CueRun {
+            resolution,
+            z_ref,
+            surface_points: false,
+            prior: None,
+        }
+    }
+}
 
 /// A sparse accumulator of per-cell evidence for one frame, keyed like the grid.
 #[derive(Debug, Clone)]

@@ -49,7 +49,7 @@ use nalgebra::Point3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::EvidenceMap;
+use super::{CueRun, EvidenceMap};
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{PointCloud, Pose};
@@ -231,7 +231,7 @@ pub struct StereoCues {
     /// per span.
     pub span_cells: usize,
     /// What each element says of the surface under its pixel ([`StereoSeen`]), for the
-    /// colour labels' check: empty unless [`stereo_reflections_with`] was asked for it.
+    /// colour labels' check: empty unless [`stereo_reflections`] was asked for it.
     pub seen: Vec<StereoSeen>,
 }
 
@@ -257,33 +257,26 @@ pub enum StereoSeen {
     NotGround,
 }
 
-/// Finds reflections in an organized stereo cloud (rows top to bottom as in the image).
-/// `resolution` and `z_ref` are the grid's.
-pub fn stereo_reflections(
-    cloud: &PointCloud,
-    resolution: f64,
-    z_ref: f64,
-    check: Option<MirrorCheck<'_>>,
-    cfg: &StereoCueConfig,
-) -> Result<StereoCues> {
-    stereo_reflections_with(cloud, resolution, z_ref, check, cfg, false)
-}
-
-/// [`stereo_reflections`], filling [`StereoCues::seen`] only when `surface_points` (the
-/// image labels' colour check reads it).
+/// Finds reflections in an organized stereo cloud (rows top to bottom as in the image),
+/// filling [`StereoCues::seen`] only when `run.surface_points` (the image labels' colour
+/// check reads it; the cue reads no prior).
 ///
 /// A frame goes through four phases, in the order its data flows: the candidate runs up
 /// each column; the frame's water level, at the waterline and by symmetry; the runs
 /// confirmed against that level and the image, with their evidence and mirrored points;
 /// and the points below the known level up the columns with confirmed water.
-pub fn stereo_reflections_with(
+pub fn stereo_reflections(
     cloud: &PointCloud,
-    resolution: f64,
-    z_ref: f64,
+    run: &CueRun,
     check: Option<MirrorCheck<'_>>,
     cfg: &StereoCueConfig,
-    surface_points: bool,
 ) -> Result<StereoCues> {
+    let CueRun {
+        resolution,
+        z_ref,
+        surface_points,
+        ..
+    } = *run;
     cloud.validate()?;
     cfg.validate()?;
     if !cloud.is_organized() {

@@ -22,7 +22,7 @@ use tarn::classify::Label;
 use tarn::cues::frame::{mirror_check_of, mirror_gray};
 use tarn::cues::lidar::LidarBuffers;
 use tarn::cues::{
-    estimate_sensor_height, stereo_reflections_with, FrameCueConfig, GrayImage, LidarCueModel,
+    estimate_sensor_height, stereo_reflections, CueRun, FrameCueConfig, GrayImage, LidarCueModel,
     StereoCueConfig,
 };
 use tarn::error::{Error, Result};
@@ -495,7 +495,10 @@ fn add_frame_stages<'a>(
     grid: &RollingGrid,
 ) -> Result<()> {
     let (res, z_ref) = (opts.grid.resolution, opts.grid.z_ref);
-    let surface_points = setup.fc.surface_points;
+    let run = CueRun {
+        surface_points: setup.fc.surface_points,
+        ..CueRun::new(res, z_ref)
+    };
     let (lidar_noise, stereo_noise) = (setup.lidar_noise, setup.stereo_noise);
     let (mut gl, mut gs) = (grid.clone(), grid.clone());
     if let Some(c) = setup.lidar {
@@ -511,7 +514,7 @@ fn add_frame_stages<'a>(
     if let (Some(c), Some(m)) = (setup.lidar, &setup.lidar_model) {
         let mut bufs = LidarBuffers::default();
         st.add("cue_lidar", true, move || {
-            let out = m.run_in(c, res, z_ref, surface_points, None, &mut bufs)?;
+            let out = m.run(c, &run, &mut bufs)?;
             bufs.recycle(out.evidence, out.corrected);
             Ok(())
         });
@@ -523,7 +526,7 @@ fn add_frame_stages<'a>(
         };
         let check = mirror_check_of(setup.frame, setup.gray.as_ref());
         st.add("cue_stereo", true, move || {
-            stereo_reflections_with(c, res, z_ref, check, &cfg, surface_points).map(|_| ())
+            stereo_reflections(c, &run, check, &cfg).map(|_| ())
         });
     }
     Ok(())

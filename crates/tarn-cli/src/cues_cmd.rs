@@ -7,7 +7,8 @@ use clap::Args;
 use serde::Serialize;
 use tarn::cues::lidar::LidarCueStats;
 use tarn::cues::{
-    estimate_sensor_height, BeamModel, LidarCueConfig, LidarCueModel, ReflectivityConfig,
+    estimate_sensor_height, BeamModel, CueRun, LidarBuffers, LidarCueConfig, LidarCueModel,
+    ReflectivityConfig,
 };
 use tarn::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
 
@@ -88,7 +89,11 @@ pub fn run(a: &CuesArgs) -> anyhow::Result<()> {
         cfg,
         Some(ReflectivityConfig::default()),
     )?;
-    let out = model.run(&cloud, a.resolution, 0.0)?;
+    let run = CueRun {
+        surface_points: true,
+        ..CueRun::new(a.resolution, 0.0)
+    };
+    let out = model.run(&cloud, &run, &mut LidarBuffers::default())?;
     let count = |f: &dyn Fn(&tarn::grid::Evidence) -> bool| {
         out.evidence.iter().filter(|(_, e)| f(e)).count()
     };

@@ -10,6 +10,7 @@ use super::*;
 use crate::cues::prior::{PriorLevel, WaterPrior};
 use crate::cues::reflectivity::ReflectivityConfig;
 use crate::cues::testutil::TestRng;
+use crate::cues::CueRun;
 use crate::grid::{key_of, CellKey, Evidence, GridConfig, RangeNoise, RollingGrid};
 use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig, LidarWaterModel};
 
@@ -134,7 +135,9 @@ fn run_over_pond(
         beams: BeamModel::Directions(dirs),
         ..base.clone()
     };
-    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    let out = cue
+        .run(&cloud, &scan_run(), &mut LidarBuffers::default())
+        .unwrap();
     (cloud, out, shots)
 }
 
@@ -193,7 +196,7 @@ fn vertical_scanner_no_return_evidence_is_exactly_the_optics_interval() {
         beams: BeamModel::default(),
         ..cue.clone()
     }
-    .run(&column, RES, 0.0)
+    .run(&column, &scan_run(), &mut LidarBuffers::default())
     .unwrap();
     assert_eq!(inferred.stats.no_direction, 0);
     assert_eq!(inferred.stats.noret, out.stats.noret);
@@ -307,7 +310,9 @@ fn deep_below_level_return_is_specular_and_left_out_of_the_terrain() {
     pts.push([8.0, 0.0, -2.0]);
     let mut cloud = PointCloud::organized(1, 4, pts).unwrap();
     cloud.sensor_origin = o;
-    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    let out = cue
+        .run(&cloud, &scan_run(), &mut LidarBuffers::default())
+        .unwrap();
     assert_eq!(out.stats.specular, 1);
     assert_eq!(out.stats.bottom, 0);
     // Not fused as terrain: mirrored about the walked level it would stand where the tree
@@ -380,7 +385,9 @@ fn spinning_lidar_with_inferred_beams_finds_the_pond_and_only_the_pond() {
         in_pond: &pond,
     };
     let (cloud, shots, _) = spinning_scan(&scene, 32, 1024);
-    let out = cue.run(&cloud, RES, 0.0).unwrap();
+    let out = cue
+        .run(&cloud, &scan_run(), &mut LidarBuffers::default())
+        .unwrap();
     let expected = shots
         .iter()
         .filter(|s| matches!(s, Shot::Missing { lookahead, over_water: true } if *lookahead >= start && *lookahead <= end))
@@ -463,7 +470,10 @@ fn results_do_not_depend_on_thread_count() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| cue.run(&cloud, RES, 0.0).unwrap())
+            .install(|| {
+                cue.run(&cloud, &scan_run(), &mut LidarBuffers::default())
+                    .unwrap()
+            })
     };
     let (a, b) = (run(1), run(2));
     assert_eq!(a.evidence.clone().into_batch(), b.evidence.into_batch());
@@ -505,8 +515,10 @@ fn buffers_reused_across_scans_give_each_scan_its_own_result() {
     .collect();
     let mut bufs = LidarBuffers::default();
     for (i, c) in scans.iter().enumerate() {
-        let fresh = cue.run_with(c, RES, 0.0, true, None).unwrap();
-        let reused = cue.run_in(c, RES, 0.0, true, None, &mut bufs).unwrap();
+        let fresh = cue
+            .run(c, &scan_run(), &mut LidarBuffers::default())
+            .unwrap();
+        let reused = cue.run(c, &scan_run(), &mut bufs).unwrap();
         assert!(
             fresh.evidence.iter().count() > 10,
             "scan {i}: {:?}",
@@ -541,7 +553,10 @@ fn bad_beam_models_are_errors_not_panics() {
     )
     .unwrap();
     let cloud = PointCloud::organized(1, 4, vec![[f32::NAN; 3]; 4]).unwrap();
-    let e = cue.run(&cloud, RES, 0.0).unwrap_err().to_string();
+    let e = cue
+        .run(&cloud, &scan_run(), &mut LidarBuffers::default())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("3 directions"), "{e}");
     let bad = LidarCueConfig {
         below_gate_m: f64::NAN,
@@ -561,8 +576,8 @@ fn bad_beam_models_are_errors_not_panics() {
     .unwrap();
     let e = spin.run(
         &PointCloud::organized(2, 2, vec![[f32::NAN; 3]; 4]).unwrap(),
-        RES,
-        0.0,
+        &scan_run(),
+        &mut LidarBuffers::default(),
     );
     assert!(e.unwrap_err().to_string().contains("5 ring elevations"));
 }
@@ -612,7 +627,7 @@ fn dry_ground_sloping_away_is_not_the_bottom_of_water() {
     let run = |cfg: LidarCueConfig| {
         LidarCueModel::new(optics(h), BeamModel::default(), cfg, None)
             .unwrap()
-            .run(&cloud, RES, 0.0)
+            .run(&cloud, &scan_run(), &mut LidarBuffers::default())
             .unwrap()
             .stats
     };
@@ -801,7 +816,17 @@ fn returns_under_a_prior_water_level_are_bottom_returns_and_dry_ground_beside_it
         ),
         ..base.clone()
     };
-    let run = |prior: &WaterPrior| cue.run_with(&cloud, RES, 0.0, false, Some(prior)).unwrap();
+    let run = |prior: &WaterPrior| {
+        cue.run(
+            &cloud,
+            &CueRun {
+                prior: Some(prior),
+                ..CueRun::new(RES, 0.0)
+            },
+            &mut LidarBuffers::default(),
+        )
+        .unwrap()
+    };
     let wet = run(&prior_at(0.05, 0.005));
     let seen = (0..cloud.len())
         .filter(|&k| cloud.is_valid(k) && in_patch(cloud.point_in_map(k).x))
@@ -893,4 +918,12 @@ fn a_below_level_return_is_ground_only_where_the_line_sees_nothing_above_it() {
         .fold(f64::INFINITY, f64::min);
     assert!(lowest > p.z + 0.3, "{lowest}");
     assert!(!refuted(sparse));
+}
+
+/// The options of a scan's run in these tests: the test grid, with the surface points.
+fn scan_run() -> CueRun<'static> {
+    CueRun {
+        surface_points: true,
+        ..CueRun::new(RES, 0.0)
+    }
 }

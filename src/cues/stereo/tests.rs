@@ -219,8 +219,13 @@ fn still_pond_reflections_find_the_water_and_put_trees_back_above_it() {
         camera: &r.camera,
         image: &r.image,
     };
-    let out =
-        stereo_reflections(&r.cloud, RES, 0.0, Some(chk), &StereoCueConfig::default()).unwrap();
+    let out = stereo_reflections(
+        &r.cloud,
+        &CueRun::new(RES, 0.0),
+        Some(chk),
+        &StereoCueConfig::default(),
+    )
+    .unwrap();
     assert!(out.runs > 50, "{} runs", out.runs);
     // Runs whose mirrored points project onto something else (occlusion) may fail the
     // correlation; they must stay few.
@@ -299,8 +304,13 @@ fn dry_ditch_is_not_a_reflection() {
         camera: &r.camera,
         image: &r.image,
     };
-    let out =
-        stereo_reflections(&r.cloud, RES, 0.0, Some(chk), &StereoCueConfig::default()).unwrap();
+    let out = stereo_reflections(
+        &r.cloud,
+        &CueRun::new(RES, 0.0),
+        Some(chk),
+        &StereoCueConfig::default(),
+    )
+    .unwrap();
     assert_eq!(out.runs, 0);
     assert!(out.evidence.is_empty());
     assert_eq!(out.corrected, r.cloud);
@@ -318,12 +328,16 @@ fn an_image_that_does_not_mirror_rejects_the_runs() {
         camera: &r.camera,
         image: &img,
     };
-    let out =
-        stereo_reflections(&r.cloud, RES, 0.0, Some(chk), &StereoCueConfig::default()).unwrap();
+    let out = stereo_reflections(
+        &r.cloud,
+        &CueRun::new(RES, 0.0),
+        Some(chk),
+        &StereoCueConfig::default(),
+    )
+    .unwrap();
     let good = stereo_reflections(
         &r.cloud,
-        RES,
-        0.0,
+        &CueRun::new(RES, 0.0),
         Some(MirrorCheck {
             camera: &r.camera,
             image: &r.image,
@@ -348,10 +362,21 @@ fn wrong_image_size_and_unorganized_clouds_are_errors() {
         camera: &r.camera,
         image: &img,
     };
-    let e = stereo_reflections(&r.cloud, RES, 0.0, Some(chk), &StereoCueConfig::default());
+    let e = stereo_reflections(
+        &r.cloud,
+        &CueRun::new(RES, 0.0),
+        Some(chk),
+        &StereoCueConfig::default(),
+    );
     assert!(e.unwrap_err().to_string().contains("whole-factor"));
     let flat = PointCloud::unorganized(vec![[0.0; 3]; 4]);
-    assert!(stereo_reflections(&flat, RES, 0.0, None, &StereoCueConfig::default()).is_err());
+    assert!(stereo_reflections(
+        &flat,
+        &CueRun::new(RES, 0.0),
+        None,
+        &StereoCueConfig::default()
+    )
+    .is_err());
     assert!(GrayImage::new(3, 3, vec![0.0; 8]).is_err());
 }
 
@@ -371,7 +396,13 @@ fn symmetry_gives_the_level_when_the_shore_is_a_bank_above_it() {
         })
         .collect();
     let r = render(&w, 320, 240);
-    let out = stereo_reflections(&r.cloud, RES, 0.0, None, &StereoCueConfig::default()).unwrap();
+    let out = stereo_reflections(
+        &r.cloud,
+        &CueRun::new(RES, 0.0),
+        None,
+        &StereoCueConfig::default(),
+    )
+    .unwrap();
     let l = out.symmetry_level.unwrap_or_else(|| {
         panic!(
             "no symmetry level: {} runs, {} pairs, {} reflected, {} rejected",
@@ -401,7 +432,13 @@ fn bank_and_walls(bank: f64) -> World {
 /// water, level samples at the water, corrected points at the truth and above the water.
 fn assert_waterline(w: &World, width: usize, height: usize) {
     let r = render(w, width, height);
-    let out = stereo_reflections(&r.cloud, RES, 0.0, None, &StereoCueConfig::default()).unwrap();
+    let out = stereo_reflections(
+        &r.cloud,
+        &CueRun::new(RES, 0.0),
+        None,
+        &StereoCueConfig::default(),
+    )
+    .unwrap();
     assert!(out.runs >= 10, "{} runs", out.runs);
     let wl = out.waterline_level.unwrap_or_else(|| {
         panic!(
@@ -484,8 +521,7 @@ fn one_point_pulled_near_by_range_noise_does_not_reject_the_run() {
     for pull in [0.0, 2.5] {
         let out = stereo_reflections(
             &column_cloud(pull),
-            RES,
-            0.0,
+            &CueRun::new(RES, 0.0),
             None,
             &StereoCueConfig::default(),
         )
@@ -566,7 +602,7 @@ fn below_the_known_level_a_point_up_a_water_column_is_a_reflection_and_a_ditch_i
         ..StereoCueConfig::default()
     };
     let cloud = columns_cloud(&island_and_ditch());
-    let out = stereo_reflections(&cloud, RES, 0.0, None, &cfg).unwrap();
+    let out = stereo_reflections(&cloud, &CueRun::new(RES, 0.0), None, &cfg).unwrap();
     // The wall's reflection is the one confirmed run; the island is its far shore.
     assert_eq!(out.runs, 1);
     let level = out.waterline_level.expect("a waterline level");
@@ -600,7 +636,7 @@ fn below_the_known_level_a_point_up_a_water_column_is_a_reflection_and_a_ditch_i
     }
     // Without a confirmed run in its column the ditch says nothing, even below the level.
     let ditch_only = columns_cloud(&island_and_ditch()[1..]);
-    let out = stereo_reflections(&ditch_only, RES, 0.0, None, &cfg).unwrap();
+    let out = stereo_reflections(&ditch_only, &CueRun::new(RES, 0.0), None, &cfg).unwrap();
     assert!(out.evidence.is_empty() && out.level_points == 0 && out.runs == 0);
 }
 
@@ -662,9 +698,18 @@ fn stereo_elements_say_ground_at_the_level_and_not_ground_at_reflections() {
         .collect();
     columns.push(c);
     let cloud = columns_cloud(&columns);
-    let off = stereo_reflections(&cloud, RES, 0.0, None, &cfg).unwrap();
+    let off = stereo_reflections(&cloud, &CueRun::new(RES, 0.0), None, &cfg).unwrap();
     assert!(off.seen.is_empty());
-    let out = stereo_reflections_with(&cloud, RES, 0.0, None, &cfg, true).unwrap();
+    let out = stereo_reflections(
+        &cloud,
+        &CueRun {
+            surface_points: true,
+            ..CueRun::new(RES, 0.0)
+        },
+        None,
+        &cfg,
+    )
+    .unwrap();
     assert_eq!(out.runs, 1);
     let (rows, cols) = (cloud.rows, cloud.cols);
     let at = |c: usize, i: usize| out.seen[(rows - 1 - i) * cols + c];

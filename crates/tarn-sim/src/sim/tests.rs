@@ -1106,7 +1106,13 @@ fn missing_returns_past_the_scans_own_dry_limit_say_nothing() {
                 None,
             )
             .unwrap();
-            let out = cue.run(&cloud, 0.1, 0.0).unwrap();
+            let out = cue
+                .run(
+                    &cloud,
+                    &tarn::cues::CueRun::new(0.1, 0.0),
+                    &mut Default::default(),
+                )
+                .unwrap();
             noret.push((
                 material,
                 scan_dry_limit,
