@@ -33,102 +33,14 @@ pub fn build_log(
     let mut mapper = Mapper::new(sensors_of_log(&cfg.mapper, &log_cfg, &summary))?;
     mapper.set_publish(cfg.build.per_frame_maps);
     calibrate_on_log(&mut mapper, input, &log_cfg)?;
-    let mut stream = FrameStream::open(input, &log_cfg)?;
-    let (mut lidar, mut stereo) = (IngestStats::default(), IngestStats::default());
-    let mut counts = CueCounts::default();
-    let mut errors = Vec::new();
-    let mut warnings = Vec::new();
-    let mut frame_warnings = FrameWarnings::default();
-    let mut beyond = BeyondRange::default();
-    let mut frames_fused = 0u64;
-    let mut t_fuse = 0.0;
-    let mut stage_totals = StageTimes::default();
-    let mut per_frame = Vec::new();
-    let mut label_totals: Option<crate::project::FrameLabelsReport> = None;
-    let mut vehicle_path: Vec<[f64; 2]> = Vec::new();
+    let stream = FrameStream::open(input, &log_cfg)?;
     let path_step = cfg.mapper.grid.resolution;
-    // Frames are read and decoded on a second thread while this one fuses the previous
-    // frame: the order, and so the map, is the log's. A bounded queue keeps at most two
-    // decoded frames waiting.
-    let (tx, rx) = std::sync::mpsc::sync_channel(2);
-    // What the reader leaves: its counts, the damaged parts of the log, and the error that
-    // ended reading early if one did.
-    type ReadEnd = (
-        crate::frames::FrameStats,
-        Vec<crate::mcap_log::DamagedRange>,
-        Option<String>,
-    );
-    let (stream_stats, damaged, fatal) = std::thread::scope(|scope| -> Result<ReadEnd> {
-        // Owned here, so that an early return drops it and the reader's next send fails.
-        let rx = rx;
-        let reader = scope.spawn(move || {
-            while let Some(item) = stream.next() {
-                // The fusing side stopped (an interrupt): stop reading.
-                if tx.send((item, stream.progress())).is_err() {
-                    break;
-                }
-            }
-            (
-                stream.stats().clone(),
-                stream.damaged().to_vec(),
-                stream.fatal_error().map(str::to_string),
-            )
-        });
-        for (item, (done, total)) in rx.iter() {
-            crate::interrupt::check("reading the log")?;
-            progress(done, total);
-            let frame = match item {
-                Ok(f) => f,
-                Err(e) => {
-                    errors.push(e.to_string());
-                    continue;
-                }
-            };
-            let t = Instant::now();
-            match mapper.update(&frame) {
-                Ok(r) => {
-                    // The vehicle's path for map.png: a point per cell travelled.
-                    let at = frame.base_to_map.translation.vector;
-                    if vehicle_path
-                        .last()
-                        .is_none_or(|p: &[f64; 2]| (p[0] - at.x).hypot(p[1] - at.y) >= path_step)
-                    {
-                        vehicle_path.push([at.x, at.y]);
-                    }
-                    beyond.lidar += r.beyond_max_range[0];
-                    beyond.stereo += r.beyond_max_range[1];
-                    for w in &r.warnings {
-                        frame_warnings.add(frame.stamp, w);
-                    }
-                    if let Some(s) = r.lidar_points() {
-                        lidar.merge(s);
-                    }
-                    if let Some(s) = r.stereo_points() {
-                        stereo.merge(s);
-                    }
-                    counts.add(&r.cues);
-                    if let Some(l) = &r.labels {
-                        crate::project::FrameLabelsReport::merge(
-                            label_totals.get_or_insert_with(Default::default),
-                            l,
-                        );
-                    }
-                    stage_totals.add(&r.times_s);
-                    per_frame.push(r.times_s);
-                    frames_fused += 1;
-                }
-                Err(e) => errors.push(format!("frame at {:.6} s: {e}", frame.stamp)),
-            }
-            t_fuse += t.elapsed().as_secs_f64();
-        }
-        reader.join().map_err(|_| {
-            Error::format(
-                input,
-                "frames",
-                "the thread reading the log stopped unexpectedly",
-            )
-        })
-    })?;
+    let (fused, read_end) = fuse_frames(&mut mapper, stream, input, path_step, progress)?;
+    let ReadEnd {
+        stats: stream_stats,
+        damaged,
+        fatal,
+    } = read_end;
     if let Some(e) = fatal {
         // Not a log, or unreadable: nothing is written.
         return Err(Error::format(
@@ -137,22 +49,14 @@ pub fn build_log(
             format!("no map built: {e}"),
         ));
     }
-    if frames_fused == 0 {
-        // Nothing to map: refuse rather than replace a previous map with an empty one.
-        let why = damaged
-            .first()
-            .map(|d| format!("{}: {d}", input.display()))
-            .or_else(|| errors.first().cloned())
-            .unwrap_or_else(|| {
-                format!(
-                    "{} messages, {} frames skipped without a transform to {}",
-                    summary.messages, stream_stats.frames_skipped_no_tf, log_cfg.map_frame
-                )
-            });
-        return Err(Error::format(
+    if fused.frames_fused == 0 {
+        return Err(no_frame_built(
             input,
-            format!("topic {}", log_cfg.frame_topic),
-            format!("no frame could be built: {why}"),
+            &log_cfg,
+            &summary,
+            &stream_stats,
+            &damaged,
+            &fused.errors,
         ));
     }
     let cues = mapper.config().cue_names();
@@ -166,34 +70,10 @@ pub fn build_log(
     );
     let t_read_fuse = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    warnings.extend(frame_warnings.lines());
-    if let Some(m) = label_totals.and_then(|l| l.mwir) {
-        if m.frames_no_hour > 0 {
-            warnings.push(format!(
-                "mwir labels skipped in {} frames: no local solar hour (give --hour, or a \
-                 longitude: labels.longitude_deg, --longitude, or a NavSatFix in the log)",
-                m.frames_no_hour
-            ));
-        }
-    }
+    let mut warnings = fused.warnings();
     let (tiles, map) = mapper.finish_map()?;
     if map.cells.is_empty() {
-        let pts = |p: &IngestStats| {
-            format!(
-                "{} points, {} fused, {} non-finite, {} outside the window",
-                p.points, p.fused, p.nonfinite, p.outside
-            )
-        };
-        return Err(Error::format(
-            input,
-            format!("topic {}", log_cfg.frame_topic),
-            format!(
-                "nothing built: {frames_fused} frames read, and no cell observed (lidar: {}; \
-                 stereo: {})",
-                pts(&lidar),
-                pts(&stereo)
-            ),
-        ));
+        return Err(nothing_observed(input, &log_cfg, &fused));
     }
     let stage = export::Staging::new(out)?;
     warnings.extend(swept_warnings(&stage));
@@ -201,7 +81,7 @@ pub fn build_log(
         stage.path(),
         &map,
         &damage_marks(input, &damaged),
-        &vehicle_path,
+        &fused.vehicle_path,
     )?;
     let extra_outputs = ExtraMaps::of(&cfg.build, &log_cfg.map_frame, summary.end_ns.unwrap_or(0))
         .write(stage.path(), &tiles)?;
@@ -214,7 +94,7 @@ pub fn build_log(
         resolution_m: res,
         window_cells: gcfg.size_cells,
         frame_topic: log_cfg.frame_topic.clone(),
-        frames_fused,
+        frames_fused: fused.frames_fused,
         log_duration_s: summary.duration_s,
         x_realtime: summary.duration_s / total.max(1e-9),
         per_frame_maps: cfg.build.per_frame_maps,
@@ -222,33 +102,223 @@ pub fn build_log(
         lidar_height_m,
         diagnostic_interval_m,
         calibration,
-        lidar_points: lidar,
-        stereo_points: stereo,
-        cue_counts: counts,
+        lidar_points: fused.lidar,
+        stereo_points: fused.stereo,
+        cue_counts: fused.counts,
         frames: stream_stats,
-        errors,
+        errors: fused.errors,
         warnings,
-        points_beyond_max_range: beyond,
+        points_beyond_max_range: fused.beyond,
         damaged,
-        labels: label_totals,
+        labels: fused.label_totals,
         cells_observed: map.cells.len(),
         tiles: tiles.tile_count(),
         elevation_range_m: export::elevation_range(&map.cells),
         water: WaterSummary::of(&map, &fusion),
         extra_outputs,
         timings_s: Timings {
-            read: t_read_fuse - t_fuse,
-            fuse: t_fuse,
+            read: t_read_fuse - fused.t_fuse,
+            fuse: fused.t_fuse,
             export: t_export,
             total,
         },
-        stage_totals_s: stage_totals,
-        stage_latency_ms: stage_latency(&per_frame),
+        stage_totals_s: fused.stage_totals,
+        stage_latency_ms: stage_latency(&fused.per_frame),
     };
     crate::files::write_json(&stage.path().join("report.json"), &report)?;
     crate::interrupt::check("writing the outputs")?;
     stage.commit()?;
     Ok(report)
+}
+
+/// What the reader of a log's frames leaves: its counts, the damaged parts of the log,
+/// and the error that ended reading early if one did.
+struct ReadEnd {
+    stats: crate::frames::FrameStats,
+    damaged: Vec<crate::mcap_log::DamagedRange>,
+    fatal: Option<String>,
+}
+
+/// What fusing a log's frames gathered, frame by frame.
+#[derive(Default)]
+struct FusedFrames {
+    lidar: IngestStats,
+    stereo: IngestStats,
+    counts: CueCounts,
+    /// Frames that could not be read or fused.
+    errors: Vec<String>,
+    frame_warnings: FrameWarnings,
+    beyond: BeyondRange,
+    frames_fused: u64,
+    /// Seconds spent in [`Mapper::update`].
+    t_fuse: f64,
+    stage_totals: StageTimes,
+    per_frame: Vec<StageTimes>,
+    label_totals: Option<crate::project::FrameLabelsReport>,
+    /// The vehicle's path for map.png: a point per cell travelled.
+    vehicle_path: Vec<[f64; 2]>,
+}
+
+impl FusedFrames {
+    /// Adds what fusing `frame` reported; `path_step` is the spacing of the vehicle's path.
+    fn add(&mut self, frame: &crate::sensor::Frame, r: crate::mapper::FrameReport, path_step: f64) {
+        let at = frame.base_to_map.translation.vector;
+        if self
+            .vehicle_path
+            .last()
+            .is_none_or(|p: &[f64; 2]| (p[0] - at.x).hypot(p[1] - at.y) >= path_step)
+        {
+            self.vehicle_path.push([at.x, at.y]);
+        }
+        self.beyond.lidar += r.beyond_max_range[0];
+        self.beyond.stereo += r.beyond_max_range[1];
+        for w in &r.warnings {
+            self.frame_warnings.add(frame.stamp, w);
+        }
+        if let Some(s) = r.lidar_points() {
+            self.lidar.merge(s);
+        }
+        if let Some(s) = r.stereo_points() {
+            self.stereo.merge(s);
+        }
+        self.counts.add(&r.cues);
+        if let Some(l) = &r.labels {
+            crate::project::FrameLabelsReport::merge(
+                self.label_totals.get_or_insert_with(Default::default),
+                l,
+            );
+        }
+        self.stage_totals.add(&r.times_s);
+        self.per_frame.push(r.times_s);
+        self.frames_fused += 1;
+    }
+
+    /// The build's warnings from its frames: each kind of per-frame warning once, and
+    /// the frames whose MWIR labels had no solar hour.
+    fn warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        warnings.extend(self.frame_warnings.lines());
+        if let Some(m) = self.label_totals.and_then(|l| l.mwir) {
+            if m.frames_no_hour > 0 {
+                warnings.push(format!(
+                    "mwir labels skipped in {} frames: no local solar hour (give --hour, or a \
+                     longitude: labels.longitude_deg, --longitude, or a NavSatFix in the log)",
+                    m.frames_no_hour
+                ));
+            }
+        }
+        warnings
+    }
+}
+
+/// Reads the frames of `stream` and fuses each through `mapper`, reporting
+/// `progress(bytes_read, bytes_total)`.
+///
+/// Frames are read and decoded on a second thread while this one fuses the previous
+/// frame: the order, and so the map, is the log's. A bounded queue keeps at most two
+/// decoded frames waiting.
+fn fuse_frames(
+    mapper: &mut Mapper,
+    mut stream: crate::frames::FrameStream,
+    input: &Path,
+    path_step: f64,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<(FusedFrames, ReadEnd)> {
+    let mut fused = FusedFrames::default();
+    let (tx, rx) = std::sync::mpsc::sync_channel(2);
+    let read_end = std::thread::scope(|scope| -> Result<ReadEnd> {
+        // Owned here, so that an early return drops it and the reader's next send fails.
+        let rx = rx;
+        let reader = scope.spawn(move || {
+            while let Some(item) = stream.next() {
+                // The fusing side stopped (an interrupt): stop reading.
+                if tx.send((item, stream.progress())).is_err() {
+                    break;
+                }
+            }
+            ReadEnd {
+                stats: stream.stats().clone(),
+                damaged: stream.damaged().to_vec(),
+                fatal: stream.fatal_error().map(str::to_string),
+            }
+        });
+        for (item, (done, total)) in rx.iter() {
+            crate::interrupt::check("reading the log")?;
+            progress(done, total);
+            let frame = match item {
+                Ok(f) => f,
+                Err(e) => {
+                    fused.errors.push(e.to_string());
+                    continue;
+                }
+            };
+            let t = Instant::now();
+            match mapper.update(&frame) {
+                Ok(r) => fused.add(&frame, r, path_step),
+                Err(e) => fused
+                    .errors
+                    .push(format!("frame at {:.6} s: {e}", frame.stamp)),
+            }
+            fused.t_fuse += t.elapsed().as_secs_f64();
+        }
+        reader.join().map_err(|_| {
+            Error::format(
+                input,
+                "frames",
+                "the thread reading the log stopped unexpectedly",
+            )
+        })
+    })?;
+    Ok((fused, read_end))
+}
+
+/// The error of a build that fused no frame: nothing to map, so it refuses rather than
+/// replace a previous map with an empty one. It names the first damage, else the first
+/// error, else why frames were skipped.
+fn no_frame_built(
+    input: &Path,
+    log_cfg: &LogConfig,
+    summary: &crate::mcap_log::LogSummary,
+    stream_stats: &crate::frames::FrameStats,
+    damaged: &[crate::mcap_log::DamagedRange],
+    errors: &[String],
+) -> Error {
+    let why = damaged
+        .first()
+        .map(|d| format!("{}: {d}", input.display()))
+        .or_else(|| errors.first().cloned())
+        .unwrap_or_else(|| {
+            format!(
+                "{} messages, {} frames skipped without a transform to {}",
+                summary.messages, stream_stats.frames_skipped_no_tf, log_cfg.map_frame
+            )
+        });
+    Error::format(
+        input,
+        format!("topic {}", log_cfg.frame_topic),
+        format!("no frame could be built: {why}"),
+    )
+}
+
+/// The error of a build whose frames observed no cell, with what became of their points.
+fn nothing_observed(input: &Path, log_cfg: &LogConfig, fused: &FusedFrames) -> Error {
+    let pts = |p: &IngestStats| {
+        format!(
+            "{} points, {} fused, {} non-finite, {} outside the window",
+            p.points, p.fused, p.nonfinite, p.outside
+        )
+    };
+    Error::format(
+        input,
+        format!("topic {}", log_cfg.frame_topic),
+        format!(
+            "nothing built: {} frames read, and no cell observed (lidar: {}; \
+             stereo: {})",
+            fused.frames_fused,
+            pts(&fused.lidar),
+            pts(&fused.stereo)
+        ),
+    )
 }
 
 /// Per-frame warnings gathered by kind (the text with its numbers left out), so that a
