@@ -201,48 +201,16 @@ pub fn build_cloud(
     cfg: &BuildConfig,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<CloudBuild> {
-    cfg.grid.validate()?;
-    cfg.noise.validate()?;
-    cloud.validate()?;
-    if cloud.len() >= u32::MAX as usize {
-        return Err(Error::invalid(
-            "cloud",
-            format!(
-                "{} points (at most {} per build)",
-                cloud.len(),
-                u32::MAX - 1
-            ),
-        ));
-    }
+    check_cloud(cloud, cfg)?;
     let res = cfg.grid.resolution;
     let total = cloud.len() as u64;
     let (bounds, beyond) = key_bounds(cloud, res);
     let Some((lo, hi)) = bounds else {
-        // Nothing finite within the map: an empty map, every point counted.
-        let tiles = TileMap::new(res, cfg.grid.z_ref)?;
-        progress(total, total);
-        return Ok(CloudBuild {
-            tiles,
-            ingest: IngestStats {
-                points: total,
-                nonfinite: total - beyond,
-                outside: beyond,
-                ..Default::default()
-            },
-            blocks: 0,
-            window_cells: 0,
-        });
+        return empty_build(cfg, total, beyond, progress);
     };
     // Keys lie within ±2³⁵ (the domain at the finest resolution): no overflow below.
     let extent = (hi.x - lo.x).max(hi.y - lo.y) as u64 + 1;
-    let max_n = cfg.max_window_cells.clamp(MIN_LEAF_CELLS, 32768);
-    let n = if extent <= max_n as u64 {
-        (extent as usize)
-            .next_power_of_two()
-            .clamp(MIN_LEAF_CELLS, max_n)
-    } else {
-        max_n
-    };
+    let n = window_side(extent, cfg.max_window_cells);
     let gcfg = GridConfig {
         size_cells: n,
         ..cfg.grid.clone()
@@ -251,89 +219,14 @@ pub fn build_cloud(
     let valid = cloud.valid_count() as u64;
 
     if extent <= n as u64 && n * n <= LEAF_CELLS_PER_POINT * valid as usize {
-        // One window the points fill: fused in one batch.
-        let mut grid = RollingGrid::new(gcfg, 0.0, 0.0)?;
-        let mut tiles = TileMap::for_grid(&grid);
-        grid.move_origin(lo, &mut tiles);
-        let stats = grid.ingest(cloud, &cfg.noise)?;
-        grid.flush(&mut tiles);
-        progress(total, total);
-        return Ok(CloudBuild {
-            tiles,
-            ingest: stats,
-            blocks: 1,
-            window_cells: n,
-        });
+        return fuse_one_window(cloud, gcfg, lo, &cfg.noise, total, progress);
     }
 
-    // Blocks of whole windows, aligned at multiples of n cells from `lo`.
-    let block_of = |i: usize| -> Option<(i64, i64)> {
-        if !cloud.is_valid(i) {
-            return None;
-        }
-        let p = cloud.point_in_map(i);
-        if !in_map_domain(p.x, p.y) {
-            return None;
-        }
-        let k = key_of(res, p.x, p.y);
-        Some(((k.x - lo.x).div_euclid(n64), (k.y - lo.y).div_euclid(n64)))
-    };
-    let bw = (hi.x - lo.x).div_euclid(n64) + 1;
-    let bh = (hi.y - lo.y).div_euclid(n64) + 1;
-    let dense_limit = (valid as usize).max(1 << 16) as i64;
-    // Block ids (u32::MAX: no block) and each id's block coordinates.
-    let (ids, block_xy): (Vec<u32>, Vec<(i64, i64)>) = match bw.checked_mul(bh) {
-        Some(nb) if nb <= dense_limit => {
-            let ids = (0..cloud.len())
-                .into_par_iter()
-                .with_min_len(4096)
-                .map(|i| block_of(i).map_or(u32::MAX, |(bx, by)| (by * bw + bx) as u32))
-                .collect();
-            (ids, (0..nb).map(|b| (b % bw, b / bw)).collect())
-        }
-        _ => {
-            // Scattered: number only the occupied blocks, in row-major order.
-            let mut occupied: Vec<(i64, i64)> = (0..cloud.len())
-                .into_par_iter()
-                .with_min_len(4096)
-                .filter_map(|i| block_of(i).map(|(bx, by)| (by, bx)))
-                .collect();
-            occupied.par_sort_unstable();
-            occupied.dedup();
-            let number: std::collections::HashMap<(i64, i64), u32> = occupied
-                .iter()
-                .enumerate()
-                .map(|(b, &(by, bx))| ((bx, by), b as u32))
-                .collect();
-            let ids = (0..cloud.len())
-                .into_par_iter()
-                .with_min_len(4096)
-                .map(|i| block_of(i).map_or(u32::MAX, |b| number[&b]))
-                .collect();
-            (ids, occupied.into_iter().map(|(by, bx)| (bx, by)).collect())
-        }
-    };
-    let nblocks = block_xy.len();
-    // Counting sort of point indices by block.
-    let mut start = vec![0usize; nblocks + 1];
-    for &b in &ids {
-        if b != u32::MAX {
-            start[b as usize + 1] += 1;
-        }
-    }
-    for b in 0..nblocks {
-        start[b + 1] += start[b];
-    }
-    let mut order = vec![0u32; start[nblocks]];
-    let mut fill = start.clone();
-    for (i, &b) in ids.iter().enumerate() {
-        if b != u32::MAX {
-            order[fill[b as usize]] = i as u32;
-            fill[b as usize] += 1;
-        }
-    }
-    drop(ids);
-    drop(fill);
+    let Blocks {
+        xy: block_xy,
+        start,
+        mut order,
+    } = Blocks::of(cloud, res, lo, hi, n, valid);
     let mut stats = IngestStats::default();
     let skipped = total - order.len() as u64;
     stats.points += skipped;
@@ -380,6 +273,189 @@ pub fn build_cloud(
         blocks,
         window_cells: n,
     })
+}
+
+/// Checks the build's grid and noise, the cloud, and that its points can be indexed by
+/// `u32` (one value, `u32::MAX`, is kept for "no block").
+fn check_cloud(cloud: &PointCloud, cfg: &BuildConfig) -> Result<()> {
+    cfg.grid.validate()?;
+    cfg.noise.validate()?;
+    cloud.validate()?;
+    if cloud.len() >= u32::MAX as usize {
+        return Err(Error::invalid(
+            "cloud",
+            format!(
+                "{} points (at most {} per build)",
+                cloud.len(),
+                u32::MAX - 1
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Nothing finite within the map: an empty map, every point counted (`beyond` of the
+/// `total` as outside the map's domain, the rest as non-finite).
+fn empty_build(
+    cfg: &BuildConfig,
+    total: u64,
+    beyond: u64,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<CloudBuild> {
+    let tiles = TileMap::new(cfg.grid.resolution, cfg.grid.z_ref)?;
+    progress(total, total);
+    Ok(CloudBuild {
+        tiles,
+        ingest: IngestStats {
+            points: total,
+            nonfinite: total - beyond,
+            outside: beyond,
+            ..Default::default()
+        },
+        blocks: 0,
+        window_cells: 0,
+    })
+}
+
+/// The window side for a cloud whose keys span `extent` cells: the power of two that
+/// holds it when it fits in `max_window_cells` (clamped to `[MIN_LEAF_CELLS, 32768]`),
+/// else that largest side.
+fn window_side(extent: u64, max_window_cells: usize) -> usize {
+    let max_n = max_window_cells.clamp(MIN_LEAF_CELLS, 32768);
+    if extent <= max_n as u64 {
+        (extent as usize)
+            .next_power_of_two()
+            .clamp(MIN_LEAF_CELLS, max_n)
+    } else {
+        max_n
+    }
+}
+
+/// One window the points fill: the whole cloud fused in one batch into a grid of `gcfg`
+/// placed at `lo`.
+fn fuse_one_window(
+    cloud: &PointCloud,
+    gcfg: GridConfig,
+    lo: CellKey,
+    noise: &RangeNoise,
+    total: u64,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<CloudBuild> {
+    let n = gcfg.size_cells;
+    let mut grid = RollingGrid::new(gcfg, 0.0, 0.0)?;
+    let mut tiles = TileMap::for_grid(&grid);
+    grid.move_origin(lo, &mut tiles);
+    let stats = grid.ingest(cloud, noise)?;
+    grid.flush(&mut tiles);
+    progress(total, total);
+    Ok(CloudBuild {
+        tiles,
+        ingest: stats,
+        blocks: 1,
+        window_cells: n,
+    })
+}
+
+/// A cloud's points sorted into blocks of whole windows, aligned at multiples of the
+/// window side from the lowest key.
+struct Blocks {
+    /// Each block's coordinates, in windows from the lowest key.
+    xy: Vec<(i64, i64)>,
+    /// Block `b`'s points are `order[start[b]..start[b + 1]]`.
+    start: Vec<usize>,
+    /// Point indices, grouped by block.
+    order: Vec<u32>,
+}
+
+impl Blocks {
+    /// The blocks of side `n` cells of the points whose keys lie in `lo..=hi`; `valid`
+    /// is the cloud's count of valid points.
+    fn of(cloud: &PointCloud, res: f64, lo: CellKey, hi: CellKey, n: usize, valid: u64) -> Self {
+        let (ids, xy) = Self::number(cloud, res, lo, hi, n, valid);
+        let (start, order) = Self::sort(ids, xy.len());
+        Blocks { xy, start, order }
+    }
+
+    /// Each point's block id (`u32::MAX`: no block) and each id's block coordinates:
+    /// every block of the bounds numbered densely, in row-major order, when there are not
+    /// many more of them than points; else only the occupied ones.
+    fn number(
+        cloud: &PointCloud,
+        res: f64,
+        lo: CellKey,
+        hi: CellKey,
+        n: usize,
+        valid: u64,
+    ) -> (Vec<u32>, Vec<(i64, i64)>) {
+        let n64 = n as i64;
+        let block_of = |i: usize| -> Option<(i64, i64)> {
+            if !cloud.is_valid(i) {
+                return None;
+            }
+            let p = cloud.point_in_map(i);
+            if !in_map_domain(p.x, p.y) {
+                return None;
+            }
+            let k = key_of(res, p.x, p.y);
+            Some(((k.x - lo.x).div_euclid(n64), (k.y - lo.y).div_euclid(n64)))
+        };
+        let bw = (hi.x - lo.x).div_euclid(n64) + 1;
+        let bh = (hi.y - lo.y).div_euclid(n64) + 1;
+        let dense_limit = (valid as usize).max(1 << 16) as i64;
+        match bw.checked_mul(bh) {
+            Some(nb) if nb <= dense_limit => {
+                let ids = (0..cloud.len())
+                    .into_par_iter()
+                    .with_min_len(4096)
+                    .map(|i| block_of(i).map_or(u32::MAX, |(bx, by)| (by * bw + bx) as u32))
+                    .collect();
+                (ids, (0..nb).map(|b| (b % bw, b / bw)).collect())
+            }
+            _ => {
+                // Scattered: number only the occupied blocks, in row-major order.
+                let mut occupied: Vec<(i64, i64)> = (0..cloud.len())
+                    .into_par_iter()
+                    .with_min_len(4096)
+                    .filter_map(|i| block_of(i).map(|(bx, by)| (by, bx)))
+                    .collect();
+                occupied.par_sort_unstable();
+                occupied.dedup();
+                let number: std::collections::HashMap<(i64, i64), u32> = occupied
+                    .iter()
+                    .enumerate()
+                    .map(|(b, &(by, bx))| ((bx, by), b as u32))
+                    .collect();
+                let ids = (0..cloud.len())
+                    .into_par_iter()
+                    .with_min_len(4096)
+                    .map(|i| block_of(i).map_or(u32::MAX, |b| number[&b]))
+                    .collect();
+                (ids, occupied.into_iter().map(|(by, bx)| (bx, by)).collect())
+            }
+        }
+    }
+
+    /// Counting sort of point indices by block id: `(start, order)` of [`Blocks`].
+    fn sort(ids: Vec<u32>, nblocks: usize) -> (Vec<usize>, Vec<u32>) {
+        let mut start = vec![0usize; nblocks + 1];
+        for &b in &ids {
+            if b != u32::MAX {
+                start[b as usize + 1] += 1;
+            }
+        }
+        for b in 0..nblocks {
+            start[b + 1] += start[b];
+        }
+        let mut order = vec![0u32; start[nblocks]];
+        let mut fill = start.clone();
+        for (i, &b) in ids.iter().enumerate() {
+            if b != u32::MAX {
+                order[fill[b as usize]] = i as u32;
+                fill[b as usize] += 1;
+            }
+        }
+        (start, order)
+    }
 }
 
 /// `report.json` of a build.
