@@ -1,6 +1,7 @@
 //! Tests of the PLY reader, with a tiny independent PLY writer.
 
 use super::*;
+use nalgebra::Point3;
 use proptest::prelude::*;
 
 // ------------------------------------------------------------------------------------
