@@ -46,123 +46,9 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
     };
     let header =
         std::str::from_utf8(&bytes[..end]).map_err(|_| fmt(path, "header", "not UTF-8 text"))?;
-    let mut lines = header
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
-    let mut next = |what: &str| {
-        lines
-            .next()
-            .ok_or_else(|| fmt(path, "header", format!("ends before {what}")))
-    };
-    let (n, l) = next("`ply`")?;
-    if l != "ply" {
-        return Err(fmt(
-            path,
-            format!("header line {n}"),
-            format!("{l:?} is not `ply`"),
-        ));
-    }
-    let (n, l) = next("the format")?;
-    if l != "format binary_little_endian 1.0" {
-        return Err(fmt(
-            path,
-            format!("header line {n}"),
-            format!("{l:?}: the map contract is `format binary_little_endian 1.0`"),
-        ));
-    }
-    let mut resolution = None;
-    let mut origin = [0.0f64; 3];
-    let mut count = None;
-    let mut props = Vec::new();
-    for (n, l) in lines {
-        if let Some(c) = l.strip_prefix("comment ") {
-            if let Some(r) = c.strip_prefix("resolution ") {
-                let r: f64 = r.trim().parse().map_err(|_| {
-                    fmt(
-                        path,
-                        format!("header line {n}"),
-                        format!("bad resolution {r:?}"),
-                    )
-                })?;
-                if !(r.is_finite() && r > 0.0) {
-                    return Err(fmt(
-                        path,
-                        format!("header line {n}"),
-                        format!("resolution {r} must be > 0"),
-                    ));
-                }
-                resolution = Some(r);
-            }
-            if let Some(o) = c.strip_prefix("origin ") {
-                origin = super::ply::parse_origin(o)
-                    .map_err(|m| fmt(path, format!("header line {n}"), m))?;
-            }
-            continue;
-        }
-        if let Some(e) = l.strip_prefix("element ") {
-            let mut it = e.split_whitespace();
-            if it.next() != Some("vertex") || count.is_some() {
-                return Err(fmt(
-                    path,
-                    format!("header line {n}"),
-                    format!("{l:?}: the map contract has one element, `vertex`"),
-                ));
-            }
-            let c: usize = it.next().and_then(|c| c.parse().ok()).ok_or_else(|| {
-                fmt(
-                    path,
-                    format!("header line {n}"),
-                    format!("bad vertex count in {l:?}"),
-                )
-            })?;
-            count = Some(c);
-            continue;
-        }
-        if l.starts_with("property ") {
-            props.push((n, l));
-            continue;
-        }
-        if l.starts_with("obj_info") {
-            continue;
-        }
-        return Err(fmt(
-            path,
-            format!("header line {n}"),
-            format!("unexpected {l:?}"),
-        ));
-    }
-    // x y z: all float or all double.
-    let double = props
-        .first()
-        .is_some_and(|(_, l)| *l == "property double x");
-    for (i, want) in PROPS.iter().enumerate() {
-        let want_double = want.replace("float", "double");
-        let want = if double && i < 3 { &want_double } else { *want };
-        match props.get(i) {
-            Some((_, got)) if *got == want => {}
-            Some((n, got)) => {
-                return Err(fmt(
-                    path,
-                    format!("header line {n}"),
-                    format!("{got:?} where the map contract has {want:?}"),
-                ))
-            }
-            None => return Err(fmt(path, "header", format!("missing {want:?}"))),
-        }
-    }
-    if let Some((n, extra)) = props.get(PROPS.len()) {
-        return Err(fmt(
-            path,
-            format!("header line {n}"),
-            format!("{extra:?} is not in the map contract"),
-        ));
-    }
-    let count = count.ok_or_else(|| fmt(path, "header", "no `element vertex N`"))?;
-    let resolution =
-        resolution.ok_or_else(|| fmt(path, "header", "no `comment resolution R` line"))?;
-    let xyz = if double { 24 } else { 12 };
-    let record = xyz + REST;
+    let h = MapHeader::parse(path, header)?;
+    let count = h.count;
+    let record = h.xyz_bytes() + REST;
     let body = &bytes[end + END.len()..];
     let need = count
         .checked_mul(record)
@@ -179,6 +65,88 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
     }
     let mut cells = Vec::with_capacity(count);
     for (i, rec) in body.chunks_exact(record).enumerate() {
+        cells.push(h.cell(path, i, rec)?);
+    }
+    Ok(HazardMap::new(h.resolution, cells))
+}
+
+/// What a contract `map.ply` header declares.
+struct MapHeader {
+    resolution: f64,
+    /// `comment origin X Y Z` (zero without one): added back to every vertex.
+    origin: [f64; 3],
+    count: usize,
+    /// x y z are `double` (else `float`).
+    double: bool,
+}
+
+/// The header lines after `format`, as declared, before the contract is checked.
+struct Declared<'a> {
+    resolution: Option<f64>,
+    origin: [f64; 3],
+    count: Option<usize>,
+    /// Property lines with their line numbers, in order.
+    props: Vec<(usize, &'a str)>,
+}
+
+impl MapHeader {
+    /// Parses the header text before `end_header`: `ply`, the binary little-endian
+    /// format, then comments, the one `vertex` element and its properties, which must be
+    /// the contract's.
+    fn parse(path: &Path, header: &str) -> Result<Self> {
+        let mut lines = header
+            .lines()
+            .enumerate()
+            .map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
+        let mut next = |what: &str| {
+            lines
+                .next()
+                .ok_or_else(|| fmt(path, "header", format!("ends before {what}")))
+        };
+        let (n, l) = next("`ply`")?;
+        if l != "ply" {
+            return Err(fmt(
+                path,
+                format!("header line {n}"),
+                format!("{l:?} is not `ply`"),
+            ));
+        }
+        let (n, l) = next("the format")?;
+        if l != "format binary_little_endian 1.0" {
+            return Err(fmt(
+                path,
+                format!("header line {n}"),
+                format!("{l:?}: the map contract is `format binary_little_endian 1.0`"),
+            ));
+        }
+        let declared = Declared::read(path, lines)?;
+        let double = contract_props(path, &declared.props)?;
+        let count = declared
+            .count
+            .ok_or_else(|| fmt(path, "header", "no `element vertex N`"))?;
+        let resolution = declared
+            .resolution
+            .ok_or_else(|| fmt(path, "header", "no `comment resolution R` line"))?;
+        Ok(MapHeader {
+            resolution,
+            origin: declared.origin,
+            count,
+            double,
+        })
+    }
+
+    /// Bytes of x y z in a vertex.
+    fn xyz_bytes(&self) -> usize {
+        if self.double {
+            24
+        } else {
+            12
+        }
+    }
+
+    /// The cell of vertex `i`, whose record is `rec`.
+    fn cell(&self, path: &Path, i: usize, rec: &[u8]) -> Result<MapCell> {
+        let (double, origin, resolution) = (self.double, self.origin, self.resolution);
         let c = |j: usize| -> f64 {
             if double {
                 f64::from_le_bytes(rec[8 * j..8 * j + 8].try_into().expect("8 bytes"))
@@ -186,7 +154,7 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
                 f32::from_le_bytes(rec[4 * j..4 * j + 4].try_into().expect("4 bytes")) as f64
             }
         };
-        let r = &rec[xyz..];
+        let r = &rec[self.xyz_bytes()..];
         let f = |j: usize| f32::from_le_bytes([r[4 * j], r[4 * j + 1], r[4 * j + 2], r[4 * j + 3]]);
         let class = *Class::ALL.get(r[12] as usize).ok_or_else(|| {
             fmt(
@@ -212,7 +180,7 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
         if !(x.is_finite() && y.is_finite()) {
             return Err(fmt(path, format!("vertex {i}"), "x or y is not finite"));
         }
-        cells.push(MapCell {
+        Ok(MapCell {
             key: CellKey::new(
                 (x / resolution).floor() as i64,
                 (y / resolution).floor() as i64,
@@ -227,9 +195,114 @@ pub fn parse_map_ply(path: &Path, bytes: &[u8]) -> Result<HazardMap> {
             hazard,
             hits: 0,
             below: 0,
-        });
+        })
     }
-    Ok(HazardMap::new(resolution, cells))
+}
+
+impl<'a> Declared<'a> {
+    /// Reads the header lines after `format` (numbered): `comment resolution R`,
+    /// `comment origin X Y Z` (other comments and `obj_info` are ignored), one
+    /// `element vertex N`, and `property` lines; anything else is refused.
+    fn read(path: &Path, lines: impl Iterator<Item = (usize, &'a str)>) -> Result<Self> {
+        let mut resolution = None;
+        let mut origin = [0.0f64; 3];
+        let mut count = None;
+        let mut props = Vec::new();
+        for (n, l) in lines {
+            if let Some(c) = l.strip_prefix("comment ") {
+                if let Some(r) = c.strip_prefix("resolution ") {
+                    let r: f64 = r.trim().parse().map_err(|_| {
+                        fmt(
+                            path,
+                            format!("header line {n}"),
+                            format!("bad resolution {r:?}"),
+                        )
+                    })?;
+                    if !(r.is_finite() && r > 0.0) {
+                        return Err(fmt(
+                            path,
+                            format!("header line {n}"),
+                            format!("resolution {r} must be > 0"),
+                        ));
+                    }
+                    resolution = Some(r);
+                }
+                if let Some(o) = c.strip_prefix("origin ") {
+                    origin = super::ply::parse_origin(o)
+                        .map_err(|m| fmt(path, format!("header line {n}"), m))?;
+                }
+                continue;
+            }
+            if let Some(e) = l.strip_prefix("element ") {
+                let mut it = e.split_whitespace();
+                if it.next() != Some("vertex") || count.is_some() {
+                    return Err(fmt(
+                        path,
+                        format!("header line {n}"),
+                        format!("{l:?}: the map contract has one element, `vertex`"),
+                    ));
+                }
+                let c: usize = it.next().and_then(|c| c.parse().ok()).ok_or_else(|| {
+                    fmt(
+                        path,
+                        format!("header line {n}"),
+                        format!("bad vertex count in {l:?}"),
+                    )
+                })?;
+                count = Some(c);
+                continue;
+            }
+            if l.starts_with("property ") {
+                props.push((n, l));
+                continue;
+            }
+            if l.starts_with("obj_info") {
+                continue;
+            }
+            return Err(fmt(
+                path,
+                format!("header line {n}"),
+                format!("unexpected {l:?}"),
+            ));
+        }
+        Ok(Declared {
+            resolution,
+            origin,
+            count,
+            props,
+        })
+    }
+}
+
+/// Checks the property lines against [`PROPS`], in order and nothing more; x y z may all
+/// be `double` instead of `float`. Returns whether they are.
+fn contract_props(path: &Path, props: &[(usize, &str)]) -> Result<bool> {
+    let double = props
+        .first()
+        .is_some_and(|(_, l)| *l == "property double x");
+    for (i, want) in PROPS.iter().enumerate() {
+        let want_double = want.replace("float", "double");
+        let want = if double && i < 3 { &want_double } else { *want };
+        match props.get(i) {
+            Some((_, got)) if *got == want => {}
+            Some((n, got)) => {
+                return Err(fmt(
+                    path,
+                    format!("header line {n}"),
+                    format!("{got:?} where the map contract has {want:?}"),
+                ))
+            }
+            None => return Err(fmt(path, "header", format!("missing {want:?}"))),
+        }
+    }
+    if let Some((n, extra)) = props.get(PROPS.len()) {
+        return Err(fmt(
+            path,
+            format!("header line {n}"),
+            format!("{extra:?} is not in the map contract"),
+        ));
+    }
+    Ok(double)
 }
 
 #[cfg(test)]
