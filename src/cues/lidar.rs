@@ -131,7 +131,7 @@ pub struct LidarCueConfig {
     /// nothing about water. Off: the optics' interval alone.
     pub scan_dry_limit: bool,
     /// Read by the mapper: every this many frames, the window's water bodies become the
-    /// prior the lidar cue reads in the frames that follow ([`WaterPrior`]); 0: no prior.
+    /// prior the lidar cue reads in the frames that follow ([`WaterPrior`](super::prior::WaterPrior)); 0: no prior.
     pub prior_every_frames: u32,
     /// How far beyond its bodies' cells the prior carries their level (m).
     pub prior_reach_m: f64,
@@ -200,7 +200,7 @@ pub struct LidarCueStats {
     pub noret_beyond_dry: u64,
     /// Returns from under the water surface, refraction-corrected into bottom evidence.
     pub bottom: u64,
-    /// Of `bottom`, those found under the water level of the prior ([`WaterPrior`]).
+    /// Of `bottom`, those found under the water level of the prior ([`WaterPrior`](super::prior::WaterPrior)).
     pub bottom_under_prior: u64,
     /// Returns mirrored by the water surface, put back where the object is.
     pub specular: u64,

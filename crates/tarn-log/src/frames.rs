@@ -32,7 +32,7 @@ pub use config::{LogConfig, NamedTopics, POSE_JUMP_CONFIRM, POSE_JUMP_SLACK_M};
 
 /// The baseline (m) of a stereo pair from its right camera's rectified projection:
 /// ROS stereo drivers publish `P[0][3] = −f·B` (`f = P[0][0]`).
-pub fn stereo_baseline(right: &CameraInfoMsg) -> std::result::Result<f64, String> {
+pub(crate) fn stereo_baseline(right: &CameraInfoMsg) -> std::result::Result<f64, String> {
     let (f, tx) = (right.p[0], right.p[3]);
     let b = -tx / f;
     if f.is_finite() && f > 0.0 && b.is_finite() && b > 0.0 {

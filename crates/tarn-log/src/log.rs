@@ -14,7 +14,7 @@ use crate::mcap_log::{DamagedRange, LogReader, LogSummary, RawMessage};
 use crate::ros::{schema_name, Wire};
 
 /// The inputs tarn accepts, for error messages.
-pub const SUPPORTED: &str = "supported: .mcap, .db3, rosbag2 directory, .bag, .ply, .bin";
+pub(crate) const SUPPORTED: &str = "supported: .mcap, .db3, rosbag2 directory, .bag, .ply, .bin";
 
 /// Reads an input that is not a log: a point cloud ([`tarn::io::read_point_cloud`]: `.ply`,
 /// `.bin`). Anything else is an error that names every input tarn reads, logs included.
@@ -175,7 +175,7 @@ fn open_ros1(path: &Path) -> Result<Box<dyn MessageSource>> {
 /// The storage files of a rosbag2 directory, in order: `relative_file_paths` of its
 /// `metadata.yaml` (read as the list under that key: `- name` lines), else its `.db3` and
 /// `.mcap` files by name.
-pub fn rosbag2_files(dir: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn rosbag2_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let meta = dir.join("metadata.yaml");
     let text = std::fs::read_to_string(&meta).map_err(|e| {
         Error::format(

@@ -84,7 +84,7 @@ pub struct TfBuffer {
 const MAX_DEPTH: usize = 64;
 
 /// Interpolates between two poses: linear in translation, slerp in rotation.
-pub fn interpolate(a: &Pose, b: &Pose, s: f64) -> Pose {
+pub(crate) fn interpolate(a: &Pose, b: &Pose, s: f64) -> Pose {
     let t = a.translation.vector.lerp(&b.translation.vector, s);
     // try_slerp fails only for opposite quaternions (180° apart); nlerp is then as good
     // as anything.
@@ -135,7 +135,7 @@ impl TfBuffer {
 
     /// Forgets dynamic samples older than `t_ns`, keeping the last one before it so that
     /// lookups at `t_ns` itself still interpolate.
-    pub fn prune_before(&mut self, t_ns: i64) {
+    pub(crate) fn prune_before(&mut self, t_ns: i64) {
         for d in self.dynamics.values_mut() {
             while d.samples.len() > 1 && d.samples[1].0 <= t_ns {
                 d.samples.pop_front();

@@ -23,10 +23,10 @@ use crate::mcap_log::{record_length_limit, ChannelInfo, DamagedRange, RawMessage
 const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 
 mod op {
-    pub const MESSAGE: u8 = 0x02;
-    pub const BAG_HEADER: u8 = 0x03;
-    pub const CHUNK: u8 = 0x05;
-    pub const CONNECTION: u8 = 0x07;
+    pub(crate) const MESSAGE: u8 = 0x02;
+    pub(crate) const BAG_HEADER: u8 = 0x03;
+    pub(crate) const CHUNK: u8 = 0x05;
+    pub(crate) const CONNECTION: u8 = 0x07;
 }
 
 /// The `name=value` fields of a record header.

@@ -368,13 +368,17 @@ impl FrameWarnings {
 }
 
 /// Frames of a log's start an offline build reads to measure the sensors' noise, at most.
-pub const CALIBRATION_MAX_FRAMES: usize = 200;
+pub(crate) const CALIBRATION_MAX_FRAMES: usize = 200;
 
 /// Shows the first frames of the log to `mapper` ([`Mapper::calibrate`]) until its
 /// calibration is settled, at most [`CALIBRATION_MAX_FRAMES`], and holds what it measured:
 /// every build of the log, whole or in time chunks, then fuses every frame with the same
 /// noise. Frames that cannot be read are left to the build, which reports them.
-pub fn calibrate_on_log(mapper: &mut Mapper, input: &Path, log_cfg: &LogConfig) -> Result<()> {
+pub(crate) fn calibrate_on_log(
+    mapper: &mut Mapper,
+    input: &Path,
+    log_cfg: &LogConfig,
+) -> Result<()> {
     let stream = crate::frames::FrameStream::open(input, log_cfg)?;
     for frame in stream.take(CALIBRATION_MAX_FRAMES).flatten() {
         crate::interrupt::check("measuring the sensors' noise")?;

@@ -120,17 +120,17 @@ impl LogReader {
     }
 
     /// Bytes of the file consumed so far (for a progress bar).
-    pub fn bytes_read(&self) -> u64 {
+    pub(crate) fn bytes_read(&self) -> u64 {
         self.pos
     }
 
     /// Size of the file in bytes.
-    pub fn total_bytes(&self) -> u64 {
+    pub(crate) fn total_bytes(&self) -> u64 {
         self.total_bytes
     }
 
     /// Messages returned so far.
-    pub fn messages_read(&self) -> u64 {
+    pub(crate) fn messages_read(&self) -> u64 {
         self.messages
     }
 

@@ -172,7 +172,7 @@ pub fn pointcloud2_to_cloud(msg: &PointCloud2Msg) -> Result<PointCloud, String> 
 }
 
 /// Most rings an unorganized cloud's `ring` field may name.
-pub const MAX_RINGS: usize = 1024;
+pub(crate) const MAX_RINGS: usize = 1024;
 
 fn wrap_pi(a: f64) -> f64 {
     let t = std::f64::consts::TAU;

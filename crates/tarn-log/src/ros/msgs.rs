@@ -30,7 +30,7 @@ impl Time {
     }
 
     /// Seconds since the epoch, as a float.
-    pub fn to_sec(self) -> f64 {
+    pub(crate) fn to_sec(self) -> f64 {
         self.sec as f64 + self.nanosec as f64 * 1e-9
     }
 
