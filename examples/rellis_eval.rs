@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use rellis_common::*;
 use tarn::classify::color::RuleClassifier;
-use tarn::classify::gmm::TrainConfig;
+use tarn::classify::gmm::{ColorModel, TrainConfig};
 use tarn::classify::lut::ColorLut;
 use tarn::classify::{Confusion, Label, LabelImage};
 
@@ -52,6 +52,15 @@ fn main() {
         l
     };
 
+    classifier_table(&r, &model, &with_h);
+    mixture_table(&r, &with_h);
+    let l6 = with_h(&ColorLut::compile(&model, 6).unwrap().classify(&r.rgb));
+    error_tables(&r, &l6, &above);
+    projection_tables(&r, &l6);
+}
+
+/// Precision, recall and IoU of each classifier on the right half of the image.
+fn classifier_table(r: &Rellis, model: &ColorModel, with_h: &dyn Fn(&LabelImage) -> LabelImage) {
     println!("\nRight half of the image, puddle (id 31) as truth:\n");
     println!("| classifier | precision | recall | IoU |\n| --- | --- | --- | --- |");
     let rule = RuleClassifier::default().classify(&r.rgb);
@@ -64,7 +73,7 @@ fn main() {
         &score_right(&with_h(&direct), &r.ids),
     );
     for bits in [3u8, 4, 5, 6, 7, 8] {
-        let lut = ColorLut::compile(&model, bits).unwrap();
+        let lut = ColorLut::compile(model, bits).unwrap();
         let l = lut.classify(&r.rgb);
         let agree = l
             .data
@@ -82,7 +91,10 @@ fn main() {
             &score_right(&with_h(&l), &r.ids),
         );
     }
+}
 
+/// Speed against error of the mixture size.
+fn mixture_table(r: &Rellis, with_h: &dyn Fn(&LabelImage) -> LabelImage) {
     // Where the errors are: the puddle polygon covers wet mud between the puddles.
     // Speed against error of the mixture size: BIC picks 1..=k components per class; the
     // time is training (left half) and direct classification of the whole image (the
@@ -92,7 +104,7 @@ fn main() {
     for k in [1usize, 2, 4, 6, 8] {
         let t = Instant::now();
         let m = train(
-            &r,
+            r,
             &TrainConfig {
                 max_components: k,
                 ..TrainConfig::default()
@@ -117,8 +129,11 @@ fn main() {
             c.iou()
         );
     }
+}
 
-    let l6 = with_h(&ColorLut::compile(&model, 6).unwrap().classify(&r.rgb));
+/// Where the errors are: the pixels inside the puddle polygon, and the pixels called water
+/// by image class id.
+fn error_tables(r: &Rellis, l6: &LabelImage, above: &[bool]) {
     let (mut bright, mut bright_hit, mut dark, mut dark_hit) = (0u64, 0u64, 0u64, 0u64);
     let w = r.ids.width();
     for (i, (p, id)) in r.rgb.pixels().zip(r.ids.pixels()).enumerate() {
@@ -162,19 +177,22 @@ fn main() {
     let sky_above = r
         .ids
         .pixels()
-        .zip(&above)
+        .zip(above)
         .filter(|(id, a)| id.0[0] == SKY && **a)
         .count();
     println!(
         "Horizon from the lidar ground plane: {sky_above} of {sky_total} sky pixels above it."
     );
+}
 
+/// The image labels projected onto the Ouster scan, against the scan's own labels.
+fn projection_tables(r: &Rellis, l6: &LabelImage) {
     // Projection onto the Ouster scan.
     let (per_point, votes) =
-        tarn::project::label_points(&l6, &r.camera, &r.cloud, &r.lidar_to_cam, 0.25).unwrap();
+        tarn::project::label_points(l6, &r.camera, &r.cloud, &r.lidar_to_cam, 0.25).unwrap();
     let mut c = Confusion::default();
     let mut truth_img = Confusion::default();
-    let pix = lidar_pixels(&r, &r.lidar_to_cam);
+    let pix = lidar_pixels(r, &r.lidar_to_cam);
     for (i, l) in per_point.iter().enumerate() {
         if let Some(l) = l {
             c.add(*l == Label::Water, r.lidar_ids[i] == 31);
