@@ -5,7 +5,7 @@
 //! for the sensors the rig configures), `DIR/truth.ply` (the `map.ply` schema: one vertex
 //! per truth cell), `DIR/truth.json` ([`TruthInfo`]) and `DIR/scene.ply` (the terrain and
 //! object mesh the rays were cast against), and `DIR/rig.toml` (the rig: datasheet values
-//! and mounts, which [`mapper_config`] turns into what the mapper is told). `maps/README.md`
+//! and mounts, which [`tarn::rig::RigSpec::mapper_config`] turns into what the mapper is told). `maps/README.md`
 //! documents the formats.
 //!
 //! `sim` sits beside the pipeline: it uses every module, no pipeline module uses it.
