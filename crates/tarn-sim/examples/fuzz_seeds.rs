@@ -126,6 +126,18 @@ fn log(path: &Path, opts: &WriteOptions) -> anyhow::Result<()> {
 }
 
 fn main() -> anyhow::Result<()> {
+    let tmp = tempfile::tempdir()?;
+    ply_seeds(tmp.path())?;
+    kitti_seeds()?;
+    mcap_seeds(tmp.path())?;
+    cdr_seeds()?;
+    scene_seeds()?;
+    colour_model_seeds(tmp.path())?;
+    Ok(())
+}
+
+/// PLY point clouds, and a map.ply.
+fn ply_seeds(tmp: &Path) -> anyhow::Result<()> {
     // PLY point clouds.
     put(
         "ply",
@@ -156,7 +168,6 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
         be.extend_from_slice(&(500u16 * i).to_be_bytes());
     }
     put("ply", "binary-be.ply", &be)?;
-    let tmp = tempfile::tempdir()?;
     let map = tarn_sim::sim::truth_map(&tarn_sim::sim::World::build(&tarn_sim::sim::Scene::load(
         &Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
             .join("maps/vertical_scanner.toml"),
@@ -170,13 +181,13 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
             .cloned()
             .collect(),
     );
-    tarn::io::export::write_map_ply(&tmp.path().join("map.ply"), &small)?;
-    put(
-        "ply",
-        "map.ply",
-        &std::fs::read(tmp.path().join("map.ply"))?,
-    )?;
+    tarn::io::export::write_map_ply(&tmp.join("map.ply"), &small)?;
+    put("ply", "map.ply", &std::fs::read(tmp.join("map.ply"))?)?;
+    Ok(())
+}
 
+/// KITTI scans.
+fn kitti_seeds() -> anyhow::Result<()> {
     // KITTI scans.
     let mut k = Vec::new();
     for p in [
@@ -190,7 +201,11 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
         }
     }
     put("kitti", "scan.bin", &k)?;
+    Ok(())
+}
 
+/// MCAP logs: uncompressed unchunked, zstd and lz4 chunked, big-endian CDR.
+fn mcap_seeds(tmp: &Path) -> anyhow::Result<()> {
     // MCAP logs: uncompressed unchunked, zstd and lz4 chunked, big-endian CDR.
     for (name, opts) in [
         (
@@ -221,11 +236,15 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
             },
         ),
     ] {
-        let p = tmp.path().join(name);
+        let p = tmp.join(name);
         log(&p, &opts)?;
         put("mcap", name, &std::fs::read(&p)?)?;
     }
+    Ok(())
+}
 
+/// CDR messages, a type byte before each.
+fn cdr_seeds() -> anyhow::Result<()> {
     // CDR messages: one type byte (0 TF, 1 PointCloud2, 2 Image, 3 CameraInfo), then the message.
     for (endian, e) in [(Endian::Little, "le"), (Endian::Big, "be")] {
         let msgs: [(u8, Vec<u8>); 4] = [
@@ -249,7 +268,11 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
             put("cdr", &format!("{kind}-{e}.cdr"), &v)?;
         }
     }
+    Ok(())
+}
 
+/// Scenes: the repository's maps.
+fn scene_seeds() -> anyhow::Result<()> {
     // Scenes: the repository's maps.
     for entry in
         std::fs::read_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../..")).join("maps"))?
@@ -263,7 +286,11 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
             )?;
         }
     }
+    Ok(())
+}
 
+/// A colour model JSON.
+fn colour_model_seeds(tmp: &Path) -> anyhow::Result<()> {
     // Colour model JSON.
     let comp = |m: [f64; 3], v: f64| Component {
         weight: 0.5,
@@ -291,11 +318,11 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
         ],
     };
     let model = ColorModel::from_data(data)?;
-    model.save(&tmp.path().join("model.json"))?;
+    model.save(&tmp.join("model.json"))?;
     put(
         "color_model_json",
         "model.json",
-        &std::fs::read(tmp.path().join("model.json"))?,
+        &std::fs::read(tmp.join("model.json"))?,
     )?;
     Ok(())
 }
