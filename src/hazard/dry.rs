@@ -1,8 +1,6 @@
 //! The dry terrain the step, slope and σ rules read: each dry cell's elevation, σ and
 //! weight ([`dry_terrain`]), looked up by key in a dense array or a hash map ([`DryCells`]).
 
-#[cfg(doc)]
-use super::terrain::window_gradient;
 use super::terrain::{Neighbourhood, Window};
 use super::CellMap;
 use crate::grid::{CellKey, CellStats};
@@ -127,7 +125,8 @@ impl DryCells {
 
 /// Elevation (m) of a cell with fused points, its range-bound σ for the step and slope
 /// tests (0 when unknown), and the weight its elevation has in its neighbours' gradient:
-/// the inverse of its vertical variance and the millimetre's ([`window_gradient`]).
+/// the inverse of its vertical variance and the millimetre's
+/// ([`window_gradient`](super::terrain::window_gradient)).
 pub(super) fn dry_terrain(c: &CellStats, z_ref: f64) -> Option<Dry> {
     let finite = |s: Option<f64>| s.filter(|s| s.is_finite()).unwrap_or(0.0);
     Some((

@@ -1,11 +1,7 @@
 //! The rules of a dry cell read from the dry cells around it: its class and hazard from
 //! steps and slopes ([`terrain_hazard`]), and the σ of its elevation at its centre.
 
-#[cfg(doc)]
-use super::dry::dry_terrain;
 use super::{Class, Hazard};
-#[cfg(doc)]
-use crate::grid::CellStats;
 
 /// The dry 3 × 3 neighbourhood of a cell (itself included), row by row from its lower-left
 /// neighbour: elevation and σ, NaN elevation where the neighbour is not a dry cell.
@@ -13,8 +9,8 @@ pub type Neighbourhood = [(f64, f64); 9];
 
 /// The dry 5 × 5 window around a cell (itself at index 12), row by row from its lower-left
 /// cell: elevation and weight (the inverse variance of its vertical σ and the millimetre,
-/// [`dry_terrain`]), NaN elevation where the cell is not dry. What the cell's σ reads its
-/// terrain's gradient from.
+/// [`dry_terrain`](super::dry::dry_terrain)), NaN elevation where the cell is not dry. What
+/// the cell's σ reads its terrain's gradient from.
 pub(super) type Window = [(f64, f64); 25];
 
 /// Class and hazard of a dry cell with elevation `z` ± `sz` from its dry neighbourhood
@@ -85,9 +81,10 @@ pub fn terrain_hazard(
 }
 
 /// The σ of a dry cell's elevation as the elevation of its centre, from the cell's vertical
-/// σ `sd` ([`CellStats::elevation_std_m`]) and its range-bound σ `s_rb`
-/// ([`CellStats::range_bound_std_m`]), on terrain of gradient g read from the dry cells
-/// of its 5 × 5 window ([`window_gradient`]):
+/// σ `sd` ([`elevation_std_m`](crate::grid::CellStats::elevation_std_m)) and its
+/// range-bound σ `s_rb` ([`range_bound_std_m`](crate::grid::CellStats::range_bound_std_m)),
+/// on terrain of gradient g read from the dry cells of its 5 × 5 window
+/// ([`window_gradient`]):
 ///
 /// * a point moved along its ray by a range error lands in the map at another place, where
 ///   sloping terrain stands higher or lower: against the terrain there, the error is the
@@ -103,7 +100,8 @@ pub fn terrain_hazard(
 ///   offset spread over the cell, variance `g²·res²/12` along each axis;
 /// * the terrain varies within the cell beyond that plane (roughness, a kerb's edge): the
 ///   centre differs from the points' mean by what their spread shows beyond their noise
-///   (`excess`, [`CellStats::excess_spread_var_m2`]) less the plane's `g²·res²/12`;
+///   (`excess`, [`excess_spread_var_m2`](crate::grid::CellStats::excess_spread_var_m2))
+///   less the plane's `g²·res²/12`;
 /// * the elevations are whole millimetres (variance 1/12 mm²).
 pub(super) fn centre_std(sd: f64, s_rb: f64, excess: f64, win: &Window, res: f64) -> f64 {
     let (g2, slope2) = window_gradient(win, res);

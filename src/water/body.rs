@@ -28,9 +28,8 @@ pub(crate) fn body_of(
         &surface::reject_occluders(&shore.samples, &ground, cfg),
         cfg,
     );
-    let (samples, keys, source) = surface_samples(&cells, &set, &shore, &kept, info, res, cfg);
-    let (fit, samples, source) =
-        fit_surface(&cells, &set, &shore, samples, keys, source, info, res, cfg)?;
+    let samples = surface_samples(&cells, &set, &shore, &kept, info, res, cfg);
+    let (fit, samples) = fit_surface(&cells, &set, shore.few_reliable, samples, info, res, cfg)?;
     let surface = fit.model.evaluator();
     let (cell_depth_m, depth) = depths(&cells, &surface, info, res);
     let cell_area = res * res;
@@ -42,8 +41,8 @@ pub(crate) fn body_of(
         depth,
         shore_samples: shore.samples.len(),
         shore_samples_kept: kept.len(),
-        surface_samples: samples.len(),
-        surface_source: source,
+        surface_samples: samples.points.len(),
+        surface_source: samples.source,
         surface: fit.model,
         level_residual_m: fit.level_residual_m,
         delaunay_residual_m: fit.delaunay_residual_m,
@@ -64,6 +63,14 @@ struct Shore {
     /// Fewer reliably measured shore cells than `min_shore_samples`: every shore cell is
     /// kept, and the level is weighted by the inverse of each cell's variance.
     few_reliable: bool,
+}
+
+/// The samples a surface is fitted to, their cells (in the same order), and where they
+/// came from.
+struct Samples {
+    points: Vec<ShoreSample>,
+    keys: Vec<CellKey>,
+    source: SurfaceSource,
 }
 
 /// A surface sample at the centre of cell `k`.
@@ -134,35 +141,35 @@ fn surface_samples(
     info: &impl CellInfos,
     res: f64,
     cfg: &WaterConfig,
-) -> (Vec<ShoreSample>, Vec<CellKey>, SurfaceSource) {
-    let of_kept = || {
-        (
-            kept.iter().map(|&i| shore.samples[i]).collect::<Vec<_>>(),
-            kept.iter().map(|&i| shore.keys[i]).collect::<Vec<_>>(),
-            SurfaceSource::Shore,
-        )
+) -> Samples {
+    let of_kept = || Samples {
+        points: kept.iter().map(|&i| shore.samples[i]).collect(),
+        keys: kept.iter().map(|&i| shore.keys[i]).collect(),
+        source: SurfaceSource::Shore,
     };
     let of_cells = |z: &dyn Fn(&Info) -> Option<f64>, source| {
         let at: Vec<(CellKey, f64)> = cells
             .iter()
             .filter_map(|&k| info.get(k).and_then(|i| z(&i)).map(|z| (k, z)))
             .collect();
-        (
-            at.iter()
-                .map(|&(k, z)| sample(res, k, z))
-                .collect::<Vec<_>>(),
-            at.iter().map(|&(k, _)| k).collect::<Vec<_>>(),
+        Samples {
+            points: at.iter().map(|&(k, z)| sample(res, k, z)).collect(),
+            keys: at.iter().map(|&(k, _)| k).collect(),
             source,
-        )
+        }
     };
     if kept.len() >= cfg.min_shore_samples.max(1) {
         return of_kept();
     }
-    if let Some((s, k)) = far_shore(set, info, res, cfg) {
-        return (s, k, SurfaceSource::FarShore);
+    if let Some((points, keys)) = far_shore(set, info, res, cfg) {
+        return Samples {
+            points,
+            keys,
+            source: SurfaceSource::FarShore,
+        };
     }
     let levels = of_cells(&|i| i.level, SurfaceSource::WaterLevels);
-    if !levels.0.is_empty() {
+    if !levels.points.is_empty() {
         levels
     } else if !kept.is_empty() {
         of_kept()
@@ -171,39 +178,39 @@ fn surface_samples(
     }
 }
 
-/// The surface through `samples` (cells `keys`, from `source`). Too few reliable shore
-/// cells: every shore cell counts, weighted by the inverse of its elevation variance, so
-/// that the reliable few still decide the level; samples of σ of metres make no surface,
-/// so the model is level. A shore that is neither level nor a smooth surface (the fit fell
-/// back to its lowest samples), or a triangulated surface that some body cells lie more
-/// than `shore_radius_m` outside of (beyond its samples' hull it is carried on level, a
-/// guess), may be a stretch of a sloping stream seen in one place: the far shore, where
-/// there is one, adds the rest of its length. Gives the fit, its samples and their source.
-#[allow(clippy::too_many_arguments)]
+/// The surface through `samples`. When they are the shore and it has few reliably measured
+/// cells (`few_reliable`), every shore cell counts, weighted by the inverse of its
+/// elevation variance, so that the reliable few still decide the level; samples of σ of
+/// metres make no surface, so the model is level. A shore that is neither level nor a
+/// smooth surface (the fit fell back to its lowest samples), or a triangulated surface that
+/// some body cells lie more than `shore_radius_m` outside of (beyond its samples' hull it
+/// is carried on level, a guess), may be a stretch of a sloping stream seen in one place:
+/// the far shore, where there is one, adds the rest of its length. Gives the fit and the
+/// samples it went through.
 fn fit_surface(
     cells: &[CellKey],
     set: &BTreeSet<CellKey>,
-    shore: &Shore,
-    samples: Vec<ShoreSample>,
-    keys: Vec<CellKey>,
-    source: SurfaceSource,
+    few_reliable: bool,
+    samples: Samples,
     info: &impl CellInfos,
     res: f64,
     cfg: &WaterConfig,
-) -> Option<(surface::Fit, Vec<ShoreSample>, SurfaceSource)> {
-    let few_reliable = shore.few_reliable;
-    let fit = if few_reliable && source == SurfaceSource::Shore {
-        let sigma: Vec<f64> = keys
+) -> Option<(surface::Fit, Samples)> {
+    let mut samples = samples;
+    let shore = samples.source == SurfaceSource::Shore;
+    let fit = if few_reliable && shore {
+        let sigma: Vec<f64> = samples
+            .keys
             .iter()
             .map(|&k| info.get(k).and_then(|i| i.std).unwrap_or(f64::INFINITY))
             .collect();
-        surface::weighted_level(&samples, &sigma)?
+        surface::weighted_level(&samples.points, &sigma)?
     } else {
         surface::fit(
-            &samples,
-            &shore_constraints(&keys),
+            &samples.points,
+            &shore_constraints(&samples.keys),
             cfg,
-            median_std(&keys, info),
+            median_std(&samples.keys, info),
         )?
     };
     let extrapolated = || {
@@ -213,25 +220,26 @@ fn fit_surface(
             ev.outside_hull_m(x, y) > cfg.shore_radius_m
         })
     };
-    let undecided =
-        !few_reliable && source == SurfaceSource::Shore && (!fit.decided || extrapolated());
-    let far = undecided.then(|| far_shore(set, info, res, cfg)).flatten();
-    Some(match far {
-        Some((far, far_keys)) => {
-            let own: BTreeSet<CellKey> = keys.iter().copied().collect();
-            let (mut samples, mut keys) = (samples, keys);
-            for (s, k) in far.into_iter().zip(far_keys) {
-                if !own.contains(&k) {
-                    samples.push(s);
-                    keys.push(k);
-                }
-            }
-            let noise = median_std(&keys, info);
-            let fit = surface::fit(&samples, &shore_constraints(&keys), cfg, noise)?;
-            (fit, samples, SurfaceSource::ShoreAndFarShore)
+    let undecided = !few_reliable && shore && (!fit.decided || extrapolated());
+    let Some((far, far_keys)) = undecided.then(|| far_shore(set, info, res, cfg)).flatten() else {
+        return Some((fit, samples));
+    };
+    let own: BTreeSet<CellKey> = samples.keys.iter().copied().collect();
+    for (s, k) in far.into_iter().zip(far_keys) {
+        if !own.contains(&k) {
+            samples.points.push(s);
+            samples.keys.push(k);
         }
-        None => (fit, samples, source),
-    })
+    }
+    let noise = median_std(&samples.keys, info);
+    let fit = surface::fit(
+        &samples.points,
+        &shore_constraints(&samples.keys),
+        cfg,
+        noise,
+    )?;
+    samples.source = SurfaceSource::ShoreAndFarShore;
+    Some((fit, samples))
 }
 
 /// Each cell's bottom returns, moved from the levels the cue corrected them against onto

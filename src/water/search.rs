@@ -259,7 +259,7 @@ pub(crate) fn find_bodies_and_void(
 }
 
 /// The bodies a part of a map decides: the body search run on the part's observed cells,
-/// as [`find_bodies_and_void`] runs it on the whole map ([`crate::hazard::region`] drives
+/// as [`find_bodies_and_void`] runs it on the whole map (`hazard::region` drives
 /// it region by region).
 pub(crate) struct PartBodies {
     /// The bodies of the components the part knows whole (with `margin` cells around

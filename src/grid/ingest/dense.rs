@@ -1,8 +1,6 @@
 //! Pass 2 of ingest for a dense bucket (several samples a cell): each sample accumulated
 //! straight into its cell's one-line accumulator, no sort.
 
-#[cfg(doc)]
-use super::fuse::fuse_bucket;
 use super::fuse::ElevMut;
 use super::gate::{fast_threshold, is_below, prior_gate, split_and_merge};
 use super::sample::Sample;
@@ -91,7 +89,7 @@ pub(super) struct Dense {
 
 /// Pass 2 for a dense bucket `bi`, through its accumulators `acc` (all default on entry
 /// and on return): returns (fused, below) point counts. The same rules as
-/// [`fuse_bucket`], sample by sample.
+/// [`fuse_bucket`](super::fuse::fuse_bucket), sample by sample.
 #[inline(never)]
 pub(super) fn fuse_dense(
     binned: &[Binned],

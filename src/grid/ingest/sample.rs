@@ -3,8 +3,6 @@
 
 use super::bin::floor_small;
 use crate::grid::cell::vertical_weight;
-#[cfg(doc)]
-use crate::grid::cell::W_MAX;
 
 /// A point reduced to what the grid needs.
 #[derive(Debug, Clone, Copy)]
@@ -18,7 +16,8 @@ pub(super) struct Sample {
     pub(super) sigma_mm: f32,
 }
 
-/// Bits of [`Sample::wv`] that hold the weight (up to [`W_MAX`] = 2²⁴).
+/// Bits of [`Sample::wv`] that hold the weight (up to
+/// [`W_MAX`](crate::grid::cell::W_MAX) = 2²⁴).
 pub(super) const W_BITS: u32 = 25;
 
 /// The vertical share `s` (0.05..1) as a 7-bit code: `round(127·√s)`, which keeps the
