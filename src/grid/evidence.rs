@@ -424,7 +424,10 @@ impl std::ops::Index<Cue> for CueLogOdds {
 /// * image cues, per cell and frame (the majority of the frame's pixels in the cell):
 ///   colour 0.8 against 0.05 (the paper's Table 1 rule found 0.806 pixel precision and
 ///   0.414 recall on the RELLIS-3D puddles, where the label polygon includes wet mud; on
-///   whole cells of open water seen from several metres it finds most of them); SWIR dark
+///   whole cells of open water seen from several metres it finds most of them); the 0.05
+///   stands only where the log cannot measure the colour labels' false alarms: where its
+///   lidar samples dry ground in the colour image, the measured rate's 95 % upper
+///   bound replaces it ([`Fusion::measured`]); SWIR dark
 ///   0.8 against 0.05, but dark in SWIR is also snow and ice (the classifier calls them
 ///   snow/ice only when a bright visible image says so); MWIR 0.7 against 0.05 (the
 ///   contrast test at 3 σ of the local terrain band);
@@ -457,7 +460,8 @@ pub struct Fusion {
     pub p_dark_dry: f64,
     /// Probability that a frame's colour labels call a water cell water.
     pub p_colour_detect: f64,
-    /// Probability that a frame's colour labels call a dry cell water.
+    /// Probability that a frame's colour labels call a dry cell water: the stated rate,
+    /// used where the log cannot measure it (see `colour_false_from_log`).
     pub p_colour_false: f64,
     /// Probability that a frame's SWIR labels call a water cell dark.
     pub p_swir_detect: f64,
@@ -471,6 +475,10 @@ pub struct Fusion {
     pub cue_cap: f64,
     /// Largest magnitude of one image cue's log-odds (natural log).
     pub image_cap: f64,
+    /// Whether the colour cue's false-alarm rate is measured from the log where its lidar
+    /// sampled dry ground in the colour image ([`Fusion::measured`]), in place of
+    /// `p_colour_false`.
+    pub colour_false_from_log: bool,
 }
 
 impl Default for Fusion {
@@ -493,6 +501,7 @@ impl Default for Fusion {
             p_mwir_false: 0.05,
             cue_cap: 100f64.ln(),
             image_cap: 1000f64.ln(),
+            colour_false_from_log: true,
         }
     }
 }
@@ -783,6 +792,7 @@ mod tests {
                 p_mwir_false: p[14],
                 cue_cap: caps.0,
                 image_cap: caps.1,
+                colour_false_from_log: true,
             };
             let r = reference_probability(&e, &f);
             prop_assert_eq!(e.water_probability(&f).to_bits(), r.to_bits());
