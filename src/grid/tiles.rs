@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{centre_of, CellKey, CellSink, CellStats, GridConfig, RollingGrid};
+use super::{centre_of, CellKey, CellSink, CellStats, FalseAlarms, GridConfig, RollingGrid};
 use crate::error::{Error, Result};
 
 #[path = "tiles_codec.rs"]
@@ -110,11 +110,17 @@ impl PartialEq for Tile {
 
 /// A sparse global map of cells at one resolution and reference height. Keys are
 /// unbounded; memory grows with the observed area only.
+///
+/// Beside the cells it holds the colour labels' false alarms measured on the logs its
+/// cells came from ([`FalseAlarms`]): the water stage reads the rate of the map's own
+/// logs. They merge with the cells (sums); a part of a map cut by tile
+/// ([`TileMap::select`], [`TileMap::partition`]) holds cells only.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TileMap {
     resolution: f64,
     z_ref: f64,
     tiles: BTreeMap<(i64, i64), Tile>,
+    colour_false_alarms: FalseAlarms,
 }
 
 #[inline]
@@ -138,15 +144,18 @@ impl TileMap {
             resolution,
             z_ref,
             tiles: BTreeMap::new(),
+            colour_false_alarms: FalseAlarms::default(),
         })
     }
 
-    /// Its cells, leaving this map empty with the same resolution and reference height.
+    /// Its cells and false alarms, leaving this map empty with the same resolution and
+    /// reference height.
     pub fn take(&mut self) -> TileMap {
         TileMap {
             resolution: self.resolution,
             z_ref: self.z_ref,
             tiles: std::mem::take(&mut self.tiles),
+            colour_false_alarms: std::mem::take(&mut self.colour_false_alarms),
         }
     }
 
@@ -156,7 +165,19 @@ impl TileMap {
             resolution: grid.resolution(),
             z_ref: grid.config().z_ref,
             tiles: BTreeMap::new(),
+            colour_false_alarms: FalseAlarms::default(),
         }
+    }
+
+    /// The colour labels' false alarms on the dry ground of the logs this map's cells came
+    /// from.
+    pub fn colour_false_alarms(&self) -> FalseAlarms {
+        self.colour_false_alarms
+    }
+
+    /// Adds false alarms measured on the logs this map's cells come from.
+    pub fn add_colour_false_alarms(&mut self, a: &FalseAlarms) {
+        self.colour_false_alarms.merge(a);
     }
 
     /// Cell edge length, metres.
@@ -201,6 +222,7 @@ impl TileMap {
         for (k, c) in other.observed() {
             self.add(k, &c);
         }
+        self.colour_false_alarms.merge(&other.colour_false_alarms);
         Ok(())
     }
 

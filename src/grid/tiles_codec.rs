@@ -1,15 +1,16 @@
 //! The tile set file format: a [`TileMap`] as compact, versioned bytes, for moving partial
 //! maps between processes (one log's tiles built on one machine, merged on another).
 //!
-//! Everything is little-endian. Version 2:
+//! Everything is little-endian. Version 3:
 //!
 //! | bytes | field |
 //! | --- | --- |
 //! | 8 | magic `TARNTILE` |
-//! | 4 | version, `u32` = 2 |
+//! | 4 | version, `u32` = 3 |
 //! | 4 | cells per tile side, `u32` = [`TILE_CELLS`] |
 //! | 8 | resolution (m), `f64` |
 //! | 8 | reference height `z_ref` (m), `f64` |
+//! | 16 | the colour labels' false alarms ([`FalseAlarms`]): dry samples, of them water, `u64` each |
 //! | 8 | number of tiles, `u64` |
 //! | … | the tiles, in increasing `(tx, ty)` |
 //! | 4 | CRC-32 (IEEE) of every byte before it |
@@ -36,14 +37,14 @@
 
 use super::{Tile, TileMap, TILE_CELLS};
 use crate::error::{Error, Result};
-use crate::grid::{CellStats, Evidence, EVIDENCE_COUNTS};
+use crate::grid::{CellStats, Evidence, FalseAlarms, EVIDENCE_COUNTS};
 
 /// The first eight bytes of a tile set.
 pub const TILESET_MAGIC: &[u8; 8] = b"TARNTILE";
 /// The version written, and the only one read.
-pub const TILESET_VERSION: u32 = 2;
+pub const TILESET_VERSION: u32 = 3;
 
-const HEADER: usize = 8 + 4 + 4 + 8 + 8 + 8;
+const HEADER: usize = 8 + 4 + 4 + 8 + 8 + 16 + 8;
 const TILE_HEADER: usize = 8 + 8 + 4;
 const CELL_MIN: usize = 2 + 1 + 4;
 const ELEVATION: u8 = 1;
@@ -222,6 +223,8 @@ impl TileMap {
         out.extend_from_slice(&(TILE_CELLS as u32).to_le_bytes());
         out.extend_from_slice(&self.resolution.to_le_bytes());
         out.extend_from_slice(&self.z_ref.to_le_bytes());
+        out.extend_from_slice(&self.colour_false_alarms.samples.to_le_bytes());
+        out.extend_from_slice(&self.colour_false_alarms.water.to_le_bytes());
         out.extend_from_slice(&(self.tiles.len() as u64).to_le_bytes());
         for (&(tx, ty), tile) in &self.tiles {
             out.extend_from_slice(&tx.to_le_bytes());
@@ -281,6 +284,14 @@ impl TileMap {
         let z_ref = r.f64("z_ref")?;
         let mut map = TileMap::new(resolution, z_ref).map_err(|e| corrupt(16, e))?;
         let at = r.pos;
+        map.colour_false_alarms = FalseAlarms {
+            samples: r.u64("false alarm samples")?,
+            water: r.u64("false alarms")?,
+        };
+        if map.colour_false_alarms.water > map.colour_false_alarms.samples {
+            return Err(corrupt(at, "more false alarms than samples"));
+        }
+        let at = r.pos;
         let tiles = r.u64("tile count")?;
         if tiles > (r.remaining() / (TILE_HEADER + CELL_MIN)) as u64 {
             return Err(corrupt(
@@ -338,7 +349,7 @@ impl TileMap {
     }
 
     /// A new map (same resolution and reference height) of the tiles whose key `keep`
-    /// accepts.
+    /// accepts, without the false alarms (they describe the logs, not the tiles).
     pub fn select(&self, keep: impl Fn((i64, i64)) -> bool) -> TileMap {
         TileMap {
             resolution: self.resolution,
@@ -349,11 +360,13 @@ impl TileMap {
                 .filter(|(&k, _)| keep(k))
                 .map(|(&k, t)| (k, t.clone()))
                 .collect(),
+            colour_false_alarms: FalseAlarms::default(),
         }
     }
 
     /// Splits the map into `parts` maps (at least one) by tile key: every tile goes whole
-    /// to part [`TileMap::part_of`]. Merging the parts gives the map back; merging the same
+    /// to part [`TileMap::part_of`], the false alarms to part 0. Merging the parts gives
+    /// the map back; merging the same
     /// part of many maps reduces one region independently of the others.
     pub fn partition(&self, parts: usize) -> Vec<TileMap> {
         let parts = parts.max(1);
@@ -362,11 +375,13 @@ impl TileMap {
                 resolution: self.resolution,
                 z_ref: self.z_ref,
                 tiles: Default::default(),
+                colour_false_alarms: FalseAlarms::default(),
             })
             .collect();
         for (&k, t) in &self.tiles {
             out[Self::part_of(k, parts)].tiles.insert(k, t.clone());
         }
+        out[0].colour_false_alarms = self.colour_false_alarms;
         out
     }
 
@@ -520,6 +535,14 @@ mod tests {
         });
         let bytes = m.to_bytes();
         assert_eq!(bytes.len(), HEADER + TILE_HEADER + 3 + 60 + 4);
+        // The false alarms travel with the cells.
+        let mut a = m.clone();
+        a.add_colour_false_alarms(&FalseAlarms {
+            samples: 7,
+            water: 2,
+        });
+        assert_eq!(TileMap::from_bytes(&a.to_bytes()).unwrap(), a);
+        assert_ne!(a, m);
         let e = TileMap::from_bytes(b"PLY\n").unwrap_err().to_string();
         assert!(e.contains("shorter than a tile set's header"), "{e}");
         let mut v = bytes.clone();
@@ -527,12 +550,23 @@ mod tests {
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
         assert!(e.contains("magic"), "{e}");
         let mut v = bytes.clone();
-        v[8] = 3;
+        v[8] = 4;
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
-        assert!(e.contains("version 3"), "{e}");
+        assert!(e.contains("version 4"), "{e}");
+        // More false alarms than samples, with a valid CRC.
+        let mut v = bytes[..bytes.len() - 4].to_vec();
+        v[32..40].copy_from_slice(&5u64.to_le_bytes());
+        v[40..48].copy_from_slice(&6u64.to_le_bytes());
+        let crc = crc32fast::hash(&v);
+        v.extend_from_slice(&crc.to_le_bytes());
+        let e = TileMap::from_bytes(&v).unwrap_err().to_string();
+        assert!(
+            e.contains("at byte 32: more false alarms than samples"),
+            "{e}"
+        );
         // A tile count of 2^40 with a valid CRC: refused before any allocation.
         let mut v = bytes[..bytes.len() - 4].to_vec();
-        v[32..40].copy_from_slice(&(1u64 << 40).to_le_bytes());
+        v[48..56].copy_from_slice(&(1u64 << 40).to_le_bytes());
         let crc = crc32fast::hash(&v);
         v.extend_from_slice(&crc.to_le_bytes());
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
