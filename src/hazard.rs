@@ -206,7 +206,8 @@ impl HazardMap {
     /// The hazard map of a tile map: water bodies (see [`crate::water`]), then one record
     /// per observed cell with class, hazard, water probability, z (the fitted water surface
     /// for water cells, else the terrain elevation, else the cues' water level) and depth
-    /// (0 dry, NaN where unknown). Body ids start at 1.
+    /// (0 dry, NaN where unknown). Body ids start at 1. The fusion rule is `cfg`'s,
+    /// measured on the map's logs ([`HazardConfig::measured_on`]).
     pub fn from_tiles(tiles: &TileMap, cfg: &HazardConfig) -> Result<Self> {
         Self::from_tiles_after(tiles, cfg, &[])
     }
@@ -224,14 +225,16 @@ impl HazardMap {
     /// [`HazardMap::from_tiles`] of the cells `observed` (unique keys, in the order the
     /// map's cells should have), with body ids carried over from the bodies of an earlier
     /// snapshot, `previous` (a body that grew or merged keeps its largest ancestor's id); of
-    /// `tiles` only the resolution and reference height are read. The mapper's window snapshot takes this path with an empty tile map, skipping
-    /// the copy of the window into tiles.
+    /// `tiles` only the resolution, the reference height and the false alarms
+    /// ([`HazardConfig::measured_on`]) are read. The mapper's window snapshot takes this
+    /// path with an empty tile map, skipping the copy of the window into tiles.
     pub fn from_cells_after(
         tiles: &TileMap,
         observed: Vec<(CellKey, CellStats)>,
         cfg: &HazardConfig,
         previous: &[WaterBody],
     ) -> Result<Self> {
+        let cfg = &cfg.measured_on(tiles);
         cfg.validate()?;
         let (bodies, void) =
             find_bodies_and_void(tiles, &observed, &cfg.fusion, &cfg.water, previous);

@@ -48,7 +48,7 @@ use crate::cues::prior::WaterPrior;
 use crate::cues::{estimate_sensor_height, FrameCues};
 use crate::error::{Error, Result};
 use crate::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
-use crate::hazard::HazardMap;
+use crate::hazard::{HazardConfig, HazardMap};
 use crate::sensor::Frame;
 
 mod config;
@@ -496,7 +496,11 @@ impl Mapper {
         // 4. labels: colour, SWIR and MWIR classification projected onto the map as votes.
         let t = Instant::now();
         if let Some(fl) = self.labels.as_mut() {
-            rep.labels = Some(fl.apply(frame, grid, surface.as_ref())?);
+            let labels = fl.apply(frame, grid, surface.as_ref())?;
+            if let Some(c) = &labels.colour {
+                self.global.add_colour_false_alarms(&c.false_alarms);
+            }
+            rep.labels = Some(labels);
         }
         times.labels = t.elapsed().as_secs_f64();
 
@@ -549,7 +553,7 @@ impl Mapper {
     /// bodies keep the ids of the previous snapshot's bodies they grew from.
     fn window_map(&mut self) -> Result<HazardMap> {
         let previous = self.snapshots.latest();
-        let cfg = self.cfg.hazard_config();
+        let cfg = self.hazard_config();
         match &self.grid {
             Some(g) => HazardMap::from_window_after(g, &cfg, &previous.bodies, &mut self.scratch),
             None => {
@@ -559,9 +563,27 @@ impl Mapper {
         }
     }
 
-    /// The hazard map of a tile map under this mapper's fusion, water and vehicle settings.
+    /// The hazard map of a tile map under this mapper's fusion, water and vehicle settings,
+    /// the fusion measured on the tile map's own logs ([`HazardMap::from_tiles`]).
     pub fn hazard_map_of(&self, tiles: &TileMap) -> Result<HazardMap> {
         HazardMap::from_tiles(tiles, &self.cfg.hazard_config())
+    }
+
+    /// The water stage's settings: the config's ([`MapperConfig::hazard_config`]), its
+    /// fusion rule measured on the frames so far ([`crate::grid::Fusion::measured`] of the
+    /// colour labels' false alarms on the dry ground the lidar sampled): what
+    /// its window's maps assume.
+    pub fn hazard_config(&self) -> HazardConfig {
+        let alarms = self
+            .labels
+            .as_ref()
+            .map(|l| l.colour_false_alarms())
+            .unwrap_or_default();
+        let cfg = self.cfg.hazard_config();
+        HazardConfig {
+            fusion: cfg.fusion.measured(&alarms),
+            ..cfg
+        }
     }
 
     /// The hazard map of the window after the last update: an immutable snapshot, cheap to

@@ -150,8 +150,16 @@ fn build(
     if let Some(c) = rep.labels.and_then(|l| l.colour) {
         eprintln!(
             "  colour: {} water pixels, {} vetoed by the colour check, {} by the reflection \
-             check; {} cells voted water, {} dry",
-            c.pixels_water, c.colour_check_vetoed, c.reflection_vetoed, c.cells_water, c.cells_dry
+             check; {} cells voted water, {} dry; false alarms {} of {} lidar dry samples \
+             (p_colour_false {:.2e})",
+            c.pixels_water,
+            c.colour_check_vetoed,
+            c.reflection_vetoed,
+            c.cells_water,
+            c.cells_dry,
+            c.false_alarms.water,
+            c.false_alarms.samples,
+            m.hazard_config().fusion.p_colour_false
         );
     }
     (m.publish_now().unwrap().as_ref().clone(), m)

@@ -237,7 +237,9 @@ def rates():
     print("path, on true water or on dry ground farther than 0.5 m from water, every scene and")
     print("rig summed (one row per rig below). P(for | ·) is the share of a cue's events that")
     print("speak for water. LR is the likelihood ratio of an event for water, then of one")
-    print("against; the rule's are beside it.")
+    print("against; the rule's are beside it. The colour labels' P(for | dry) is measured from")
+    print("each log where its lidar sampled dry ground (`Fusion::measured`; the stated 0.05")
+    print("where it did not): the range the row's builds used is shown.")
     print()
     print("| cue (event for / against) | rig | on water: for / against | P(for \\| water) | on dry: for / against | P(for \\| dry) | P(for \\| dry), the worst scene | LR for / against | rule: P(for \\| water), P(for \\| dry) | rule: LR for / against |")
     print("| --- | --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: |")
@@ -272,12 +274,24 @@ def rates():
         a = "–" if pd == 1 else f"{(1 - pw) / (1 - pd):.2f}"
         return f"{f} / {a}"
 
+    def used(rig, pd_name):
+        """The P(for | dry) each build of the row used (a rate measured from its log, or the
+        stated one): "a" or "a–b" over the builds, from their reports."""
+        ps = sorted({(load(r, scene, "build").get("fusion") or rule)[pd_name]
+                     for (r, scene) in runs if in_row(rig, (r, scene))})
+        f = lambda p: f"{p:.2f}" if p >= 0.01 else f"{p:.0e}"
+        return f(ps[0]) if len(ps) == 1 else f"{f(ps[0])}–{f(ps[-1])}"
+
     for name, key, what, pw_name, pd_name in RATE_CUES:
         rpw = 1 - rule["p_water_return"] if pw_name is None else rule[pw_name]
         rpd = rule[pd_name]
         for rig in rigs + ["all"]:
             w, d = tot(rig, key)
             if sum(w) + sum(d) == 0:
+                continue
+            if key == "colour":
+                # Measured per log: the rule's ratio is the stated one's, the range beside.
+                print(f"| {name} ({what}) | {rig} | {w[0]:,} / {w[1]:,} | {pct(ratio(w[0], sum(w)))} | {d[0]:,} / {d[1]:,} | {pct(ratio(d[0], sum(d)), 2)} | {top(rig, lambda r: r[key]['dry'][0] / sum(r[key]['dry']) if sum(r[key]['dry']) >= 1000 else None)} | {lr(ratio(w[0], sum(w)), ratio(d[0], sum(d)))} | {rpw:.2f}, {used(rig, pd_name)} | measured per log |")
                 continue
             pw, pd = ratio(w[0], sum(w)), ratio(d[0], sum(d))
             # The scene whose dry ground fooled the cue most, among those with at least

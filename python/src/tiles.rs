@@ -39,7 +39,7 @@ impl TileSet {
         py.detach(|| t.merge(o)).map_err(err)
     }
 
-    /// The tile set format of `docs/distributed.md` (magic `TARNTILE`, version 2, CRC).
+    /// The tile set format of `docs/distributed.md` (magic `TARNTILE`, version 3, CRC).
     fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
         let b = py.detach(|| self.tiles.to_bytes());
         PyBytes::new(py, &b)
@@ -85,6 +85,28 @@ impl TileSet {
             .observed()
             .map(|(_, c)| c.hits as u64 + c.below as u64)
             .sum()
+    }
+
+    /// The colour labels' false alarms on the dry ground of the logs this set was built
+    /// from: `(samples, labelled water)`. Merging sets sums them; a cut of a set
+    /// (`blocks`, `select_near`, `partition` but its first part) holds none.
+    #[getter]
+    fn colour_false_alarms(&self) -> (u64, u64) {
+        let a = self.tiles.colour_false_alarms();
+        (a.samples, a.water)
+    }
+
+    /// Adds false alarms `(samples, labelled water)` measured on this set's logs: a region
+    /// cut from a merged map is finished with the whole build's.
+    fn add_colour_false_alarms(&mut self, samples: u64, water: u64) -> PyResult<()> {
+        if water > samples {
+            return Err(PyValueError::new_err(format!(
+                "{water} false alarms of {samples} samples"
+            )));
+        }
+        self.tiles
+            .add_colour_false_alarms(&tarn::grid::FalseAlarms { samples, water });
+        Ok(())
     }
 
     /// The tile keys `(tx, ty)`, in increasing order (tiles are 64 × 64 cells).

@@ -70,8 +70,15 @@ def _near(t, region: list, halo: int):
     return t.select_near(region, halo)
 
 
-def _finish(crops: list, region: list, halo: int, bounds, config: Optional[str]):
-    return tarn.finish_region(tarn.merge(crops), region, halo, bounds, config)
+def _alarms(t) -> tuple:
+    return t.colour_false_alarms
+
+
+def _finish(crops: list, region: list, halo: int, bounds, config: Optional[str], alarms):
+    # The crops hold cells only: the region is finished under the whole build's rates.
+    m = tarn.merge(crops)
+    m.add_colour_false_alarms(*alarms)
+    return tarn.finish_region(m, region, halo, bounds, config)
 
 
 def _nbytes(t) -> int:
@@ -132,6 +139,8 @@ def build_many(
         [tuple(k) for k in ks]
         for ks in client.gather([client.submit(_keys, f, pure=False) for f in per_log])
     ]
+    per_log_alarms = client.gather([client.submit(_alarms, f, pure=False) for f in per_log])
+    alarms = tuple(sum(a[i] for a in per_log_alarms) for i in range(2))
     every = sorted(set().union(*map(set, keys)))
     if not every:
         # Nothing observed: the empty map, with the logs' resolution.
@@ -203,7 +212,9 @@ def build_many(
                 for b in reading(region, h)
             ]
             crops_all.extend(crops)
-            futures.append(client.submit(_finish, crops, region, h, bounds, cfg, pure=False))
+            futures.append(
+                client.submit(_finish, crops, region, h, bounds, cfg, alarms, pure=False)
+            )
         done = client.gather(futures)
         finished.extend(futures)
         regions_done.extend(done)

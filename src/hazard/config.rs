@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{check, Error, Result};
-use crate::grid::Fusion;
+use crate::grid::{Fusion, TileMap};
 use crate::water::WaterConfig;
 
 /// What the vehicle can drive through.
@@ -65,6 +65,15 @@ impl HazardConfig {
         self.fusion.validate()?;
         self.water.validate()?;
         self.vehicle.validate()
+    }
+
+    /// The config with the fusion rule measured on the logs of `tiles`
+    /// ([`Fusion::measured`] of [`TileMap::colour_false_alarms`]).
+    pub fn measured_on(&self, tiles: &TileMap) -> HazardConfig {
+        HazardConfig {
+            fusion: self.fusion.measured(&tiles.colour_false_alarms()),
+            ..*self
+        }
     }
 
     /// Reads a JSON config; unknown fields are errors naming the file.

@@ -128,7 +128,10 @@ impl Domain {
 /// within `bounds` (inclusive): the records and bodies [`HazardMap::from_tiles`] of the
 /// whole map gives for the region's cells, for every tile it can decide, and the tiles it
 /// cannot (module documentation). `tiles` must hold every tile of the map within `halo`
-/// tiles of the region (it may hold more: only those are read); `halo` is at least 1.
+/// tiles of the region (it may hold more: only those are read); `halo` is at least 1. The
+/// fusion rule is measured on `tiles`' false alarms ([`HazardConfig::measured_on`]); a cut
+/// of a map holds none ([`TileMap::select`]), so give a region cut from a merged map the
+/// whole build's ([`TileMap::add_colour_false_alarms`]) for the map the whole build gives.
 pub fn finish_region(
     tiles: &TileMap,
     region: &[TileKey],
@@ -136,6 +139,7 @@ pub fn finish_region(
     bounds: (TileKey, TileKey),
     cfg: &HazardConfig,
 ) -> Result<RegionMap> {
+    let cfg = &cfg.measured_on(tiles);
     cfg.validate()?;
     if halo < 1 {
         return Err(Error::invalid(

@@ -45,7 +45,7 @@ use crate::cues::ScanSurface;
 use crate::error::{Error, Result};
 use crate::geom::camera::CameraModel;
 use crate::geom::{pose_is_finite, PointCloud, Pose};
-use crate::grid::{CellKey, Cue, Evidence, RollingGrid};
+use crate::grid::{CellKey, Cue, Evidence, FalseAlarms, RollingGrid};
 use crate::sensor::{Frame, Pixels, SensorImage};
 use colour_check::ColourCheck;
 use place::{sampled_rows, tighten_hole_levels, Hit, Placer};
@@ -194,6 +194,13 @@ impl FrameLabels {
         })
     }
 
+    /// The colour labels' false alarms on the dry ground the log's lidar
+    /// sampled, over every frame so far ([`FalseAlarms`]; none without the colour check or
+    /// its samples).
+    pub fn colour_false_alarms(&self) -> FalseAlarms {
+        self.colour_check.alarms()
+    }
+
     /// Bytes allocated per window cell between frames (capacities): the vote tally, the
     /// cells it touched and the elevation raster.
     pub fn heap_bytes(&self) -> usize {
@@ -319,6 +326,7 @@ impl FrameLabels {
             hour,
             ground_z,
             samples,
+            resolution: surface.resolution(),
         };
         let labels = Self::classify(cfg, &view, &mut bufs.labels, colour_check, st)?;
         let (w, h) = (camera.width, camera.height);
@@ -467,8 +475,17 @@ impl FrameLabels {
         }
         if let Some(samples) = view.samples.filter(|_| cfg.colour_check) {
             let stereo = view.stereo.and_then(|c| Some((c, stereo_factor(c, w, h)?)));
-            st.colour_check_vetoed +=
-                colour_check.run(&mut l, px, camera, cam_to_map, samples, stereo);
+            let (vetoed, alarms) = colour_check.run(
+                &mut l,
+                px,
+                camera,
+                cam_to_map,
+                samples,
+                stereo,
+                view.resolution,
+            );
+            st.colour_check_vetoed += vetoed;
+            st.false_alarms.merge(&alarms);
         }
         Ok(l)
     }
@@ -490,6 +507,8 @@ struct SensorView<'a> {
     ground_z: f64,
     /// Where the frame's lidar found the surface dry or wet.
     samples: Option<&'a ScanSurface>,
+    /// The map's cell size (m).
+    resolution: f64,
 }
 
 /// Adds the rows' `votes` to the per-cell `tally` (water pixels, other pixels, Σ level of

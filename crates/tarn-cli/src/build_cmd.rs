@@ -481,6 +481,13 @@ fn print_log_summary(r: &LogBuildReport) {
                         s.cells_water,
                         s.cells_dry
                     );
+                    let fa = s.false_alarms;
+                    if name == "colour" && fa.samples > 0 {
+                        println!(
+                            "    false alarms: {} of {} dry-ground samples of the lidar labelled water; fusion p_colour_false {:.2e} (the rate's 95 % bound)",
+                            fa.water, fa.samples, r.fusion.p_colour_false
+                        );
+                    }
                 }
                 None => {}
             }

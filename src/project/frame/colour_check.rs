@@ -4,6 +4,7 @@ use crate::classify::{Label, LabelImage};
 use crate::cues::{ScanSurface, StereoSeen};
 use crate::geom::camera::CameraModel;
 use crate::geom::{PointCloud, Pose};
+use crate::grid::FalseAlarms;
 
 /// Bits per channel of the colour bins the [`ColourCheck`] counts in.
 const CHECK_BITS: u32 = 4;
@@ -44,11 +45,25 @@ fn inside_water(labels: &LabelImage, u: usize, v: usize) -> bool {
 /// and pale concrete without texture, the colours the check is for. Without either
 /// sensor nothing is counted and nothing vetoed: the check says nothing where it cannot
 /// tell.
+///
+/// The lidar's dry samples also measure the labels' false-alarm rate after the veto
+/// ([`FalseAlarms`]), which the fusion rule reads in place of a stated one. A sample is
+/// what the rule's event is, a map cell in a frame: the cells holding dry samples, each
+/// called water or not by the majority of its samples' labelled pixels (a tie is no
+/// sample, as it is no vote). The points of one cell are one patch of ground, not
+/// independent draws. The stereo's do not: stereo
+/// matches textured ground, which the colour rule gets right, and finds no match on the
+/// pale, smooth surfaces it calls water, so its samples would measure a rate far below
+/// the one the labels' votes have there.
 #[derive(Debug, Clone, Default)]
 pub(super) struct ColourCheck {
     /// Per bin: lidar samples on dry ground and on water whose pixel is colour water.
     dry: Vec<u32>,
     wet: Vec<u32>,
+    /// The map cells and pixels of this frame's lidar dry samples (scratch).
+    dry_px: Vec<((i64, i64), usize)>,
+    /// The false alarms of every frame so far.
+    alarms: FalseAlarms,
 }
 
 impl ColourCheck {
@@ -77,7 +92,10 @@ impl ColourCheck {
 
     /// Counts the frame's lidar `samples`, and the verdicts of the stereo `(cloud, k)`
     /// registered to the image at `1/k` of its resolution, that land on colour water, then
-    /// takes the water label from pixels of vetoed colours. Returns the pixels vetoed.
+    /// takes the water label from pixels of vetoed colours. Returns the pixels vetoed and
+    /// the frame's false alarms, after the veto, over the map cells (`resolution` m) its
+    /// lidar dry samples lie in.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn run(
         &mut self,
         labels: &mut LabelImage,
@@ -86,10 +104,12 @@ impl ColourCheck {
         cam_to_map: &Pose,
         samples: &ScanSurface,
         stereo: Option<(&PointCloud, usize)>,
-    ) -> u64 {
+        resolution: f64,
+    ) -> (u64, FalseAlarms) {
         let bins = 1 << (3 * CHECK_BITS);
         self.dry.resize(bins, 0);
         self.wet.resize(bins, 0);
+        self.dry_px.clear();
         let (w, h) = (labels.width, labels.height);
         if let Some((cloud, k)) = stereo.filter(|(c, _)| c.len() == samples.stereo.len()) {
             let half = (k - 1) / 2;
@@ -117,6 +137,10 @@ impl ColourCheck {
                     continue;
                 }
                 let (u, v) = (u as usize, v as usize);
+                if dry {
+                    let cell = |c: f64| (c / resolution).floor() as i64;
+                    self.dry_px.push(((cell(p.x), cell(p.y)), v * w + u));
+                }
                 if !inside_water(labels, u, v) {
                     continue;
                 }
@@ -130,6 +154,28 @@ impl ColourCheck {
                 vetoed += 1;
             }
         }
-        vetoed
+        let mut alarms = FalseAlarms::default();
+        self.dry_px.sort_unstable();
+        for cell in self.dry_px.chunk_by(|a, b| a.0 == b.0) {
+            let (mut water, mut dry) = (0u32, 0u32);
+            for &(_, i) in cell {
+                match labels.data[i] {
+                    Label::Water => water += 1,
+                    Label::Other | Label::SnowIce => dry += 1,
+                    _ => {}
+                }
+            }
+            if water != dry {
+                alarms.samples += 1;
+                alarms.water += u64::from(water > dry);
+            }
+        }
+        self.alarms.merge(&alarms);
+        (vetoed, alarms)
+    }
+
+    /// The false alarms of every frame so far.
+    pub(super) fn alarms(&self) -> FalseAlarms {
+        self.alarms
     }
 }

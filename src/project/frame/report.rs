@@ -2,6 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::grid::FalseAlarms;
+
 /// What one sensor contributed in one frame (or, summed, over a log).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SensorLabelStats {
@@ -32,6 +34,11 @@ pub struct SensorLabelStats {
     /// Colour water pixels whose colour the log's lidar finds on dry ground
     /// (`ColourCheck`): no vote.
     pub colour_check_vetoed: u64,
+    /// Of the dry ground the log's lidar sampled in the image, the samples whose
+    /// pixel was labelled, and those labelled water (`ColourCheck`): the labels' measured
+    /// false-alarm rate.
+    #[serde(default)]
+    pub false_alarms: FalseAlarms,
     /// MWIR frames skipped for want of a local solar hour (no hour given, no longitude).
     #[serde(default)]
     pub frames_no_hour: u64,
@@ -55,6 +62,7 @@ impl SensorLabelStats {
         self.reflection_vetoed += o.reflection_vetoed;
         self.beyond_reach += o.beyond_reach;
         self.colour_check_vetoed += o.colour_check_vetoed;
+        self.false_alarms.merge(&o.false_alarms);
         self.frames_no_hour += o.frames_no_hour;
         self.frames_hour_from_stamp += o.frames_hour_from_stamp;
     }

@@ -8,7 +8,7 @@ use crate::classify::thermal::{MwirConfig, SwirConfig};
 use crate::cues::StereoSeen;
 use crate::geom::camera::Distortion;
 use crate::geom::pose_xyz_rpy;
-use crate::grid::{Fusion, GridConfig, RangeNoise};
+use crate::grid::{FalseAlarms, Fusion, GridConfig, RangeNoise};
 use crate::sensor::Image;
 use nalgebra::Vector4;
 
@@ -840,7 +840,7 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
     // camera, which no pixel sees.
     let on_pale: Vec<Point3<f64>> = (0..6).map(|k| ground_at(5 + k, h - 5)).collect();
     let behind = Point3::new(-5.0, 0.0, 0.0);
-    let run = |dry: usize, wet: usize| -> (u64, LabelImage) {
+    let run = |dry: usize, wet: usize| -> (u64, FalseAlarms, LabelImage) {
         let mut labels = LabelImage::filled(w, h, Label::Water);
         let mut check = ColourCheck::default();
         let mut d = on_pale[..dry].to_vec();
@@ -851,14 +851,23 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
             wet: on_pale[..wet].to_vec(),
             stereo: Vec::new(),
         };
-        let n = check.run(&mut labels, &px, &cam, &pose, &lidar, None);
-        (n, labels)
+        let (n, alarms) = check.run(&mut labels, &px, &cam, &pose, &lidar, None, 0.1);
+        assert_eq!(check.alarms(), alarms);
+        (n, alarms, labels)
     };
-    // Three dry samples and none wet: the sign test cannot rule yet.
-    assert_eq!(run(3, 0).0, 0);
+    // Three dry samples and none wet: the sign test cannot rule yet, and the cells they
+    // lie in are false alarms (the sample behind the camera is none).
+    let (n, alarms, _) = run(3, 0);
+    assert_eq!(n, 0);
+    assert!(
+        alarms.samples >= 1 && alarms.water == alarms.samples,
+        "{alarms:?}"
+    );
     // Four: the pale colour is not water in this log, anywhere in the image; the sky's
-    // colour, which the lidar never found on dry ground, still is.
-    let (n, labels) = run(4, 0);
+    // colour, which the lidar never found on dry ground, still is. The vetoed pixels vote
+    // nothing: no samples, no false alarms.
+    let (n, alarms, labels) = run(4, 0);
+    assert_eq!(alarms, FalseAlarms::default());
     assert_eq!(n as usize, w / 2 * h);
     for (i, l) in labels.data.iter().enumerate() {
         let want = if i % w < w / 2 {
@@ -898,7 +907,9 @@ fn colour_check_ignores_lidar_points_on_the_waters_edge() {
             dry: (0..4).map(|k| ground_at(u, h - 5 - 3 * k)).collect(),
             ..ScanSurface::default()
         };
-        ColourCheck::default().run(&mut labels, &px, &cam, &pose, &lidar, None)
+        ColourCheck::default()
+            .run(&mut labels, &px, &cam, &pose, &lidar, None, 0.1)
+            .0
     };
     assert_eq!(run(strip.start), 0);
     assert_eq!(run(strip.end - 1), 0);
@@ -931,7 +942,17 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
             stereo,
             ..ScanSurface::default()
         };
-        ColourCheck::default().run(&mut labels, &px, &cam, &pose, &surface, Some((&cloud, 2)))
+        ColourCheck::default()
+            .run(
+                &mut labels,
+                &px,
+                &cam,
+                &pose,
+                &surface,
+                Some((&cloud, 2)),
+                0.1,
+            )
+            .0
     };
     assert_eq!(run(3, 0), 0);
     assert_eq!(run(4, 0) as usize, w / 2 * h);
@@ -946,14 +967,32 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
         stereo,
         ..ScanSurface::default()
     };
-    let n = ColourCheck::default().run(&mut labels, &px, &cam, &pose, &surface, Some((&cloud, 2)));
+    let (n, alarms) = ColourCheck::default().run(
+        &mut labels,
+        &px,
+        &cam,
+        &pose,
+        &surface,
+        Some((&cloud, 2)),
+        0.1,
+    );
     assert_eq!(n, 0);
+    // Stereo verdicts are no samples of the false-alarm rate.
+    assert_eq!(alarms, FalseAlarms::default());
     // Verdicts for a cloud of another size are not read.
     let mut labels = LabelImage::filled(w, h, Label::Water);
     let surface = ScanSurface {
         stereo: vec![StereoSeen::Ground; 10],
         ..ScanSurface::default()
     };
-    let n = ColourCheck::default().run(&mut labels, &px, &cam, &pose, &surface, Some((&cloud, 2)));
-    assert_eq!(n, 0);
+    let (n, alarms) = ColourCheck::default().run(
+        &mut labels,
+        &px,
+        &cam,
+        &pose,
+        &surface,
+        Some((&cloud, 2)),
+        0.1,
+    );
+    assert_eq!((n, alarms), (0, FalseAlarms::default()));
 }

@@ -72,6 +72,7 @@ pub fn build_log(
     let t2 = Instant::now();
     let mut warnings = fused.warnings();
     let (tiles, map) = mapper.finish_map()?;
+    let fusion = fusion.measured(&tiles.colour_false_alarms());
     if map.cells.is_empty() {
         return Err(nothing_observed(input, &log_cfg, &fused));
     }
@@ -102,6 +103,7 @@ pub fn build_log(
         lidar_height_m,
         diagnostic_interval_m,
         calibration,
+        fusion,
         lidar_points: fused.lidar,
         stereo_points: fused.stereo,
         cue_counts: fused.counts,

@@ -46,6 +46,11 @@ pub struct LogBuildReport {
     /// and the stated values the log contradicts ([`crate::calib`]).
     #[serde(default)]
     pub calibration: crate::calib::CalibrationReport,
+    /// The fusion rule the map was built with: the config's, the colour labels'
+    /// false-alarm rate measured from the log where its lidar sampled dry ground
+    /// (`labels.colour.false_alarms`, [`crate::grid::Fusion::measured`]).
+    #[serde(default)]
+    pub fusion: crate::grid::Fusion,
     /// What happened to the lidar points, summed over frames.
     pub lidar_points: IngestStats,
     /// What happened to the stereo points, summed over frames.
