@@ -103,8 +103,9 @@ fn a_pond_cut_by_regions_finishes_to_the_whole_map() {
     // With one tile of halo (6.4 m) the pond (about 14 m across) is undecided at first.
     assert!(refinished);
 
-    // Regions finished from their own tiles only (as a worker holds them), through their
-    // bytes, joined: the same map.
+    // Regions finished from their own tiles only (as a worker holds them), with the whole
+    // build's colour false alarms (a cut holds none), through their bytes, joined: the
+    // same map.
     let keys = tiles.tile_keys();
     let lo = keys
         .iter()
@@ -121,7 +122,8 @@ fn a_pond_cut_by_regions_finishes_to_the_whole_map() {
                 .iter()
                 .any(|r| r.0.abs_diff(t.0) <= halo as u64 && r.1.abs_diff(t.1) <= halo as u64)
         };
-        let own = tiles.select(near);
+        let mut own = tiles.select(near);
+        own.add_colour_false_alarms(&tiles.colour_false_alarms());
         let r = finish_tile_region(&own, &region, halo, (lo, hi), &mapper).unwrap();
         let r = RegionMap::from_bytes(&r.to_bytes()).unwrap();
         if !r.undecided.is_empty() {
