@@ -14,8 +14,7 @@ use tarn::classify::gmm::{ColorModel, PixelClassifier, TrainConfig};
 use tarn::classify::horizon::optical_pose;
 use tarn::classify::lut::ColorLut;
 use tarn::classify::{Label, LabelImage};
-use tarn::geom::camera::{CameraModel, Distortion};
-use tarn::geom::{pose_xyz_rpy, PointCloud};
+use tarn::geom::{pose_xyz_rpy, CameraModel, Distortion, PointCloud};
 use tarn::grid::{GridConfig, RangeNoise, RollingGrid};
 use tarn::project::{ElevationSurface, ProjectConfig, Projector, RayTarget};
 

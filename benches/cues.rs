@@ -9,8 +9,7 @@ use tarn::cues::{
     stereo_reflections, BeamModel, CueRun, GrayImage, LidarBuffers, LidarCueConfig, LidarCueModel,
     MirrorCheck, ReflectivityConfig, StereoCueConfig,
 };
-use tarn::geom::camera::{CameraModel, Distortion};
-use tarn::geom::{PointCloud, Pose};
+use tarn::geom::{CameraModel, Distortion, PointCloud, Pose};
 use tarn::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
 
 fn optics() -> LidarModelConfig {

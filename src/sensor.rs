@@ -5,8 +5,7 @@
 //! vehicle's drivers). It sits below every stage of the data flow and imports only the
 //! geometry (`geom`).
 
-use crate::geom::camera::CameraModel;
-use crate::geom::{PointCloud, Pose};
+use crate::geom::{CameraModel, PointCloud, Pose};
 
 /// Pixels of a decoded image, row-major.
 #[derive(Debug, Clone, PartialEq)]

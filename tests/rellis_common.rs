@@ -10,8 +10,7 @@ use nalgebra::{Matrix3, Point3, Quaternion, Rotation3, Translation3, UnitQuatern
 use tarn::classify::gmm::{ColorModel, TrainConfig};
 use tarn::classify::horizon::Horizon;
 use tarn::classify::{Confusion, Label, LabelImage};
-use tarn::geom::camera::{CameraModel, Distortion};
-use tarn::geom::{PointCloud, Pose};
+use tarn::geom::{CameraModel, Distortion, PointCloud, Pose};
 
 pub const PUDDLE: u8 = 31;
 pub const SKY: u8 = 7;

@@ -9,8 +9,7 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 use super::{Label, LabelImage};
 use crate::error::{Error, Result};
-use crate::geom::camera::CameraModel;
-use crate::geom::{pose_is_finite, Pose};
+use crate::geom::{pose_is_finite, CameraModel, Pose};
 
 /// Unit rays of every pixel in the map frame (row-major); `None` where undistortion fails.
 pub(crate) fn pixel_rays_in_map(
@@ -185,8 +184,7 @@ impl GroundGeometry {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::geom::camera::Distortion;
-    use crate::geom::pose_xyz_rpy;
+    use crate::geom::{pose_xyz_rpy, Distortion};
     use proptest::prelude::*;
 
     pub(crate) fn cam_pose(z: f64, pitch_down: f64) -> Pose {

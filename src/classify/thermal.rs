@@ -344,7 +344,7 @@ pub(crate) fn classify_mwir(
 mod tests {
     use super::*;
     use crate::classify::horizon::tests::cam_pose;
-    use crate::geom::camera::{CameraModel, Distortion};
+    use crate::geom::{CameraModel, Distortion};
 
     /// Deterministic pseudo-noise in [−1, 1).
     fn noise(i: usize) -> f32 {

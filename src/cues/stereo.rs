@@ -51,8 +51,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{CueRun, EvidenceMap};
 use crate::error::{Error, Result};
-use crate::geom::camera::CameraModel;
-use crate::geom::{PointCloud, Pose};
+use crate::geom::{CameraModel, PointCloud, Pose};
 use crate::grid::RangeNoise;
 
 mod level;

@@ -3,8 +3,13 @@
 //! Poses are `Isometry3<f64>`. Points are stored as `f32` *relative to their cloud's frame*
 //! (a sensor frame, or a local origin chosen by a reader), never as absolute UTM-scale
 //! coordinates in `f32`; [`PointCloud::frame_to_map`] carries the large part in `f64`.
+//!
+//! Exports: [`Pose`] and [`pose_xyz_rpy`], [`PointCloud`], the pinhole [`CameraModel`] with
+//! its [`Distortion`], and the helpers [`hypot`] and [`direction`].
 
-pub mod camera;
+mod camera;
+
+pub use camera::{CameraModel, Distortion};
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 

@@ -155,7 +155,7 @@ impl StereoConfig {
     /// ([`crate::calib::StereoStated::per_m2`]).
     pub fn stated(
         &self,
-        camera: Option<&crate::geom::camera::CameraModel>,
+        camera: Option<&crate::geom::CameraModel>,
         cloud_cols: usize,
         baseline_m: Option<f64>,
     ) -> StereoStated {

@@ -35,8 +35,7 @@ use rayon::prelude::*;
 
 use crate::classify::{Label, LabelImage};
 use crate::error::{Error, Result};
-use crate::geom::camera::CameraModel;
-use crate::geom::{pose_is_finite, PointCloud, Pose};
+use crate::geom::{pose_is_finite, CameraModel, PointCloud, Pose};
 use crate::grid::{key_of, CellKey, RollingGrid};
 
 /// Votes per decided label, indexed by [`Label::index`] (other, water, sky, snow/ice).

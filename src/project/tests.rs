@@ -1,6 +1,6 @@
 use super::*;
 use crate::classify::horizon::tests::cam_pose;
-use crate::geom::camera::Distortion;
+use crate::geom::Distortion;
 use crate::grid::{GridConfig, RangeNoise};
 use proptest::prelude::*;
 

@@ -28,8 +28,7 @@ use nalgebra::{Point3, Rotation3, Vector3};
 use rayon::prelude::*;
 
 use super::surface::GridSurface;
-use crate::geom::camera::CameraModel;
-use crate::geom::{ceil_i64, floor_i64, Pose};
+use crate::geom::{ceil_i64, floor_i64, CameraModel, Pose};
 use crate::grid::CellKey;
 
 /// Cells per side of the blocks over which the rims' heights are taken.
@@ -738,8 +737,7 @@ fn fill(
 mod tests {
     use super::*;
     use crate::classify::horizon::optical_pose;
-    use crate::geom::camera::Distortion;
-    use crate::geom::pose_xyz_rpy;
+    use crate::geom::{pose_xyz_rpy, Distortion};
     use crate::grid::CellKey;
 
     /// A 40 m window of 0.1 m cells around the origin, heights from `f`, NaN where `hole`.

@@ -12,8 +12,7 @@ use tarn::classify::gmm::{training_samples, ColorModel, TrainConfig};
 use tarn::classify::horizon::{optical_pose, Horizon};
 use tarn::classify::lut::ColorLut;
 use tarn::classify::{save_gray_png, Label};
-use tarn::geom::camera::{CameraModel, Distortion};
-use tarn::geom::pose_xyz_rpy;
+use tarn::geom::{pose_xyz_rpy, CameraModel, Distortion};
 
 fn parse_list<T: std::str::FromStr>(
     s: &str,

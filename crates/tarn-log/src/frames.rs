@@ -15,8 +15,7 @@ use std::path::Path;
 use nalgebra::{Point3, Vector3};
 
 use crate::error::{Error, Result};
-use crate::geom::camera::CameraModel;
-use crate::geom::{PointCloud, Pose};
+use crate::geom::{CameraModel, PointCloud, Pose};
 use crate::log::{canonical_type, wire_of, MessageSource};
 use crate::mcap_log::{DamagedRange, LogReader, RawMessage};
 use crate::ros::{

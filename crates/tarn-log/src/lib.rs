@@ -5,7 +5,7 @@
 //!
 //! - [`ros`]: CDR in both byte orders; `TFMessage`, `PointCloud2`, `Image`, `CameraInfo`,
 //!   `NavSatFix`; their `ros2msg` schemas; conversions to [`tarn::geom::PointCloud`],
-//!   [`tarn::sensor::Image`] and [`tarn::geom::camera::CameraModel`].
+//!   [`tarn::sensor::Image`] and [`tarn::geom::CameraModel`].
 //! - [`mcap_log`]: [`mcap_log::LogReader`] streams messages from chunked or unchunked,
 //!   zstd / lz4 / uncompressed files, with or without summary; [`mcap_log::LogWriter`]
 //!   writes `ros2`-profile logs; [`mcap_log::summarize`], [`mcap_log::recode`].

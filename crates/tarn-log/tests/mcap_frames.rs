@@ -4,8 +4,7 @@
 use std::path::Path;
 
 use nalgebra::Point3;
-use tarn::geom::camera::{CameraModel, Distortion};
-use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
+use tarn::geom::{pose_xyz_rpy, CameraModel, Distortion, PointCloud, Pose};
 use tarn::sensor::{Frame, Image, Pixels};
 use tarn_log::frames::{FrameStream, LogConfig};
 use tarn_log::mcap_log::{

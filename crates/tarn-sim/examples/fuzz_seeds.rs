@@ -9,8 +9,7 @@ use std::path::Path;
 
 use tarn::classify::gmm::{ClassModel, ColorModel, ColorModelData, Component};
 use tarn::classify::Label;
-use tarn::geom::camera::{CameraModel, Distortion};
-use tarn::geom::{pose_xyz_rpy, PointCloud};
+use tarn::geom::{pose_xyz_rpy, CameraModel, Distortion, PointCloud};
 use tarn::sensor::{Image, Pixels};
 use tarn_log::mcap_log::{LogCompression, LogWriter, WriteOptions};
 use tarn_log::ros::{

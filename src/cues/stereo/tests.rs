@@ -1,6 +1,5 @@
 use super::*;
-use crate::geom::camera::Distortion;
-use crate::geom::Pose;
+use crate::geom::{Distortion, Pose};
 use crate::grid::centre_of;
 use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 

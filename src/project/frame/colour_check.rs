@@ -2,8 +2,7 @@
 
 use crate::classify::{Label, LabelImage};
 use crate::cues::{ScanSurface, StereoSeen};
-use crate::geom::camera::CameraModel;
-use crate::geom::{PointCloud, Pose};
+use crate::geom::{CameraModel, PointCloud, Pose};
 use crate::grid::FalseAlarms;
 
 /// Bits per channel of the colour bins the [`ColourCheck`] counts in.

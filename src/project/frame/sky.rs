@@ -5,8 +5,7 @@ use nalgebra::{Point3, Vector3};
 
 use super::Encoding;
 use crate::classify::{Label, LabelImage};
-use crate::geom::camera::CameraModel;
-use crate::geom::Pose;
+use crate::geom::{CameraModel, Pose};
 
 /// Sky-above-horizon rule with the cached rays: the same as
 /// [`crate::classify::horizon::Horizon::apply`] with `sky_below_is_water` (sky colour below

@@ -6,8 +6,7 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::geom::camera::CameraModel;
-use crate::geom::PointCloud;
+use crate::geom::{CameraModel, PointCloud};
 use crate::ros::{
     camera_to_info, cloud_to_pointcloud2, encode_image, schema_name, schema_text, Endian, Header,
     TfMessage,

@@ -4,8 +4,7 @@
 //! Errors are plain messages; the log reader adds the file and message location.
 
 use super::msgs::{datatype, CameraInfoMsg, Header, ImageMsg, PointCloud2Msg, PointField};
-use crate::geom::camera::{CameraModel, Distortion};
-use crate::geom::PointCloud;
+use crate::geom::{CameraModel, Distortion, PointCloud};
 use crate::sensor::{Image, Pixels};
 
 fn read_scalar(data: &[u8], at: usize, dt: u8, big: bool) -> f64 {

@@ -10,8 +10,7 @@ use super::rng::{hash, normal};
 use super::scene::CameraSpec;
 use super::world::World;
 use crate::error::Result;
-use crate::geom::camera::{CameraModel, Distortion};
-use crate::geom::Pose;
+use crate::geom::{CameraModel, Distortion, Pose};
 
 mod lidar;
 mod light;

@@ -1045,12 +1045,12 @@ fn the_log_carries_the_baseline_and_the_distortion() {
         let cam = f.image.as_ref().unwrap().camera.as_ref().unwrap();
         assert_eq!(
             cam.distortion,
-            crate::geom::camera::Distortion::PlumbBob([-0.1, 0.02, 0.0, 0.0, 0.0])
+            crate::geom::Distortion::PlumbBob([-0.1, 0.02, 0.0, 0.0, 0.0])
         );
         // A reader that ignored the distortion would be measurably off: at the image's
         // corner the pinhole ray of the same K is more than half a degree away.
-        let pin = crate::geom::camera::CameraModel {
-            distortion: crate::geom::camera::Distortion::None,
+        let pin = crate::geom::CameraModel {
+            distortion: crate::geom::Distortion::None,
             ..cam.clone()
         };
         let (u, v) = (0.0, 0.0);

@@ -8,8 +8,7 @@ use super::super::rng::{hash, unit_f64};
 use super::super::scene::SkyKind;
 use super::super::world::{Hit, Surface, World};
 use super::{EPS, N_WATER};
-use crate::geom::camera::CameraModel;
-use crate::geom::Pose;
+use crate::geom::{CameraModel, Pose};
 use crate::optics::fresnel;
 
 /// Sun direction (map frame, unit, towards the sun) and its elevation (rad) at `hours`:

@@ -9,8 +9,7 @@ use super::super::scene::StereoSpec;
 use super::super::world::{Surface, World};
 use super::{body_to_optical, lens, mount, pinhole, EPS};
 use crate::error::Result;
-use crate::geom::camera::CameraModel;
-use crate::geom::{PointCloud, Pose};
+use crate::geom::{CameraModel, PointCloud, Pose};
 
 /// The stereo pair: its left camera and where it sits.
 #[derive(Debug, Clone)]
