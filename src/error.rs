@@ -1,4 +1,8 @@
 //! Errors are values. Every error names what was wrong and where.
+//!
+//! Exports: [`Error`] and [`Result`], and the checks of configuration values that fail with
+//! an [`Error::Invalid`] naming the field: [`finite`], [`positive`], [`non_negative`],
+//! [`unit`](fn@unit), [`all_finite`].
 
 use std::path::PathBuf;
 
@@ -70,12 +74,15 @@ impl Error {
     }
 }
 
+pub use check::{all_finite, finite, non_negative, positive, unit};
+
 /// The library's result type.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 /// Checks of configuration values: each failure an [`Error::Invalid`] that names the field
-/// (`what`) and says what the value must be.
-pub mod check {
+/// (`what`) and says what the value must be. The crate calls them as `check::positive`; they
+/// are public as `error::positive` and so on.
+pub(crate) mod check {
     use super::{Error, Result};
 
     /// `v` is finite.

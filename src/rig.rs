@@ -8,8 +8,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::check::{all_finite, non_negative, positive, unit};
-use crate::error::{Error, Result};
+use crate::error::{all_finite, non_negative, positive, unit, Error, Result};
 use crate::grid::RangeNoise;
 use crate::mapper::{LidarConfig, MapperConfig, StereoConfig};
 

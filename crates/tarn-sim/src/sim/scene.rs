@@ -7,8 +7,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::check::{all_finite, finite, non_negative, positive, unit};
-use crate::error::{Error, Result};
+use crate::error::{all_finite, finite, non_negative, positive, unit, Error, Result};
 use crate::hazard::Class;
 pub use crate::rig::{CameraSpec, GpsSpec, IntensityKind, LidarSpec, RigSpec, StereoSpec};
 
