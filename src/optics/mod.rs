@@ -7,6 +7,14 @@
 //! Conventions: angles in radians (reports in degrees say so), lengths in metres, z up. The
 //! *lookahead* is the horizontal distance from the sensor to where the beam meets the water.
 //!
+//! Exports: the surface ([`snell`], [`fresnel`] and its [`Fresnel`], [`brewster_angle`]);
+//! absorption ([`AbsorptionTable`], [`absorption_per_m`], [`ice_absorption_per_m`],
+//! [`loss_distance_m`]); the lidar model ([`LidarWaterModel`], its [`LidarModelConfig`],
+//! [`Attenuation`], [`Sensitivity`], [`SolidAngleForm`], [`PathGeometry`] and its
+//! [`LidarModelReport`] of [`LidarModelRow`]s); bottom returns ([`correct_bottom_return`],
+//! [`apparent_bottom_point`], [`bottom_depth_gain`]); thermal emission in the mid-wave
+//! infrared ([`water_reflectance_mwir`], [`apparent_temperature`]).
+//!
 //! ```
 //! use tarn::optics::{Attenuation, LidarModelConfig, LidarWaterModel};
 //! let m = LidarWaterModel::new(LidarModelConfig::paper(Attenuation::PureWater {
@@ -24,7 +32,7 @@ mod correction;
 mod data;
 mod fresnel;
 mod lidar;
-pub mod thermal;
+mod thermal;
 
 pub use absorption::{absorption_per_m, ice_absorption_per_m, loss_distance_m, AbsorptionTable};
 pub use correction::{apparent_bottom_point, bottom_depth_gain, correct_bottom_return};
@@ -33,6 +41,7 @@ pub use lidar::{
     Attenuation, LidarModelConfig, LidarModelReport, LidarModelRow, LidarWaterModel, PathGeometry,
     Sensitivity, SolidAngleForm,
 };
+pub use thermal::{apparent_temperature, water_reflectance_mwir};
 
 #[cfg(test)]
 mod tests;

@@ -8,20 +8,20 @@
 const C2_UM_K: f64 = 14_387.77;
 
 /// The wavelength the mid-wave band is taken at, µm (the middle of 3–5 µm).
-pub const MWIR_UM: f64 = 4.0;
+pub(crate) const MWIR_UM: f64 = 4.0;
 
 /// The refractive index of water at 3–5 µm (Hale & Querry, 1973: 1.35 at 4 µm).
-pub const N_WATER_MWIR: f64 = 1.35;
+pub(crate) const N_WATER_MWIR: f64 = 1.35;
 
 /// Spectral radiance of a black body at `t_k` kelvin and `lambda_um` µm, relative: Planck's
 /// law without its constant factor 2hc²/λ⁵, `1 / (exp(c₂/λT) − 1)`.
-pub fn planck_rel(lambda_um: f64, t_k: f64) -> f64 {
+pub(crate) fn planck_rel(lambda_um: f64, t_k: f64) -> f64 {
     1.0 / (C2_UM_K / (lambda_um * t_k)).exp_m1()
 }
 
 /// The temperature whose black-body radiance at `lambda_um` is `l` ([`planck_rel`]'s
 /// inverse); NaN for `l` ≤ 0.
-pub fn brightness_temperature(lambda_um: f64, l: f64) -> f64 {
+pub(crate) fn brightness_temperature(lambda_um: f64, l: f64) -> f64 {
     if l.is_nan() || l <= 0.0 {
         return f64::NAN;
     }
@@ -37,7 +37,7 @@ pub fn water_reflectance_mwir(theta: f64) -> f64 {
 
 /// The apparent (brightness) temperature of water at `t_water` K seen with reflectance
 /// `r`, mirroring a scene at `t_mirror` K: `B⁻¹((1 − r)·B(t_water) + r·B(t_mirror))` at
-/// [`MWIR_UM`].
+/// the band's centre, 4 µm.
 pub fn apparent_temperature(r: f64, t_water: f64, t_mirror: f64) -> f64 {
     let l = (1.0 - r) * planck_rel(MWIR_UM, t_water) + r * planck_rel(MWIR_UM, t_mirror);
     brightness_temperature(MWIR_UM, l)

@@ -201,8 +201,8 @@ pub fn radiance(w: &World, light: &Light, o: &Point3<f64>, d: &Vector3<f64>, max
                 // Water absorbs 1.5 µm within millimetres: only the surface reflection.
                 swir: fr * refl.swir,
                 // Emission and reflection add as radiances, at the index of 3–5 µm.
-                mwir: crate::optics::thermal::apparent_temperature(
-                    crate::optics::thermal::water_reflectance_mwir(cos_i.acos()),
+                mwir: crate::optics::apparent_temperature(
+                    crate::optics::water_reflectance_mwir(cos_i.acos()),
                     t_water,
                     refl.mwir,
                 ),
