@@ -10,10 +10,9 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use image::RgbImage;
 use nalgebra::Point3;
-use tarn::classify::gmm::{ColorModel, PixelClassifier, TrainConfig};
-use tarn::classify::horizon::optical_pose;
-use tarn::classify::lut::ColorLut;
-use tarn::classify::{Label, LabelImage};
+use tarn::classify::{
+    optical_pose, ColorLut, ColorModel, Label, LabelImage, PixelClassifier, TrainConfig,
+};
 use tarn::geom::{pose_xyz_rpy, CameraModel, Distortion, PointCloud};
 use tarn::grid::{GridConfig, RangeNoise, RollingGrid};
 use tarn::project::{ElevationSurface, ProjectConfig, Projector, RayTarget};

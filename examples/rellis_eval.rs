@@ -10,10 +10,9 @@ mod rellis_common;
 use std::time::Instant;
 
 use rellis_common::*;
-use tarn::classify::color::RuleClassifier;
-use tarn::classify::gmm::{ColorModel, TrainConfig};
-use tarn::classify::lut::ColorLut;
-use tarn::classify::{Confusion, Label, LabelImage};
+use tarn::classify::{
+    ColorLut, ColorModel, Confusion, Label, LabelImage, RuleClassifier, TrainConfig,
+};
 
 fn row(name: &str, c: &Confusion) {
     println!(
@@ -140,8 +139,8 @@ fn error_tables(r: &Rellis, l6: &LabelImage, above: &[bool]) {
         if id.0[0] != PUDDLE || !in_half(i as u32 % w, w, false) {
             continue;
         }
-        let b = tarn::classify::color::brightness(p.0);
-        let s = tarn::classify::color::saturation(p.0);
+        let b = tarn::classify::brightness(p.0);
+        let s = tarn::classify::saturation(p.0);
         let water = l6.data[i] == Label::Water;
         if b > 150.0 && s < 0.25 {
             bright += 1;

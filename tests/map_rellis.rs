@@ -12,7 +12,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 use nalgebra::Point3;
-use tarn::classify::gmm::TrainConfig;
+use tarn::classify::TrainConfig;
 use tarn::grid::{key_of, CellKey};
 use tarn::hazard::{Class, HazardMap};
 

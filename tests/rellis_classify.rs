@@ -7,10 +7,7 @@
 mod rellis_common;
 
 use rellis_common::*;
-use tarn::classify::color::RuleClassifier;
-use tarn::classify::gmm::{PixelClassifier, TrainConfig};
-use tarn::classify::lut::ColorLut;
-use tarn::classify::Label;
+use tarn::classify::{ColorLut, Label, PixelClassifier, RuleClassifier, TrainConfig};
 
 #[test]
 fn calibration_direction_is_lidar_to_camera() {

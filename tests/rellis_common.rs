@@ -7,9 +7,7 @@ use std::path::PathBuf;
 
 use image::{GrayImage, RgbImage};
 use nalgebra::{Matrix3, Point3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
-use tarn::classify::gmm::{ColorModel, TrainConfig};
-use tarn::classify::horizon::Horizon;
-use tarn::classify::{Confusion, Label, LabelImage};
+use tarn::classify::{ColorModel, Confusion, Horizon, Label, LabelImage, TrainConfig};
 use tarn::geom::{CameraModel, Distortion, PointCloud, Pose};
 
 pub const PUDDLE: u8 = 31;

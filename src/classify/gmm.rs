@@ -732,7 +732,7 @@ pub fn training_samples(
     Ok(by.into_iter().collect())
 }
 
-/// Labels a whole image by direct evaluation of the mixtures (slow; see [`super::lut`]).
+/// Labels a whole image by direct evaluation of the mixtures (slow; see [`super::ColorLut`]).
 impl ColorModel {
     /// Labels every pixel by direct evaluation of the mixtures.
     pub fn classify(&self, img: &RgbImage) -> LabelImage {

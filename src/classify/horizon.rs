@@ -122,7 +122,7 @@ impl Horizon {
 
 /// Per-pixel geometry against the level plane z = `ground_z` (map frame).
 #[derive(Debug, Clone, PartialEq)]
-pub struct GroundGeometry {
+pub(crate) struct GroundGeometry {
     /// Image columns, pixels.
     pub width: usize,
     /// Image rows, pixels.
@@ -136,8 +136,10 @@ pub struct GroundGeometry {
 }
 
 impl GroundGeometry {
-    /// Rays of `camera` at `cam_to_map` against the plane z = `ground_z`.
-    pub fn level(camera: &CameraModel, cam_to_map: &Pose, ground_z: f64) -> Result<Self> {
+    /// Rays of `camera` at `cam_to_map` against the plane z = `ground_z` (the tests' ground;
+    /// the labels cast their own rays, [`GroundGeometry::of_rays`]).
+    #[cfg(test)]
+    pub(crate) fn level(camera: &CameraModel, cam_to_map: &Pose, ground_z: f64) -> Result<Self> {
         if !pose_is_finite(cam_to_map) || !ground_z.is_finite() {
             return Err(Error::invalid(
                 "ground geometry",

@@ -211,7 +211,7 @@ fn colour_of_sum_min(sum: usize, min: usize) -> Option<[u8; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::classify::color::RuleClassifier;
+    use crate::classify::RuleClassifier;
     use proptest::prelude::*;
 
     #[test]

@@ -3,25 +3,39 @@
 //! warmer than the land at night and cooler by day. Pixels whose ray points above the
 //! horizontal plane cannot be water.
 //!
-//! - [`color`]: the paper's brightness/saturation features and its Table 1 statistics as a
-//!   rule baseline ([`color::RuleClassifier`]).
-//! - [`gmm`]: a supervised classifier with one Gaussian mixture per class in RGB, trained by
-//!   EM (k-means++ start, full covariances, regularised), components chosen by BIC; JSON
-//!   model files; compiled into a [`lut::ColorLut`] over quantised RGB for speed.
-//! - [`horizon`]: the horizon from the camera's attitude (or a given row), and per-pixel
-//!   incidence angle and range against a level ground plane.
-//! - [`solar`]: local solar time from a UTC stamp and a longitude, for the MWIR regime.
-//! - [`thermal`]: SWIR darkness with an incidence gate, MWIR contrast against local terrain
-//!   statistics by time of day with a lookahead limit.
+//! - The paper's brightness/saturation features ([`brightness`], [`saturation`]) and its
+//!   Table 1 statistics as a rule baseline ([`RuleClassifier`], of [`ClassStats`]).
+//! - A supervised classifier with one Gaussian mixture per class in RGB ([`ColorModel`]),
+//!   trained by EM (k-means++ start, full covariances, regularised; [`TrainConfig`],
+//!   [`training_samples`], [`TrainReport`] with its [`BicRow`]s), components chosen by BIC;
+//!   JSON model files ([`ColorModelData`], [`ClassModel`], [`Component`]); compiled into a
+//!   [`ColorLut`] over quantised RGB for speed. Each is a [`PixelClassifier`].
+//! - The horizon from the camera's attitude or a given row ([`Horizon`], [`HorizonStats`],
+//!   [`optical_pose`]), and per-pixel incidence angle and range against a level ground plane.
+//! - The equation of time ([`equation_of_time_min`]): local solar time from a UTC stamp and a
+//!   longitude, for the MWIR regime.
+//! - SWIR darkness with an incidence gate ([`SwirConfig`]), MWIR contrast against local
+//!   terrain statistics by time of day with a lookahead limit ([`MwirConfig`]).
 //!
-//! Every classifier writes a [`LabelImage`] of [`Label`] values.
+//! Every classifier writes a [`LabelImage`] of [`Label`] values ([`MonoImage`] for one band;
+//! [`save_gray_png`]); [`Confusion`] scores one against the truth.
 
-pub mod color;
-pub mod gmm;
-pub mod horizon;
-pub mod lut;
-pub mod solar;
-pub mod thermal;
+mod color;
+mod gmm;
+pub(crate) mod horizon;
+mod lut;
+pub(crate) mod solar;
+pub(crate) mod thermal;
+
+pub use color::{brightness, saturation, ClassStats, RuleClassifier};
+pub use gmm::{
+    training_samples, BicRow, ClassModel, ColorModel, ColorModelData, Component, PixelClassifier,
+    TrainConfig, TrainReport,
+};
+pub use horizon::{optical_pose, Horizon, HorizonStats};
+pub use lut::ColorLut;
+pub use solar::equation_of_time_min;
+pub use thermal::{MwirConfig, SwirConfig};
 
 use image::ImageEncoder;
 use serde::{Deserialize, Serialize};

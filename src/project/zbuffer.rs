@@ -736,7 +736,7 @@ fn fill(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::classify::horizon::optical_pose;
+    use crate::classify::optical_pose;
     use crate::geom::{pose_xyz_rpy, Distortion};
     use crate::grid::CellKey;
 

@@ -16,9 +16,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use tarn::classify::color::RuleClassifier;
-use tarn::classify::lut::ColorLut;
-use tarn::classify::Label;
+use tarn::classify::{ColorLut, Label, RuleClassifier};
 use tarn::cues::frame::{mirror_check_of, mirror_gray};
 use tarn::cues::lidar::LidarBuffers;
 use tarn::cues::{

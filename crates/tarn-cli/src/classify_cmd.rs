@@ -7,11 +7,10 @@ use anyhow::{bail, Context};
 use clap::Args;
 use serde::Deserialize;
 use serde_json::json;
-use tarn::classify::color::RuleClassifier;
-use tarn::classify::gmm::{training_samples, ColorModel, TrainConfig};
-use tarn::classify::horizon::{optical_pose, Horizon};
-use tarn::classify::lut::ColorLut;
-use tarn::classify::{save_gray_png, Label};
+use tarn::classify::{
+    optical_pose, save_gray_png, training_samples, ColorLut, ColorModel, Horizon, Label,
+    RuleClassifier, TrainConfig,
+};
 use tarn::geom::{pose_xyz_rpy, CameraModel, Distortion};
 
 fn parse_list<T: std::str::FromStr>(

@@ -7,8 +7,7 @@
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
-use tarn::classify::gmm::{ClassModel, ColorModel, ColorModelData, Component};
-use tarn::classify::Label;
+use tarn::classify::{ClassModel, ColorModel, ColorModelData, Component, Label};
 use tarn::geom::{pose_xyz_rpy, CameraModel, Distortion, PointCloud};
 use tarn::sensor::{Image, Pixels};
 use tarn_log::mcap_log::{LogCompression, LogWriter, WriteOptions};

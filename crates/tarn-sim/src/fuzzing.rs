@@ -209,14 +209,14 @@ pub fn scene_toml(data: &[u8]) -> bool {
     }
 }
 
-/// A colour model JSON ([`crate::classify::gmm::ColorModel::from_json`]); an accepted model
+/// A colour model JSON ([`crate::classify::ColorModel::from_json`]); an accepted model
 /// scores and labels every 16th colour of the RGB cube.
 pub fn color_model_json(data: &[u8]) -> bool {
-    use crate::classify::gmm::PixelClassifier;
+    use crate::classify::PixelClassifier;
     let Ok(text) = std::str::from_utf8(data) else {
         return false;
     };
-    let Ok(model) = crate::classify::gmm::ColorModel::from_json(text, "fuzz.json") else {
+    let Ok(model) = crate::classify::ColorModel::from_json(text, "fuzz.json") else {
         return false;
     };
     let mut scores = Vec::new();

@@ -4,8 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::classify::lut::ColorLut;
-use crate::classify::thermal::{MwirConfig, SwirConfig};
+use crate::classify::{ColorLut, MwirConfig, SwirConfig};
 use crate::error::{Error, Result};
 use crate::sensor::Frame;
 
@@ -16,7 +15,7 @@ pub struct MwirLabelConfig {
     /// Parameters of the MWIR thermal contrast classifier.
     pub classifier: MwirConfig,
     /// Local solar hour (0..24) every image was taken at; `None`: from each frame's stamp
-    /// (UTC) and the longitude ([`crate::classify::solar`]).
+    /// (UTC) and the longitude (the equation of time, [`crate::classify::equation_of_time_min`]).
     pub hour: Option<f64>,
     /// Degrees east, for the solar hour; `None`: the log's GNSS fix ([`Frame::geo`]).
     pub longitude_deg: Option<f64>,
@@ -284,8 +283,7 @@ impl LabelsConfig {
     /// [`Self::compile`] with the lookup tables' bits per channel for a colour model and
     /// for the rule.
     fn compile_at(&self, model_bits: u8, rule_bits: u8) -> Result<FrameLabelConfig> {
-        use crate::classify::color::RuleClassifier;
-        use crate::classify::gmm::ColorModel;
+        use crate::classify::{ColorModel, RuleClassifier};
         let mut cfg = FrameLabelConfig {
             ray_stride: self.stride,
             wide_rows: self.wide_rows,

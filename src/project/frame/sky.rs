@@ -8,7 +8,7 @@ use crate::classify::{Label, LabelImage};
 use crate::geom::{CameraModel, Pose};
 
 /// Sky-above-horizon rule with the cached rays: the same as
-/// [`crate::classify::horizon::Horizon::apply`] with `sky_below_is_water` (sky colour below
+/// [`crate::classify::Horizon::apply`] with `sky_below_is_water` (sky colour below
 /// the horizon is a reflection of the sky, i.e. water).
 pub(super) fn apply_horizon(labels: &mut LabelImage, map_rays: &[Option<Vector3<f64>>]) {
     for (l, r) in labels.data.iter_mut().zip(map_rays) {

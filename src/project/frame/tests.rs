@@ -1,10 +1,7 @@
 use super::place::HOLE_LEVEL_WINDOW;
 use super::quad::quad_cells;
 use super::*;
-use crate::classify::color::RuleClassifier;
-use crate::classify::horizon::{optical_pose, Horizon};
-use crate::classify::lut::ColorLut;
-use crate::classify::thermal::{MwirConfig, SwirConfig};
+use crate::classify::{optical_pose, ColorLut, Horizon, MwirConfig, RuleClassifier, SwirConfig};
 use crate::cues::StereoSeen;
 use crate::geom::{pose_xyz_rpy, Distortion};
 use crate::grid::{FalseAlarms, Fusion, GridConfig, RangeNoise};

@@ -5,9 +5,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use tarn::classify::color::RuleClassifier;
-use tarn::classify::lut::ColorLut;
-use tarn::classify::Label;
+use tarn::classify::{ColorLut, Label, RuleClassifier};
 use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;
 use tarn::grid::{GridConfig, RangeNoise, RollingGrid};

@@ -512,7 +512,7 @@ mod tests {
     #[test]
     fn compiled_label_models_alone_keep_the_cameras_the_log_has() {
         use crate::mcap_log::LogSummary;
-        use tarn::classify::{color::RuleClassifier, lut::ColorLut};
+        use tarn::classify::{ColorLut, RuleClassifier};
         let log = LogConfig::default();
         let summary = |topics: &[&str]| {
             LogSummary::of(

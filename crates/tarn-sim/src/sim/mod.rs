@@ -152,7 +152,7 @@ pub fn pose_of(p: &TruthPose) -> Pose {
 /// at `unix_s` seconds since the epoch (UTC).
 pub fn longitude_at(unix_s: f64, hours: f64) -> f64 {
     let utc_h = unix_s.rem_euclid(86_400.0) / 3600.0;
-    let eot_h = crate::classify::solar::equation_of_time_min(unix_s) / 60.0;
+    let eot_h = crate::classify::equation_of_time_min(unix_s) / 60.0;
     let lon = (15.0 * (hours - utc_h - eot_h) + 180.0).rem_euclid(360.0) - 180.0;
     // A longitude that rounds to +180 is the same meridian as −180.
     if lon >= 180.0 {
