@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::cues::prior::{PriorLevel, WaterPrior};
+use crate::cues::{PriorLevel, WaterPrior};
 use crate::error::Result;
 use crate::grid::{BuildKeyHasher, CellKey, CellStats, TileMap};
 use crate::water::{find_bodies_and_void, WaterBody};

@@ -16,7 +16,7 @@
 //!
 //! With `[lidar.cue] prior_every_frames = N` the window's water bodies become, after every
 //! N-th frame, the prior the lidar cue reads in the frames that follow
-//! ([`crate::cues::prior::WaterPrior`], [`Mapper::water_prior`]): the map just published,
+//! ([`crate::cues::WaterPrior`], [`Mapper::water_prior`]): the map just published,
 //! or, when the mapper does not publish (an offline build), the same map built for it. An
 //! offline build with a prior is therefore the online run's map, at the cost of one water
 //! stage every N frames.
@@ -44,8 +44,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use crate::calib::{Calibration, CalibrationReport, Source, Sourced};
-use crate::cues::prior::WaterPrior;
-use crate::cues::{estimate_sensor_height, FrameCues};
+use crate::cues::{estimate_sensor_height, FrameCues, WaterPrior};
 use crate::error::{Error, Result};
 use crate::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
 use crate::hazard::{HazardConfig, HazardMap};

@@ -161,7 +161,7 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
     // Reflectivity separation, normalised for range and incidence on level ground.
     let o = cloud.sensor_origin_in_map();
     let cfg = ReflectivityConfig::default();
-    let by = |label: u32, channel: tarn::cues::reflectivity::Channel| -> Vec<f64> {
+    let by = |label: u32, channel: tarn::cues::Channel| -> Vec<f64> {
         let c = ReflectivityConfig { channel, ..cfg };
         (0..cloud.len())
             .filter(|&i| cloud.is_valid(i) && labels[i] == label)
@@ -172,7 +172,7 @@ fn rellis_missing_returns_say_nothing_on_dry_ground_and_reflectivity_separates_p
             })
             .collect()
     };
-    use tarn::cues::reflectivity::Channel;
+    use tarn::cues::Channel;
     for ch in [Channel::Reflectivity, Channel::Intensity] {
         let (p, g, m) = (by(PUDDLE, ch), by(GRASS, ch), by(MUD, ch));
         let med = |v: &[f64]| {

@@ -190,7 +190,7 @@ pub(crate) fn scan_falloff(
     scan: &PointCloud,
     cfg: &crate::cues::ReflectivityConfig,
 ) -> Option<(f64, &'static str)> {
-    let name = crate::cues::reflectivity::channel_name(scan, cfg)?;
+    let name = crate::cues::channel_name(scan, cfg)?;
     let o = scan.sensor_origin_in_map();
     let (lo, hi) = (3f64.to_radians().sin(), 45f64.to_radians().sin());
     let samples: Vec<(f64, f64)> = (0..scan.len())
@@ -202,7 +202,7 @@ pub(crate) fn scan_falloff(
             if !(s >= lo && s <= hi && r >= cfg.min_range_m && r <= cfg.max_range_m) {
                 return None;
             }
-            crate::cues::reflectivity::channel_value(scan, i, cfg).map(|(x, _)| (x, r))
+            crate::cues::channel_value(scan, i, cfg).map(|(x, _)| (x, r))
         })
         .collect();
     crate::cues::ChannelLaw::fit(&samples, cfg.min_samples).map(|l| (l.exponent, name))

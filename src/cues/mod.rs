@@ -8,13 +8,13 @@
 //! lookahead, keeping the level of the last ground seen — the shore level, which is the
 //! water level of a still water body — and reads what breaks the pattern:
 //!
-//! * [`stereo`] — **reflections**: a run of points below the local ground, behind a gap,
+//! * stereo ([`stereo_reflections`]) — **reflections**: a run of points below the local ground, behind a gap,
 //!   whose range wraps backward up the column. The ray to each reflected point crosses the
 //!   water level where the water is (evidence for that cell); mirrored about the level the
 //!   point is the real object, returned in place of the raw one; reflected points and their
 //!   sources, paired by nearest-neighbour search (kiddo), give the level by symmetry; the
 //!   intensity image, when given, confirms a run by mirror-image correlation.
-//! * [`lidar`] — **no return**: a missing beam, its direction from the organized scan or a
+//! * lidar ([`LidarCueModel`]) — **no return**: a missing beam, its direction from the organized scan or a
 //!   beam model, cast against the local ground level; if it meets the ground inside the
 //!   optics' diagnostic interval its cell gets no-return evidence, and returns inside the
 //!   interval are counted too (so no-return is a fraction, not a raw count). **Below-level
@@ -28,27 +28,42 @@
 //! The cues produce sparse per-cell [`Evidence`] (see [`crate::grid::Evidence`] for the
 //! fusion rule) that [`crate::grid::RollingGrid::apply_evidence`] merges exactly; nothing
 //! depends on thread count or point order within a scan line.
+//!
+//! Exports: a run's options ([`CueRun`]) and its output ([`EvidenceMap`]); the lidar cues
+//! ([`LidarCueModel`], [`LidarCueConfig`], [`BeamModel`], [`beam_directions`],
+//! [`estimate_sensor_height`], [`LidarBuffers`], [`LidarCues`] with [`LidarCueStats`],
+//! [`ScanSurface`], [`DryReach`]); the water an earlier map found ([`WaterPrior`]); the
+//! reflectivity drop ([`ReflectivityConfig`], [`Channel`], [`ChannelLaw`],
+//! [`normalised_reflectivity`]); the stereo reflections ([`stereo_reflections`],
+//! [`StereoCueConfig`], [`GrayImage`], [`MirrorCheck`], [`StereoCues`], [`StereoSeen`]); and
+//! a frame's cues ([`FrameCues`], [`FrameCueConfig`], [`FrameCuesReport`], [`mirror_gray`],
+//! [`mirror_check_of`]).
 
-pub mod frame;
-pub mod lidar;
-pub mod prior;
-pub mod reflectivity;
-pub mod stereo;
+mod frame;
+mod lidar;
+mod prior;
+mod reflectivity;
+mod stereo;
 
 use std::collections::HashMap;
 
 use crate::grid::{key_of, quantize_mm, BuildKeyHasher, CellKey, Evidence};
 
-pub use frame::FrameCuesReport;
-pub use frame::{FrameCueConfig, FrameCues};
+pub use frame::{mirror_check_of, mirror_gray, FrameCueConfig, FrameCues, FrameCuesReport};
 pub use lidar::{
-    estimate_sensor_height, BeamModel, DryReach, LidarBuffers, LidarCueConfig, LidarCueModel,
-    LidarCues, ScanSurface,
+    beam_directions, estimate_sensor_height, BeamModel, DryReach, LidarBuffers, LidarCueConfig,
+    LidarCueModel, LidarCueStats, LidarCues, ScanSurface,
 };
-pub use reflectivity::{normalised_reflectivity, ChannelLaw, ReflectivityConfig};
+pub use prior::WaterPrior;
+pub use reflectivity::{normalised_reflectivity, Channel, ChannelLaw, ReflectivityConfig};
 pub use stereo::{
     stereo_reflections, GrayImage, MirrorCheck, StereoCueConfig, StereoCues, StereoSeen,
 };
+
+// What the rest of the crate reads of the cues' internals: the water levels a map hands the
+// next run, and the reflectivity channel the lidar calibration fits.
+pub(crate) use prior::PriorLevel;
+pub(crate) use reflectivity::{channel_name, channel_value};
 
 /// The options of one run of a cue: the grid its events are keyed to, and what else it is
 /// asked for.

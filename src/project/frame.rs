@@ -1,5 +1,5 @@
 //! Image labels of one [`Frame`] into the grid's water evidence (same pattern as
-//! [`crate::cues::frame::FrameCues`]).
+//! [`crate::cues::FrameCues`]).
 //!
 //! For each configured image sensor present in the frame: classify the image (colour through
 //! a lookup table, pixels above the horizon — from the camera's pose — become sky; SWIR

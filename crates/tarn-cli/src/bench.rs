@@ -17,11 +17,9 @@ use std::time::Instant;
 use serde::Serialize;
 
 use tarn::classify::{ColorLut, Label, RuleClassifier};
-use tarn::cues::frame::{mirror_check_of, mirror_gray};
-use tarn::cues::lidar::LidarBuffers;
 use tarn::cues::{
-    estimate_sensor_height, stereo_reflections, CueRun, FrameCueConfig, GrayImage, LidarCueModel,
-    StereoCueConfig,
+    estimate_sensor_height, mirror_check_of, mirror_gray, stereo_reflections, CueRun,
+    FrameCueConfig, GrayImage, LidarBuffers, LidarCueModel, StereoCueConfig,
 };
 use tarn::error::{Error, Result};
 use tarn::geom::PointCloud;

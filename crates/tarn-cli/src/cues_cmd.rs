@@ -5,10 +5,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use serde::Serialize;
-use tarn::cues::lidar::LidarCueStats;
 use tarn::cues::{
     estimate_sensor_height, BeamModel, CueRun, LidarBuffers, LidarCueConfig, LidarCueModel,
-    ReflectivityConfig,
+    LidarCueStats, ReflectivityConfig,
 };
 use tarn::optics::{Attenuation, LidarModelConfig, Sensitivity, SolidAngleForm};
 
@@ -47,7 +46,7 @@ struct Report {
     diagnostic_interval_m: Option<[f64; 2]>,
     stats: LidarCueStats,
     reflectivity_threshold: Option<f64>,
-    reflectivity_law: Option<tarn::cues::reflectivity::ChannelLaw>,
+    reflectivity_law: Option<tarn::cues::ChannelLaw>,
     evidence_cells: usize,
     cells_with_noret: usize,
     cells_with_depth: usize,

@@ -7,7 +7,7 @@ use nalgebra::{Point3, Vector3};
 
 use super::walk::Event;
 use super::LidarCueModel;
-use crate::cues::prior::WaterPrior;
+use crate::cues::WaterPrior;
 use crate::geom::PointCloud;
 
 impl LidarCueModel {

@@ -2,7 +2,7 @@
 //! evidence, and the greatest depth its bottom returns can come from at each lookahead.
 
 use super::{BeamModel, LidarCueConfig};
-use crate::cues::reflectivity::ReflectivityConfig;
+use crate::cues::ReflectivityConfig;
 use crate::error::{Error, Result};
 use crate::grid::RangeNoise;
 use crate::optics::{LidarModelConfig, LidarWaterModel};

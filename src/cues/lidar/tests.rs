@@ -7,10 +7,8 @@ use super::walk::{
     below_gate, SlopeWindow, GATE_MIN, GATE_WINDOW, SLOPE_BASELINE_M, SLOPE_WINDOW_M,
 };
 use super::*;
-use crate::cues::prior::{PriorLevel, WaterPrior};
-use crate::cues::reflectivity::ReflectivityConfig;
 use crate::cues::testutil::TestRng;
-use crate::cues::CueRun;
+use crate::cues::{CueRun, PriorLevel, ReflectivityConfig, WaterPrior};
 use crate::grid::{key_of, CellKey, Evidence, GridConfig, RangeNoise, RollingGrid};
 use crate::optics::{apparent_bottom_point, Attenuation, LidarModelConfig, LidarWaterModel};
 

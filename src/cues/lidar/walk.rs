@@ -10,8 +10,7 @@ use nalgebra::{Point3, Vector3};
 use super::below::{mirror_refuted, ScanLine};
 use super::bright::{bright_reference, BED_BRIGHTER, BRIGHT_WINDOW};
 use super::LidarCueModel;
-use crate::cues::prior::WaterPrior;
-use crate::cues::reflectivity::{normalised_reflectivity, ReflectivityConfig};
+use crate::cues::{normalised_reflectivity, ReflectivityConfig, WaterPrior};
 use crate::geom::PointCloud;
 
 impl LidarCueModel {
