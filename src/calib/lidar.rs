@@ -26,7 +26,7 @@ const BANDS: [(f64, f64); 3] = [(1.0, 10.0), (10.0, 20.0), (20.0, 40.0)];
 const POOL: usize = 30_000;
 const PER_SCAN: usize = 20_000;
 /// Triples a band needs before its σ counts.
-pub const MIN_SAMPLES: usize = 300;
+pub(crate) const MIN_SAMPLES: usize = 300;
 
 /// A measured lidar range noise.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -3,9 +3,9 @@
 //! A log rarely carries its whole calibration: drivers leave out the right camera's
 //! `CameraInfo`, publish a zero baseline, name a raw intensity `reflectivity`, and nobody
 //! knows their stereo pair's disparity noise. The cues' false-alarm rates depend on these
-//! values, so the mapper measures them from the data it maps ([`stereo`], [`lidar`]),
-//! checks what it is told against the measurement ([`resolve`]), and assumes nothing
-//! optimistic:
+//! values, so the mapper measures them from the data it maps (the stereo pair's noise, the
+//! lidar's range noise and intensity law), checks what it is told against the measurement
+//! ([`resolve`]), and assumes nothing optimistic:
 //!
 //! - a measured value is used, and a stated one (the log's or the config's, a rig file's)
 //!   that it contradicts by more than [`DISAGREEMENT`]× either way is reported with a
@@ -21,17 +21,23 @@
 //! then held; an offline build measures them before it maps the first frame
 //! ([`crate::mapper::Mapper::calibrate`]), so every frame of a log, and every piece a
 //! distributed build cuts it into, is fused with the same noise.
+//!
+//! Exports: [`Calibration`] and its [`CalibrationReport`] ([`StereoCalibration`],
+//! [`LidarCalibration`]); the stated values ([`StereoStated`], [`Sourced`], [`Source`]) and
+//! [`resolve`] with its [`Resolved`]; the measurements ([`StereoMeasurement`] and its
+//! [`StereoMethod`], [`LidarMeasurement`], [`IntensityLaw`]); the thresholds
+//! [`DISAGREEMENT`], [`NOISY_STEREO_PER_M2`], [`NOISY_LIDAR`].
 
-pub mod lidar;
+mod lidar;
 pub(crate) mod robust;
-pub mod stereo;
+mod stereo;
 
 use serde::{Deserialize, Serialize};
 
 use crate::geom::PointCloud;
 use crate::grid::RangeNoise;
-pub(crate) use lidar::{IntensityLaw, LidarMeasurement};
-pub(crate) use stereo::StereoMeasurement;
+pub use lidar::{IntensityLaw, LidarMeasurement};
+pub use stereo::{StereoMeasurement, StereoMethod};
 
 /// A stated value and a measurement of it disagree when one exceeds the other by more than
 /// this factor.

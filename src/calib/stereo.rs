@@ -49,7 +49,7 @@ const PIXELS_PER_FRAME: usize = 30_000;
 /// Samples kept per method (the newest).
 const POOL: usize = 60_000;
 /// Samples a method needs before its estimate counts.
-pub const MIN_SAMPLES: usize = 1_000;
+pub(crate) const MIN_SAMPLES: usize = 1_000;
 
 /// How a stereo noise measurement was made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -75,7 +75,7 @@ pub struct StereoMeasurement {
 
 /// Measures the stereo noise coefficient over the frames it is shown.
 #[derive(Debug, Clone)]
-pub struct StereoNoiseEstimator {
+pub(crate) struct StereoNoiseEstimator {
     /// Inverse-depth error against the lidar, the lidar surface's share of it, and the
     /// lidar's depth.
     lidar: Pool<[f32; 3]>,
@@ -223,8 +223,9 @@ impl StereoNoiseEstimator {
 
     /// The noise coefficient measured so far: against the lidar when that has enough
     /// samples, else from the cloud's local planes; `None` until either has
-    /// [`MIN_SAMPLES`].
-    pub fn estimate(&self) -> Option<StereoMeasurement> {
+    /// [`MIN_SAMPLES`]. ([`super::Calibration`] asks each method itself, to report both.)
+    #[cfg(test)]
+    pub(crate) fn estimate(&self) -> Option<StereoMeasurement> {
         self.by_lidar().or_else(|| self.by_planes())
     }
 
