@@ -35,7 +35,7 @@
 //! cues leave uncertain.
 //!
 //! The image cues count **one vote per cell and frame** (the majority of that frame's
-//! pixels projected into the cell; [`crate::project::frame`]): the pixels of one patch in
+//! pixels projected into the cell; [`crate::project::FrameLabels`]): the pixels of one patch in
 //! one image are not independent, frames taken from other positions are closer to it. Each
 //! image cue is capped at `±image_cap` instead of `cue_cap`: with the prior of 0.05 a cap
 //! of ln 100 would keep an image-only cell at p ≤ 0.84, so a camera could never call water

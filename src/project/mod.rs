@@ -15,14 +15,22 @@
 //! The output, [`LabelVotes`], is a sparse map from [`CellKey`] to per-class `u32` counts with a
 //! commutative, associative [`LabelVotes::merge`]: results do not depend on thread count or
 //! frame order. Fusing votes into the map's classes is left to the mapper.
+//!
+//! Exports: points and rays to cells ([`label_points`], [`Projector`] with its
+//! [`ProjectConfig`] and [`ProjectStats`], [`ElevationSurface`], [`RayTarget`],
+//! [`LabelVotes`] of [`Counts`]); a frame's image labels into the grid's evidence
+//! ([`FrameLabels`], its [`FrameLabelConfig`], [`LabelsConfig`], [`LabelSensor`],
+//! [`MwirLabelConfig`], [`Sampler`], [`Encoding`], and its [`FrameLabelsReport`] of
+//! [`SensorLabelStats`]; [`reflection_check`]); pixel rays marched over the fused
+//! elevations ([`GridSurface`]).
 
-pub mod frame;
-pub mod surface;
+mod frame;
+mod surface;
 mod zbuffer;
 
 pub use frame::{
     reflection_check, Encoding, FrameLabelConfig, FrameLabels, FrameLabelsReport, LabelSensor,
-    LabelsConfig, MwirLabelConfig, Sampler,
+    LabelsConfig, MwirLabelConfig, Sampler, SensorLabelStats,
 };
 pub use surface::GridSurface;
 

@@ -8,8 +8,8 @@ use rayon::prelude::*;
 use crate::classify::{Label, LabelImage};
 use crate::cues::DryReach;
 use crate::geom::PointCloud;
-use crate::project::surface::GridSurface;
 use crate::project::zbuffer::ZBuffer;
+use crate::project::GridSurface;
 
 /// How a sampled pixel finds its hit on the map: through its stereo point where it has
 /// one within range, else by the march over the map, started where the z-buffer says its

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use super::place::Hit;
 use crate::geom::{ceil_i64, floor_i64};
 use crate::grid::CellKey;
-use crate::project::surface::GridSurface;
+use crate::project::GridSurface;
 
 /// Largest side (metres) of a pixel's quad that votes over the cells it covers: larger
 /// ones straddle an occlusion edge.
