@@ -491,14 +491,14 @@ fn water_vertex_colour(top: bool, known: bool) -> [u8; 3] {
 /// `water.ply`: the triangle mesh of every body's fitted water surface (DESIGN.md
 /// contract), binary little-endian. Bodies whose depths are all known are closed solids
 /// (surface, bottom at surface − depth, meeting at the shoreline: see
-/// [`crate::water::mesh`]); others are their open top sheet. Vertex properties: `x y z`,
+/// [`crate::water::body_mesh`]); others are their open top sheet. Vertex properties: `x y z`,
 /// `red green blue`, `int body` (the body id), `float depth` (below the surface at that
 /// vertex: 0 on the top sheet).
 pub(crate) fn write_water_ply(path: &Path, map: &HazardMap) -> Result<()> {
     let mut verts: Vec<([f64; 3], [u8; 3], i32, f32)> = Vec::new();
     let mut tris: Vec<[u32; 3]> = Vec::new();
     for b in &map.bodies {
-        let m = crate::water::mesh::body_mesh(b, map.resolution, &b.surface.evaluator());
+        let m = crate::water::body_mesh(b, map.resolution, &b.surface.evaluator());
         let base = verts.len() as u32;
         let known = b.depth.unknown_cells == 0;
         let bottom_vertex: std::collections::HashSet<u32> =

@@ -17,7 +17,7 @@ use crate::grid::CellKey;
 
 /// A body's mesh in the map frame (f64).
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct BodyMesh {
+pub(crate) struct BodyMesh {
     /// Vertex positions, map frame, metres.
     pub vertices: Vec<[f64; 3]>,
     /// Depth below the surface at each vertex (0 on the top sheet).
@@ -33,7 +33,7 @@ pub struct BodyMesh {
 impl BodyMesh {
     /// Signed volume by the divergence theorem (positive for a closed, outward-wound mesh),
     /// about the first vertex to keep the sums small.
-    pub fn volume(&self) -> f64 {
+    pub(crate) fn volume(&self) -> f64 {
         let Some(&o) = self.vertices.first() else {
             return 0.0;
         };
@@ -48,8 +48,10 @@ impl BodyMesh {
             .sum()
     }
 
-    /// Area of the top sheet projected on the horizontal plane.
-    pub fn top_plan_area(&self) -> f64 {
+    /// Area of the top sheet projected on the horizontal plane (the tests check the mesh
+    /// by it).
+    #[cfg(test)]
+    pub(crate) fn top_plan_area(&self) -> f64 {
         self.top
             .iter()
             .map(|t| {
@@ -61,7 +63,7 @@ impl BodyMesh {
 }
 
 /// Builds the mesh of `body` on a grid of resolution `res` with its surface evaluator.
-pub fn body_mesh(body: &WaterBody, res: f64, surface: &Surface) -> BodyMesh {
+pub(crate) fn body_mesh(body: &WaterBody, res: f64, surface: &Surface) -> BodyMesh {
     let closed = !body.cells.is_empty() && body.cell_depth_m.iter().all(|d| d.is_finite());
     let set: BTreeSet<CellKey> = body.cells.iter().copied().collect();
     let depth: HashMap<CellKey, f64> = body

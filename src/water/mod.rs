@@ -7,6 +7,11 @@
 //! are the fields of [`WaterConfig`] and [`Vehicle`](crate::hazard::Vehicle), each named below with its default in
 //! parentheses. Measured results are in docs/accuracy.md and docs/limits.md.
 //!
+//! Exports: [`find_bodies`] with its [`WaterConfig`]; what it finds, [`WaterBody`] (its
+//! [`DepthStats`], the [`SurfaceSource`] of its level); and a body's water surface
+//! ([`Surface`], of model [`SurfaceModel`], fitted to [`ShoreSample`]s; [`V`] is a vertex of
+//! its triangulation).
+//!
 //! ## 1. Bodies: connected components with hysteresis
 //!
 //! Each cell's fused water probability `p = Evidence::water_probability(&Fusion)` is read.
@@ -141,13 +146,13 @@
 //! between stretches).
 //!
 //! The vertices are not the samples as measured but each at the median of the kept samples
-//! within `vertex_median_radius_m` (1.5 m) of it ([`surface::local_medians`]; 0 keeps them
-//! as measured): a triangulation carries each vertex's own error to the water around it,
-//! and across a stream seen from one bank, to the whole near half of the channel. Single
-//! shore cells stand well off the water: a waterline cell mostly under water, seen through
-//! it at grazing incidence (low), or the top of a short stretch of bank (high). The median
-//! of a one-sided neighbourhood, within the radius of a shore's end, stands off by up to
-//! the slope times half the radius (2.25 cm on a 3 % stream).
+//! within `vertex_median_radius_m` (1.5 m) of it (`local_medians` in `water/surface.rs`; 0
+//! keeps them as measured): a triangulation carries each vertex's own error to the water
+//! around it, and across a stream seen from one bank, to the whole near half of the channel.
+//! Single shore cells stand well off the water: a waterline cell mostly under water, seen
+//! through it at grazing incidence (low), or the top of a short stretch of bank (high). The
+//! median of a one-sided neighbourhood, within the radius of a shore's end, stands off by up
+//! to the slope times half the radius (2.25 cm on a 3 % stream).
 //!
 //! The Delaunay model must earn its place: its hold-out residual (every other sample
 //! predicted from the triangulation of the others) must beat the level's, or the body
@@ -174,7 +179,7 @@
 //! surface's own error times the gain. Area is the number of cells times the cell area.
 //! The volume is given only when every cell's depth is known (`volume_m3: None`
 //! otherwise, with the known and unknown-depth areas reported): it is the volume of the
-//! closed water mesh ([`mesh`]) between the surface and the bottom, where the bottom
+//! closed water mesh (`water/mesh.rs`) between the surface and the bottom, where the bottom
 //! interpolates the measured depths at the cell centres and comes up to depth zero at the
 //! shoreline, as real water does.
 //!
@@ -187,9 +192,9 @@
 //! local 3 × 3 fit exceeds `max_slope_deg` (25°).
 
 mod body;
-pub mod mesh;
+mod mesh;
 mod search;
-pub mod surface;
+mod surface;
 
 use serde::{Deserialize, Serialize};
 
@@ -202,7 +207,9 @@ pub use search::find_bodies;
 pub(crate) use search::{
     bodies_from, bodies_in_part, find_bodies_and_void, seeds_body, CellInfos, Info,
 };
-pub use surface::{ShoreSample, Surface, SurfaceModel};
+pub use surface::{ShoreSample, Surface, SurfaceModel, V};
+// A body's closed water mesh, which `water.ply` writes.
+pub(crate) use mesh::body_mesh;
 
 /// Parameters of body extraction and surface fitting (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

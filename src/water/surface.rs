@@ -209,7 +209,7 @@ fn on_segment([a, b]: [V; 2], x: f64, y: f64) -> (f64, f64) {
 }
 
 /// The `q` quantile (0..1, nearest rank) of finite values; `None` when there are none.
-pub fn quantile(mut v: Vec<f64>, q: f64) -> Option<f64> {
+pub(crate) fn quantile(mut v: Vec<f64>, q: f64) -> Option<f64> {
     v.retain(|z| z.is_finite());
     if v.is_empty() {
         return None;
@@ -220,7 +220,7 @@ pub fn quantile(mut v: Vec<f64>, q: f64) -> Option<f64> {
 }
 
 /// The median of the finite values (nearest rank); `None` when there are none.
-pub fn median(v: Vec<f64>) -> Option<f64> {
+pub(crate) fn median(v: Vec<f64>) -> Option<f64> {
     quantile(v, 0.5)
 }
 
@@ -365,7 +365,7 @@ pub(crate) fn reject_spilling(
 /// of it (itself included): what that stretch of shore says, for the vertices of a
 /// Delaunay surface, which would otherwise carry each sample's own error to the water
 /// around it (module documentation, section 3). Order and positions are kept.
-pub fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
+pub(crate) fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
     if radius.is_nan() || radius <= 0.0 {
         return samples.to_vec();
     }
@@ -381,7 +381,7 @@ pub fn local_medians(samples: &[ShoreSample], radius: f64) -> Vec<ShoreSample> {
 
 /// The outcome of choosing a surface model for one body.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Fit {
+pub(crate) struct Fit {
     /// The surface chosen.
     pub model: SurfaceModel,
     /// RMS of the kept samples about the median level.
@@ -415,7 +415,7 @@ fn rms(it: impl Iterator<Item = f64>) -> f64 {
 /// residuals are those of the samples as measured. `noise_m` is the samples' typical
 /// elevation σ: the robust level test allows the spread that noise explains. `None`
 /// without finite samples.
-pub fn fit(
+pub(crate) fn fit(
     samples: &[ShoreSample],
     constraints: &[[usize; 2]],
     cfg: &WaterConfig,
