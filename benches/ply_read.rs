@@ -82,10 +82,10 @@ fn bench(c: &mut Criterion) {
     let le = ply_bytes(N, false);
     let be = ply_bytes(N, true);
     g.bench_function("ply_binary_le_from_bytes", |b| {
-        b.iter(|| tarn::io::ply::read_from_bytes(black_box(&le), "bench.ply").unwrap())
+        b.iter(|| tarn::io::read_ply_from_bytes(black_box(&le), "bench.ply").unwrap())
     });
     g.bench_function("ply_binary_be_from_bytes", |b| {
-        b.iter(|| tarn::io::ply::read_from_bytes(black_box(&be), "bench.ply").unwrap())
+        b.iter(|| tarn::io::read_ply_from_bytes(black_box(&be), "bench.ply").unwrap())
     });
 
     let dir = tempfile::tempdir().unwrap();
@@ -96,13 +96,13 @@ fn bench(c: &mut Criterion) {
         .unwrap();
     drop(be);
     g.bench_function("ply_binary_le_from_file", |b| {
-        b.iter(|| tarn::io::ply::read(black_box(&path)).unwrap())
+        b.iter(|| tarn::io::read_ply(black_box(&path)).unwrap())
     });
     drop(le);
 
     let kitti = kitti_bytes(N);
     g.bench_function("kitti_from_bytes", |b| {
-        b.iter(|| tarn::io::kitti::read_from_bytes(black_box(&kitti), "bench.bin").unwrap())
+        b.iter(|| tarn::io::read_kitti_from_bytes(black_box(&kitti), "bench.bin").unwrap())
     });
     g.finish();
 
@@ -110,7 +110,7 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("read_500k_ascii");
     g.sample_size(10);
     g.throughput(Throughput::Elements(500_000));
-    let cloud = tarn::io::ply::read_from_bytes(&ply_bytes(500_000, false), "x.ply").unwrap();
+    let cloud = tarn::io::read_ply_from_bytes(&ply_bytes(500_000, false), "x.ply").unwrap();
     let mut ascii = String::from(
         "ply\nformat ascii 1.0\nelement vertex 500000\nproperty float x\nproperty float y\n\
          property float z\nproperty float intensity\nend_header\n",
@@ -120,7 +120,7 @@ fn bench(c: &mut Criterion) {
         ascii += &format!("{} {} {} {i}\n", p[0], p[1], p[2]);
     }
     g.bench_function("ply_ascii_from_bytes", |b| {
-        b.iter(|| tarn::io::ply::read_from_bytes(black_box(ascii.as_bytes()), "a.ply").unwrap())
+        b.iter(|| tarn::io::read_ply_from_bytes(black_box(ascii.as_bytes()), "a.ply").unwrap())
     });
     g.finish();
 }

@@ -24,7 +24,7 @@ fn rellis_calibration_is_measured_from_the_scan() {
         eprintln!("skipped: {DIR} is absent (shared test data, kept beside the repository)");
         return;
     }
-    let raw = tarn::io::ply::read(Path::new(&format!("{DIR}frame000104-1581624663_170.ply")))
+    let raw = tarn::io::read_ply(Path::new(&format!("{DIR}frame000104-1581624663_170.ply")))
         .expect("RELLIS-3D PLY");
     let cloud = tarn::io::organize_column_major(&raw, 64).unwrap();
     let cfg = MapperConfig {

@@ -34,7 +34,7 @@ fn available() -> bool {
 
 /// The organized scan (64 rings × 2048) with reflectivity, and its labels in the same order.
 fn load() -> (PointCloud, Vec<u32>) {
-    let raw = tarn::io::ply::read(Path::new(&format!("{DIR}frame000104-1581624663_170.ply")))
+    let raw = tarn::io::read_ply(Path::new(&format!("{DIR}frame000104-1581624663_170.ply")))
         .expect("RELLIS-3D PLY");
     let cloud = tarn::io::organize_column_major(&raw, 64).unwrap();
     let bytes = std::fs::read(format!("{DIR}000104.label")).unwrap();

@@ -27,7 +27,7 @@ const NOT_GROUND: [u16; 4] = [0, 4, 7, 19];
 /// The organized scan with reflectivity, its points' labels in the same order.
 fn scan() -> (tarn::geom::PointCloud, Vec<u16>) {
     let d = rellis_common::dir();
-    let raw = tarn::io::ply::read(&d.join("frame000104-1581624663_170.ply")).unwrap();
+    let raw = tarn::io::read_ply(&d.join("frame000104-1581624663_170.ply")).unwrap();
     let cloud = tarn::io::organize_column_major(&raw, 64).unwrap();
     let flat: Vec<u16> = std::fs::read(d.join("000104.label"))
         .unwrap()

@@ -102,7 +102,7 @@ pub fn load() -> Rellis {
         "pylon_camera_node",
     )
     .unwrap();
-    let cloud = tarn::io::kitti::read(&d.join("000104.bin")).unwrap();
+    let cloud = tarn::io::read_kitti(&d.join("000104.bin")).unwrap();
     let lidar_ids = std::fs::read(d.join("000104.label"))
         .unwrap()
         .chunks_exact(4)

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use tarn::grid::{CellKey, CellStats, Evidence, TileMap};
 use tarn::hazard::HazardConfig;
 use tarn::hazard::{Class, HazardMap};
-use tarn::io::export;
+use tarn::io;
 
 const RES: f64 = 0.1;
 
@@ -93,7 +93,7 @@ fn exports_of_a_scene_with_ponds_a_stream_and_a_box() {
     let t = tiles_of(mixed, 100);
     let map = HazardMap::from_tiles(&t, &HazardConfig::default()).unwrap();
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/water-check/mixed");
-    export::write_map_files(&dir, &map).unwrap();
+    io::write_map_files(&dir, &map).unwrap();
     tarn::files::write_json(
         &dir.join("report.json"),
         &serde_json::json!({ "water_bodies": map.water_report() }),

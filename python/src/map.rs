@@ -213,7 +213,7 @@ impl Map {
     fn write(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
         py.detach(|| {
             std::fs::create_dir_all(&dir).map_err(|e| tarn::Error::io(&dir, e))?;
-            tarn::io::export::write_map_files(&dir, &self.map)
+            tarn::io::write_map_files(&dir, &self.map)
         })
         .map_err(err)
     }
@@ -224,7 +224,7 @@ impl Map {
             .detach(|| {
                 let dir = tempfile_dir()?;
                 let p = dir.join("map.ply");
-                tarn::io::export::write_map_ply(&p, &self.map)?;
+                tarn::io::write_map_ply(&p, &self.map)?;
                 let b = std::fs::read(&p).map_err(|e| tarn::Error::io(&p, e));
                 let _ = std::fs::remove_dir_all(&dir);
                 b
@@ -267,8 +267,6 @@ pub(crate) fn read_map(py: Python<'_>, dir: PathBuf) -> PyResult<Map> {
     } else {
         dir
     };
-    let map = py
-        .detach(|| tarn::io::mapfile::read_map_ply(&p))
-        .map_err(err)?;
+    let map = py.detach(|| tarn::io::read_map_ply(&p)).map_err(err)?;
     Ok(Map::new(map))
 }

@@ -892,7 +892,7 @@ mod tests {
     fn ply(m: &HazardMap) -> Vec<u8> {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("map.ply");
-        crate::io::export::write_map_ply(&p, m).unwrap();
+        crate::io::write_map_ply(&p, m).unwrap();
         std::fs::read(p).unwrap()
     }
 

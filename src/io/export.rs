@@ -15,7 +15,7 @@ use crate::hazard::{HazardMap, MapCell};
 
 /// The files of one build, in the order they are moved into place when they cannot be moved
 /// as one folder (`report.json`, which names the set, last).
-pub const OUTPUT_FILES: [&str; 5] = [
+pub(crate) const OUTPUT_FILES: [&str; 5] = [
     "map.ply",
     "terrain.ply",
     "water.ply",
@@ -102,8 +102,8 @@ fn exchange(_: &Path, _: &Path) -> std::io::Result<bool> {
 /// are renames). At the commit every file and the folder are fsynced; then:
 ///
 /// - no output folder yet: the staging folder is renamed to it;
-/// - an output folder holding only tarn's output files ([`OUTPUT_FILES`]): the two folders
-///   are exchanged in one step (`renameat2(RENAME_EXCHANGE)` on Linux; elsewhere the old
+/// - an output folder holding only tarn's output files (`map.ply`, `terrain.ply`,
+///   `water.ply`, `map.png`, `report.json`): the two folders are exchanged in one step (`renameat2(RENAME_EXCHANGE)` on Linux; elsewhere the old
 ///   folder is renamed aside first, so that for a moment there is no folder, never a
 ///   mixed one), and the old one is removed;
 /// - an output folder that also holds other things (the default run keeps `sim/` in it):
@@ -271,10 +271,10 @@ fn sweep_stale(parent: &Path, prefix: &str, own: &Path) -> Vec<PathBuf> {
 /// Beyond this distance (metres) of the map frame's origin a `float` coordinate is no
 /// longer within 0.5 mm of the value it stands for (its step is 2^-10 m below 2^14 m, and
 /// doubles beyond); `map.ply`, `terrain.ply` and `water.ply` then store `double` x y z.
-pub const FLOAT_COORDINATE_LIMIT_M: f64 = 16384.0;
+pub(crate) const FLOAT_COORDINATE_LIMIT_M: f64 = 16384.0;
 
-/// Whether vertices at these map-frame coordinates need `double` x y z
-/// ([`FLOAT_COORDINATE_LIMIT_M`]).
+/// Whether vertices at these map-frame coordinates need `double` x y z (one coordinate at
+/// 16 384 m or more from the origin).
 pub fn needs_double(points: impl IntoIterator<Item = [f64; 3]>) -> bool {
     points
         .into_iter()
@@ -316,7 +316,7 @@ fn comment_line(text: &str) -> String {
 
 /// `map.ply`: binary little-endian, one vertex per observed cell, the contract's schema:
 /// x y z are the cell centre in the map frame, `float`, or `double` when the map reaches
-/// [`FLOAT_COORDINATE_LIMIT_M`] (UTM-like coordinates).
+/// 16 384 m from the origin (UTM-like coordinates).
 pub fn write_map_ply(path: &Path, map: &HazardMap) -> Result<()> {
     write_map_ply_with(path, map, &[])
 }
@@ -789,7 +789,7 @@ pub(crate) mod tests {
         let d = |o: usize| f64::from_le_bytes(bytes[h + o..h + o + 8].try_into().unwrap());
         let c = &far.cells[0];
         assert_eq!((d(0), d(8), d(16)), (c.x, c.y, c.z));
-        let back = crate::io::mapfile::read_map_ply(&p).unwrap();
+        let back = crate::io::read_map_ply(&p).unwrap();
         assert_eq!((back.cells[0].x, back.cells[0].y), (c.x, c.y));
         assert_eq!(back.cells[0].key, c.key);
         assert!(!needs_double([[16383.9, -16383.9, 0.0]]));

@@ -206,7 +206,7 @@ mod tests {
         ) else {
             return;
         };
-        let ply = crate::io::ply::read(ply).unwrap();
+        let ply = crate::io::read_ply(ply).unwrap();
         let ply = crate::io::organize_column_major(&ply, 64).unwrap();
         let bin = read_organized(bin, 64).unwrap();
         assert_eq!((ply.rows, ply.cols), (bin.rows, bin.cols));

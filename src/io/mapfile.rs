@@ -340,7 +340,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("map.ply");
         let m = sample();
-        crate::io::export::write_map_ply(&p, &m).unwrap();
+        crate::io::write_map_ply(&p, &m).unwrap();
         let r = read_map_ply(&p).unwrap();
         assert_eq!(r.resolution, 0.25);
         assert_eq!(r.cells.len(), 3);
@@ -355,7 +355,7 @@ mod tests {
     fn refuses_what_is_not_the_contract() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("map.ply");
-        crate::io::export::write_map_ply(&p, &sample()).unwrap();
+        crate::io::write_map_ply(&p, &sample()).unwrap();
         let good = std::fs::read(&p).unwrap();
         let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
         let swap = |from: &str, to: &str| {

@@ -1,15 +1,43 @@
 //! Files other programs read and write: point clouds in (PLY, KITTI `.bin`), maps out
 //! (the export contract's `map.ply`, `terrain.ply`, `water.ply`, `map.png`; GeoTIFF;
 //! the map read back). Robot logs are the `tarn-log` crate's.
+//!
+//! Exports: clouds in ([`read_point_cloud`] by extension; [`read_ply`],
+//! [`read_ply_from_bytes`]; KITTI scans, [`read_kitti`], [`read_kitti_from_bytes`],
+//! [`read_kitti_organized`], [`read_kitti_organized_from_bytes`]; [`organize_column_major`]);
+//! maps out ([`write_map_files`] and [`write_map_files_marked`] into a [`Staging`] folder,
+//! [`write_map_ply`], [`write_mesh_ply`], [`terrain_triangles`], [`needs_double`],
+//! [`elevation_range`]; rasters, [`MapRaster`] of a [`Layer`], and [`write_geotiff`] with its
+//! [`GeoTiffOptions`]; with the feature `render`, `render_map_png` within
+//! `MAP_PNG_MAX_SIDE`); and `map.ply` read back ([`read_map_ply`], [`parse_map_ply`]).
+//!
+//! The PLY and KITTI readers share their names in their own modules (`read`,
+//! `read_from_bytes`); the stage names them by format.
 
-pub mod export;
-pub mod geotiff;
-pub mod kitti;
-pub mod mapfile;
-pub mod ply;
-pub mod raster;
+mod export;
+mod geotiff;
+mod kitti;
+mod mapfile;
+mod ply;
+mod raster;
 #[cfg(feature = "render")]
-pub mod render;
+mod render;
+
+pub use export::{
+    elevation_range, needs_double, terrain_triangles, write_map_files, write_map_files_marked,
+    write_map_ply, write_mesh_ply, Staging,
+};
+pub use geotiff::{write_geotiff, GeoTiffOptions};
+pub use kitti::{
+    read as read_kitti, read_from_bytes as read_kitti_from_bytes,
+    read_organized as read_kitti_organized,
+    read_organized_from_bytes as read_kitti_organized_from_bytes,
+};
+pub use mapfile::{parse_map_ply, read_map_ply};
+pub use ply::{read as read_ply, read_from_bytes as read_ply_from_bytes};
+pub use raster::{Layer, MapRaster};
+#[cfg(feature = "render")]
+pub use render::{render_map_png, MAP_PNG_MAX_SIDE};
 
 use std::path::Path;
 
@@ -17,7 +45,7 @@ use crate::error::{Error, Result};
 use crate::geom::PointCloud;
 
 /// Reads a point cloud, choosing the reader by the file's extension (case-insensitive):
-/// `.ply` → [`ply::read`], `.bin` → [`kitti::read`] (an unorganized KITTI scan).
+/// `.ply` → [`read_ply`], `.bin` → [`read_kitti`] (an unorganized KITTI scan).
 pub fn read_point_cloud(path: &Path) -> Result<PointCloud> {
     let ext = path
         .extension()

@@ -76,10 +76,10 @@ use vertex::{Builder, VertexPlan};
 /// Beyond this distance (metres) of the file's origin, a first finite vertex makes the
 /// reader choose a local origin even for `float` coordinates. Below 2^12 m an `f32` has
 /// steps of 0.49 mm or finer.
-pub const FAR_FROM_ORIGIN_M: f64 = 4096.0;
+pub(crate) const FAR_FROM_ORIGIN_M: f64 = 4096.0;
 
 /// Parses the three numbers of a `comment origin X Y Z` line: finite metres.
-pub fn parse_origin(text: &str) -> std::result::Result<[f64; 3], String> {
+pub(crate) fn parse_origin(text: &str) -> std::result::Result<[f64; 3], String> {
     let v: Vec<f64> = text
         .split_whitespace()
         .map(|t| t.parse::<f64>())

@@ -1,5 +1,5 @@
 //! The hazard map as a dense raster: the layers the ROS and GIS exports write
-//! (`tarn_log::ros_export`, [`crate::io::geotiff`]), over the bounding box of the
+//! (`tarn_log::ros_export`, [`crate::io::write_geotiff`]), over the bounding box of the
 //! observed cells.
 //!
 //! Cell `(ix, iy)` of the raster is the map cell with key `(lo.x + ix, lo.y + iy)`: `ix`
@@ -11,7 +11,7 @@ use crate::hazard::{HazardMap, MapCell};
 
 /// Largest raster written, cells: 2^28 cells (a 1.6 km square at 0.10 m) is 1 GiB per
 /// float layer. A sparse map over a larger box is refused rather than allocated.
-pub const MAX_RASTER_CELLS: usize = 1 << 28;
+pub(crate) const MAX_RASTER_CELLS: usize = 1 << 28;
 
 /// A layer of the exports, in the order they are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -83,8 +83,8 @@ pub struct MapRaster<'a> {
 }
 
 impl<'a> MapRaster<'a> {
-    /// The raster of `map` (an empty map gives a 0 × 0 raster). A box of more than
-    /// [`MAX_RASTER_CELLS`] cells is refused.
+    /// The raster of `map` (an empty map gives a 0 × 0 raster). A box of more than 2^28
+    /// cells is refused.
     pub fn new(map: &'a HazardMap) -> Result<Self> {
         let Some(first) = map.cells.first() else {
             return Ok(MapRaster {

@@ -550,7 +550,7 @@ const LEGEND_H: u32 = 134;
 pub const MAP_PNG_MAX_SIDE: u32 = 4096;
 
 /// `map.png` ([`render_map_png`] with the vehicle's path), atomically.
-pub fn write_map_png(path: &Path, map: &HazardMap, vehicle_path: &[[f64; 2]]) -> Result<()> {
+pub(crate) fn write_map_png(path: &Path, map: &HazardMap, vehicle_path: &[[f64; 2]]) -> Result<()> {
     crate::interrupt::check(&format!("writing {}", path.display()))?;
     let img = render_map_png(map, vehicle_path);
     // Rendering stops early on a stop request: an unfinished picture is not written.

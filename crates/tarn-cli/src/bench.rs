@@ -472,7 +472,7 @@ fn time_stages(
     add_label_and_water_stages(&mut st, input, grid)?;
     st.add("export_map (whole map)", false, || {
         let map = HazardMap::from_elevation(&tiles);
-        tarn::io::export::write_map_files(&out_dir, &map)
+        tarn::io::write_map_files(&out_dir, &map)
     });
     let big_grid1 = big_grid.clone();
     st.add("ingest_4M_synthetic", false, || {

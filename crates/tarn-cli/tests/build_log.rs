@@ -8,7 +8,7 @@ use std::path::Path;
 use nalgebra::{Point3, Vector3};
 use tarn::geom::{pose_xyz_rpy, PointCloud, Pose};
 use tarn::grid::GridConfig;
-use tarn::io::ply;
+use tarn::io;
 use tarn::mapper::MapperConfig;
 use tarn_log::build::{build_log, LogBuildConfig};
 use tarn_log::mcap_log::{LogReader, LogWriter, WriteOptions};
@@ -133,7 +133,7 @@ fn map_of_a_drive_matches_the_terrain() {
     assert!(r.lidar_points.fused > 100_000);
     assert!(r.x_realtime > 0.0);
     // Every cell against the plane; well-observed cells within a few centimetres.
-    let cloud = ply::read(&out.join("map.ply")).unwrap();
+    let cloud = io::read_ply(&out.join("map.ply")).unwrap();
     let mut se = 0.0;
     let mut n = 0;
     for i in 0..cloud.len() {
@@ -377,7 +377,7 @@ fn tiles_of_a_log_finish_to_the_built_map() {
     let map = finish_tiles(&moved, &cfg.mapper).unwrap();
     let out2 = dir.path().join("map2");
     std::fs::create_dir_all(&out2).unwrap();
-    tarn::io::export::write_map_ply(&out2.join("map.ply"), &map).unwrap();
+    tarn::io::write_map_ply(&out2.join("map.ply"), &map).unwrap();
     assert!(std::fs::read(out2.join("map.ply")).unwrap() == built);
 
     // Three time chunks, each with a mapper that starts empty, merged in reverse order.

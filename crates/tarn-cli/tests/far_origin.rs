@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use tarn::io::{mapfile, ply};
+use tarn::io;
 
 const E: f64 = 5_000_000.0;
 const N: f64 = 4_000_000.0;
@@ -52,7 +52,7 @@ fn a_map_5000_km_out_keeps_centimetres_through_build_and_export() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
     // The contract reader: cell centres on the 0.1 m lattice, elevations on the terrain.
-    let map = mapfile::read_map_ply(&out.join("map.ply")).unwrap();
+    let map = io::read_map_ply(&out.join("map.ply")).unwrap();
     assert!(map.cells.len() > 9000, "{} cells", map.cells.len());
     let r = map.resolution;
     let mut worst_xy: f64 = 0.0;
@@ -89,7 +89,7 @@ fn a_map_5000_km_out_keeps_centimetres_through_build_and_export() {
     }
     // The point-cloud reader sees the same points in the map frame.
     for name in ["map.ply", "terrain.ply"] {
-        let cloud = ply::read(&out.join(name)).unwrap();
+        let cloud = io::read_ply(&out.join(name)).unwrap();
         assert_eq!(cloud.len(), map.cells.len(), "{name}");
         for i in (0..cloud.len()).step_by(97) {
             let p = cloud.point_in_map(i);
@@ -139,7 +139,7 @@ fn a_bad_origin_line_is_refused_with_its_line() {
             "ply\nformat ascii 1.0\ncomment origin {bad}\nelement vertex 1\nproperty float x\n\
              property float y\nproperty float z\nend_header\n1 1 0\n"
         );
-        let e = ply::read_from_bytes(text.as_bytes(), "o.ply")
+        let e = io::read_ply_from_bytes(text.as_bytes(), "o.ply")
             .unwrap_err()
             .to_string();
         assert!(

@@ -35,7 +35,7 @@ use crate::mcap_log::{LogWriter, WriteOptions};
 use crate::ros::cdr::{CdrReader, CdrResult, CdrWriter, Endian};
 use crate::ros::msgs::{with_deps, HEADER_DEF, TIME_DEF};
 use crate::ros::{Header, Time};
-use tarn::io::raster::{Layer, MapRaster};
+use tarn::io::{Layer, MapRaster};
 
 /// MCAP schema names of the messages written here.
 pub mod schema_name {

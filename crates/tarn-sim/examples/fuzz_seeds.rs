@@ -179,7 +179,7 @@ property float y\nproperty float z\nproperty ushort reflectivity\nend_header\n"
             .cloned()
             .collect(),
     );
-    tarn::io::export::write_map_ply(&tmp.join("map.ply"), &small)?;
+    tarn::io::write_map_ply(&tmp.join("map.ply"), &small)?;
     put("ply", "map.ply", &std::fs::read(tmp.join("map.ply"))?)?;
     Ok(())
 }

@@ -17,18 +17,18 @@ use tarn_log::ros::{
 };
 use tarn_log::tf::TfBuffer;
 
-/// A point cloud in PLY, through [`crate::io::ply::read_from_bytes`], and the same bytes as
-/// a contract `map.ply` through [`crate::io::mapfile::parse_map_ply`].
+/// A point cloud in PLY, through [`crate::io::read_ply_from_bytes`], and the same bytes as
+/// a contract `map.ply` through [`crate::io::parse_map_ply`].
 pub fn ply(data: &[u8]) -> bool {
     let name = Path::new("fuzz.ply");
-    let cloud = crate::io::ply::read_from_bytes(data, name);
+    let cloud = crate::io::read_ply_from_bytes(data, name);
     if let Ok(c) = &cloud {
         check_cloud(c);
     }
-    let map = crate::io::mapfile::parse_map_ply(name, data);
+    let map = crate::io::parse_map_ply(name, data);
     if let Ok(m) = &map {
         assert!(m.resolution > 0.0 && m.resolution.is_finite());
-        let _ = crate::io::export::elevation_range(&m.cells);
+        let _ = crate::io::elevation_range(&m.cells);
     }
     cloud.is_ok() || map.is_ok()
 }
@@ -36,12 +36,12 @@ pub fn ply(data: &[u8]) -> bool {
 /// A KITTI `.bin` scan, unorganized and organized with 1 + `data[0] % 128` rings.
 pub fn kitti(data: &[u8]) -> bool {
     let name = Path::new("fuzz.bin");
-    let a = crate::io::kitti::read_from_bytes(data, name);
+    let a = crate::io::read_kitti_from_bytes(data, name);
     if let Ok(c) = &a {
         check_cloud(c);
     }
     let rings = 1 + data.first().copied().unwrap_or(0) as usize % 128;
-    let b = crate::io::kitti::read_organized_from_bytes(data, name, rings);
+    let b = crate::io::read_kitti_organized_from_bytes(data, name, rings);
     if let Ok(c) = &b {
         check_cloud(c);
     }
@@ -272,26 +272,25 @@ impl<'a> Bytes<'a> {
 /// triangles, the far-origin offset, the report values); with `files`, also the files of
 /// `tarn build` into a fresh temporary directory.
 fn exports_of(map: &crate::hazard::HazardMap, files: bool) {
-    use crate::io::export;
-    let img = tarn::io::render::render_map_png(map, &[]);
+    let img = tarn::io::render_map_png(map, &[]);
     assert!(
-        img.width() <= tarn::io::render::MAP_PNG_MAX_SIDE.max(640)
-            && img.height() <= tarn::io::render::MAP_PNG_MAX_SIDE + 200,
+        img.width() <= tarn::io::MAP_PNG_MAX_SIDE.max(640)
+            && img.height() <= tarn::io::MAP_PNG_MAX_SIDE + 200,
         "map.png of {} × {} pixels",
         img.width(),
         img.height()
     );
-    let tris = export::terrain_triangles(map);
+    let tris = crate::io::terrain_triangles(map);
     assert!(tris
         .iter()
         .flatten()
         .all(|&i| (i as usize) < map.cells.len()));
-    let _ = export::needs_double(map.cells.iter().map(|c| [c.x, c.y, c.z]));
-    let _ = export::elevation_range(&map.cells);
+    let _ = crate::io::needs_double(map.cells.iter().map(|c| [c.x, c.y, c.z]));
+    let _ = crate::io::elevation_range(&map.cells);
     let _ = map.water_report();
     if files {
         let dir = tempfile::tempdir().expect("a temporary directory");
-        export::write_map_files(dir.path(), map).expect("the map files are written");
+        crate::io::write_map_files(dir.path(), map).expect("the map files are written");
     }
 }
 
@@ -303,8 +302,8 @@ pub fn cloud_build(data: &[u8]) -> bool {
         return false;
     };
     let cloud = match head % 3 {
-        0 => crate::io::ply::read_from_bytes(rest, Path::new("fuzz.ply")),
-        1 => crate::io::kitti::read_from_bytes(rest, Path::new("fuzz.bin")),
+        0 => crate::io::read_ply_from_bytes(rest, Path::new("fuzz.ply")),
+        1 => crate::io::read_kitti_from_bytes(rest, Path::new("fuzz.bin")),
         _ => Ok(crate::geom::PointCloud::unorganized(
             rest.chunks_exact(12)
                 .map(|c| {

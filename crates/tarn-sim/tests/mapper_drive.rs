@@ -143,7 +143,7 @@ fn offline_build_is_the_online_map() {
     assert_eq!(r.frames_fused, 6);
     assert_eq!(r.cells_observed, online.cells.len());
     assert_eq!(r.tiles, tiles.tile_count());
-    let offline = tarn::io::mapfile::read_map_ply(&out.path().join("map.ply")).unwrap();
+    let offline = tarn::io::read_map_ply(&out.path().join("map.ply")).unwrap();
     assert_eq!(offline.cells.len(), online.cells.len());
     for (a, b) in offline.cells.iter().zip(&online.cells) {
         assert_eq!(a.key, b.key);

@@ -37,7 +37,7 @@ fn drive(dir: &std::path::Path, waypoints: &[[f64; 2]]) -> std::path::PathBuf {
 fn ply(m: &HazardMap) -> Vec<u8> {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("map.ply");
-    tarn::io::export::write_map_ply(&p, m).unwrap();
+    tarn::io::write_map_ply(&p, m).unwrap();
     std::fs::read(p).unwrap()
 }
 

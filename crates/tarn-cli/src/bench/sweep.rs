@@ -331,7 +331,7 @@ fn sweep_surface_interpolation(
         hc.water.vertex_median_radius_m = vertex_median_radius_m;
         let (ms, map) = timed(reps, || HazardMap::from_tiles(&tiles, &hc))?;
         let out = tmp.join(format!("surface-{i}"));
-        tarn::io::export::write_map_files(&out, &map)?;
+        tarn::io::write_map_files(&out, &map)?;
         let e = tarn_sim::eval::evaluate_dirs(&out, &stream_dir)?;
         rows.push(row(
             "water surface interpolation",

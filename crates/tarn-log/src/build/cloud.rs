@@ -16,7 +16,7 @@ use crate::grid::{
     in_map_domain, key_of, CellKey, GridConfig, IngestStats, RangeNoise, RollingGrid, TileMap,
 };
 use crate::hazard::HazardMap;
-use tarn::io::export;
+use tarn::io;
 
 use super::*;
 
@@ -555,8 +555,8 @@ pub fn build_file(
     crate::interrupt::check("fusing the cloud")?;
     let t2 = Instant::now();
     let map = HazardMap::from_elevation(&built.tiles);
-    let stage = export::Staging::new(out)?;
-    export::write_map_files(stage.path(), &map)?;
+    let stage = io::Staging::new(out)?;
+    io::write_map_files(stage.path(), &map)?;
     let extra_outputs = cfg.extra.write(stage.path(), &built.tiles)?;
     let t_export = t2.elapsed().as_secs_f64();
     let res = built.tiles.resolution();
@@ -572,7 +572,7 @@ pub fn build_file(
         bytes_per_cell_window: RollingGrid::bytes_per_cell(),
         bytes_cells_global: built.tiles.cell_bytes(),
         points: built.ingest,
-        elevation_range_m: export::elevation_range(&map.cells),
+        elevation_range_m: io::elevation_range(&map.cells),
         extent_m: map.key_bounds().map(|(lo, hi)| {
             [
                 lo.x as f64 * res,
@@ -661,7 +661,7 @@ mod tests {
         // The picture of scattered cells stays bounded too.
         {
             let map = HazardMap::from_elevation(&b.tiles);
-            let img = tarn::io::render::render_map_png(&map, &[]);
+            let img = tarn::io::render_map_png(&map, &[]);
             assert!(img.width() <= 4096 && img.height() <= 4096 + 200);
         }
     }

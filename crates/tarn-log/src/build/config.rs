@@ -22,7 +22,7 @@ pub struct BuildOptions {
     /// Also write `map.mcap`: the map as a GridMap and an OccupancyGrid
     /// ([`crate::ros_export`]).
     pub ros_map: bool,
-    /// Also write `map.tif`: the map's layers as a GeoTIFF ([`tarn::io::geotiff`]).
+    /// Also write `map.tif`: the map's layers as a GeoTIFF ([`tarn::io::write_geotiff`]).
     pub geotiff: bool,
     /// Also write `tiles.bin`: the map's cells before the water stage, as a tile set
     /// ([`crate::grid::TileMap::to_bytes`]).

@@ -7,7 +7,7 @@ use crate::error::{Error, Result};
 use crate::frames::LogConfig;
 use crate::grid::IngestStats;
 use crate::mapper::{Mapper, MapperConfig, StageTimes};
-use tarn::io::export;
+use tarn::io;
 
 use super::*;
 
@@ -76,9 +76,9 @@ pub fn build_log(
     if map.cells.is_empty() {
         return Err(nothing_observed(input, &log_cfg, &fused));
     }
-    let stage = export::Staging::new(out)?;
+    let stage = io::Staging::new(out)?;
     warnings.extend(swept_warnings(&stage));
-    export::write_map_files_marked(
+    io::write_map_files_marked(
         stage.path(),
         &map,
         &damage_marks(input, &damaged),
@@ -115,7 +115,7 @@ pub fn build_log(
         labels: fused.label_totals,
         cells_observed: map.cells.len(),
         tiles: tiles.tile_count(),
-        elevation_range_m: export::elevation_range(&map.cells),
+        elevation_range_m: io::elevation_range(&map.cells),
         water: WaterSummary::of(&map, &fusion),
         extra_outputs,
         timings_s: Timings {

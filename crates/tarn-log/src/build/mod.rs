@@ -8,7 +8,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::grid::TileMap;
-use tarn::io::export;
+use tarn::io;
 
 mod cloud;
 mod config;
@@ -30,8 +30,8 @@ pub struct ExtraMaps {
     /// `map.mcap`: the map as a `grid_map_msgs/GridMap` and a `nav_msgs/OccupancyGrid`
     /// ([`crate::ros_export`]), with these headers.
     pub ros_map: Option<crate::ros_export::RosMapOptions>,
-    /// `map.tif`: the layers as a GeoTIFF ([`tarn::io::geotiff`]).
-    pub geotiff: Option<tarn::io::geotiff::GeoTiffOptions>,
+    /// `map.tif`: the layers as a GeoTIFF ([`tarn::io::write_geotiff`]).
+    pub geotiff: Option<tarn::io::GeoTiffOptions>,
     /// `tiles.bin`: the map's cells before the water stage (elevation statistics and
     /// water evidence) as a tile set ([`TileMap::to_bytes`]), which merges exactly with
     /// other builds' and can be finished again under another fusion rule.
@@ -49,7 +49,7 @@ impl ExtraMaps {
             }),
             geotiff: b
                 .geotiff
-                .then_some(tarn::io::geotiff::GeoTiffOptions { epsg: b.epsg }),
+                .then_some(tarn::io::GeoTiffOptions { epsg: b.epsg }),
             tiles: b.tiles,
         }
     }
@@ -66,13 +66,13 @@ impl ExtraMaps {
         if self.ros_map.is_none() && self.geotiff.is_none() {
             return Ok(written);
         }
-        let map = tarn::io::mapfile::read_map_ply(&dir.join("map.ply"))?;
+        let map = tarn::io::read_map_ply(&dir.join("map.ply"))?;
         if let Some(o) = &self.ros_map {
             crate::ros_export::write_ros_map(&dir.join("map.mcap"), &map, o)?;
             written.push("map.mcap".to_string());
         }
         if let Some(o) = &self.geotiff {
-            tarn::io::geotiff::write_geotiff(&dir.join("map.tif"), &map, o)?;
+            tarn::io::write_geotiff(&dir.join("map.tif"), &map, o)?;
             written.push("map.tif".to_string());
         }
         Ok(written)
@@ -80,7 +80,7 @@ impl ExtraMaps {
 }
 
 /// One warning per staging folder of an earlier, killed build that `stage` removed.
-fn swept_warnings(stage: &export::Staging) -> Vec<String> {
+fn swept_warnings(stage: &io::Staging) -> Vec<String> {
     stage
         .swept()
         .iter()

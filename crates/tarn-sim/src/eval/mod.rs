@@ -476,8 +476,8 @@ pub fn lidar_cells(log: &Path, grid: &tarn::grid::GridConfig) -> Result<KeySet> 
 
 /// Reads `MAPDIR/map.ply`, `TRUTHDIR/truth.ply` and `TRUTHDIR/truth.json`.
 pub fn read_dirs(map_dir: &Path, truth_dir: &Path) -> Result<(HazardMap, HazardMap, TruthInfo)> {
-    let map = crate::io::mapfile::read_map_ply(&map_dir.join("map.ply"))?;
-    let truth = crate::io::mapfile::read_map_ply(&truth_dir.join("truth.ply"))?;
+    let map = crate::io::read_map_ply(&map_dir.join("map.ply"))?;
+    let truth = crate::io::read_map_ply(&truth_dir.join("truth.ply"))?;
     let jp = truth_dir.join("truth.json");
     let text = std::fs::read_to_string(&jp).map_err(|e| Error::io(&jp, e))?;
     let info: TruthInfo = serde_json::from_str(&text)

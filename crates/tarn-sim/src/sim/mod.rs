@@ -196,7 +196,7 @@ pub fn write_scene_mesh(w: &World, path: &Path) -> Result<()> {
             )
         })
         .collect();
-    crate::io::export::write_mesh_ply(
+    crate::io::write_mesh_ply(
         path,
         "tarn simulator scene mesh (terrain and objects)",
         &verts,
@@ -456,7 +456,7 @@ pub fn simulate(scene: &Scene, out_dir: &Path, opts: SimOptions) -> Result<SimRe
     let tw = Instant::now();
     log.finish()?;
     let truth = truth_map(&w);
-    crate::io::export::write_map_ply(&out_dir.join("truth.ply"), &truth)?;
+    crate::io::write_map_ply(&out_dir.join("truth.ply"), &truth)?;
     let counts = truth.class_counts();
     rep.truth_cells = truth.cells.len();
     rep.water_cells = counts[crate::hazard::Class::Water as usize];

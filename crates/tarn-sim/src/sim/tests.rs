@@ -617,7 +617,7 @@ fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
 
     // Wrong: the pond's far half called ground, a dry strip called water, terrain 5 cm high
     // where the lidar returned and 20 cm high where it did not.
-    let mut m = crate::io::mapfile::read_map_ply(&truth_dir.join("truth.ply")).unwrap();
+    let mut m = crate::io::read_map_ply(&truth_dir.join("truth.ply")).unwrap();
     let grid = crate::grid::GridConfig {
         resolution: m.resolution,
         ..Default::default()
@@ -632,7 +632,7 @@ fn eval_of_truth_against_itself_is_perfect_and_of_a_wrong_map_is_not() {
             c.z += if lidar.contains(&c.key) { 0.05 } else { 0.20 };
         }
     }
-    crate::io::export::write_map_ply(&map_dir.path().join("map.ply"), &m).unwrap();
+    crate::io::write_map_ply(&map_dir.path().join("map.ply"), &m).unwrap();
     let r = crate::eval::evaluate_dirs(map_dir.path(), truth_dir).unwrap();
     assert!(!r.is_perfect());
     let recall = r.all.water_recall.unwrap();
