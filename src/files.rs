@@ -2,6 +2,8 @@
 //! over it only once complete and on disk, so that a reader never sees a partial file and
 //! a failed or interrupted write leaves the previous file in place. And config files read
 //! with the line of any error.
+//!
+//! Exports: [`write_atomic`], [`write_json`], [`read_config`].
 
 use std::fs::File;
 use std::io::{BufWriter, Write};

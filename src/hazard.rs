@@ -1,5 +1,11 @@
 //! The map product: one record per observed cell, with the classes and hazards of the
 //! export contract (DESIGN.md, "Map export").
+//!
+//! Exports: [`HazardMap`] of [`MapCell`]s, each with a [`Class`] and a [`Hazard`]; its
+//! settings ([`HazardConfig`], [`Vehicle`]); look-ups by position ([`MapIndex`],
+//! [`MapLookup`]); the slope and step test ([`terrain_hazard`] over a [`Neighbourhood`]);
+//! and the map finished region by region ([`finish_by_regions`], [`finish_region`],
+//! [`join_regions`], [`RegionMap`], [`TileKey`], [`SplitStats`]).
 
 use std::collections::HashMap;
 

@@ -5,6 +5,8 @@
 //! the output directory keeps what it held before (every file is replaced atomically, and
 //! the export itself, once started, is not interrupted), so a stopped build leaves either
 //! the previous outputs or complete new ones.
+//!
+//! Exports: [`request_stop`], and [`check`] for the loops that honour it.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 

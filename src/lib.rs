@@ -10,6 +10,10 @@
 //! `calib` → `project` → `water` → `hazard` → `mapper` (one frame through every stage) →
 //! `rig` (sensor datasheets) → `io` (clouds in, maps out). Robot logs and offline builds
 //! are the `tarn-log` crate's.
+//!
+//! Each of these modules is one stage, and names everything it offers itself
+//! (`tarn::io::read_ply`, `tarn::cues::LidarCueModel`, `tarn::geom::CameraModel`): the files
+//! a stage is split into are private, and each stage's documentation lists what it exports.
 
 #![warn(missing_docs)]
 

@@ -39,6 +39,10 @@
 //! independent of thread count, so the map after any sequence of frames is bit-identical
 //! for any number of rayon threads. `build_log` runs this same code, so an online run and an
 //! offline build of a log give the same map.
+//!
+//! Exports: [`Mapper`], its [`MapperConfig`] ([`LidarConfig`], [`StereoConfig`], the cue
+//! names [`CUE_NAMES`]), a frame's [`FrameReport`] with its [`StageTimes`], the published
+//! [`MapSnapshots`], and [`window_centre`].
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;

@@ -3,6 +3,9 @@
 //! (the lidar's wavelength, sensitivity, aperture and range noise; the stereo pair's
 //! disparity noise, minimum disparity and baseline; the colour camera's encoding); the
 //! simulator renders a scene's logs with one.
+//!
+//! Exports: [`RigSpec`] and its parts ([`LidarSpec`] with its [`IntensityKind`],
+//! [`StereoSpec`], [`CameraSpec`], [`GpsSpec`]).
 
 use std::path::Path;
 

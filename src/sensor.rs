@@ -4,6 +4,8 @@
 //! This is the mapper's input, whatever it was read from (a robot log, a simulator, a
 //! vehicle's drivers). It sits below every stage of the data flow and imports only the
 //! geometry (`geom`).
+//!
+//! Exports: [`Frame`], its [`SensorImage`]s, each an [`Image`] of [`Pixels`].
 
 use crate::geom::{CameraModel, PointCloud, Pose};
 

@@ -10,6 +10,14 @@
 //! Cells that leave the window are handed to a [`CellSink`]; the offline builder's sink is
 //! [`TileMap`], a sparse global map of fixed-size tiles. All statistics are exact integer
 //! sums ([`CellStats`]), so grids and tile maps merge exactly.
+//!
+//! Exports: the window ([`RollingGrid`], its [`GridConfig`], [`IngestStats`] of an ingest,
+//! [`RangeNoise`]; [`window_origin`]), cells ([`CellKey`], [`key_of`], [`centre_of`],
+//! [`in_map_domain`] within [`MAX_MAP_COORD_M`], [`KeyHasher`] and [`BuildKeyHasher`],
+//! [`CellStats`], [`quantize_weight`]), where cells go ([`CellSink`], [`DiscardSink`],
+//! [`TileMap`] of [`TILE_CELLS`]-cell tiles, its file's [`TILESET_MAGIC`] and
+//! [`TILESET_VERSION`]), and the water evidence ([`Evidence`], the [`Fusion`] rule over each
+//! [`Cue`], [`CueLogOdds`]).
 
 mod cell;
 mod evidence;
