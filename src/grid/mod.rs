@@ -17,7 +17,7 @@
 //! [`CellStats`], [`quantize_weight`]), where cells go ([`CellSink`], [`DiscardSink`],
 //! [`TileMap`] of [`TILE_CELLS`]-cell tiles, its file's [`TILESET_MAGIC`] and
 //! [`TILESET_VERSION`]), and the water evidence ([`Evidence`], the [`Fusion`] rule over each
-//! [`Cue`], [`CueLogOdds`]).
+//! [`Cue`], [`CueLogOdds`], a cue's [`FalseAlarms`] measured from the log).
 
 mod cell;
 mod evidence;
