@@ -582,11 +582,7 @@ impl Mapper {
             .as_ref()
             .map(|l| l.colour_false_alarms())
             .unwrap_or_default();
-        let cfg = self.cfg.hazard_config();
-        HazardConfig {
-            fusion: cfg.fusion.measured(&alarms),
-            ..cfg
-        }
+        self.cfg.hazard_config().measured(&alarms)
     }
 
     /// The hazard map of the window after the last update: an immutable snapshot, cheap to

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{check, Error, Result};
-use crate::grid::{Fusion, TileMap};
+use crate::grid::{FalseAlarms, Fusion, TileMap};
 use crate::water::WaterConfig;
 
 /// What the vehicle can drive through.
@@ -70,8 +70,14 @@ impl HazardConfig {
     /// The config with the fusion rule measured on the logs of `tiles`
     /// ([`Fusion::measured`] of [`TileMap::colour_false_alarms`]).
     pub fn measured_on(&self, tiles: &TileMap) -> HazardConfig {
+        self.measured(&tiles.colour_false_alarms())
+    }
+
+    /// The config with the fusion rule measured on the colour labels' false alarms
+    /// `colour` ([`Fusion::measured`]).
+    pub fn measured(&self, colour: &FalseAlarms) -> HazardConfig {
         HazardConfig {
-            fusion: self.fusion.measured(&tiles.colour_false_alarms()),
+            fusion: self.fusion.measured(colour),
             ..*self
         }
     }

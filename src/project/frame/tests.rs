@@ -922,6 +922,10 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
     let px = pale_left_half(w, h);
     let (rows, cols) = (h / 2, w / 2);
     let cloud = PointCloud::organized(rows, cols, vec![[f32::NAN; 3]; rows * cols]).unwrap();
+    // The check of a fresh log over `labels` with the cloud's verdicts `surface`.
+    let check = |labels: &mut LabelImage, surface: &ScanSurface| {
+        ColourCheck::default().run(labels, &px, &cam, &pose, surface, Some((&cloud, 2)), 0.1)
+    };
     let run = |ground: usize, not_ground: usize| -> u64 {
         let mut labels = LabelImage::filled(w, h, Label::Water);
         let mut stereo = vec![StereoSeen::Nothing; rows * cols];
@@ -938,17 +942,7 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
             stereo,
             ..ScanSurface::default()
         };
-        ColourCheck::default()
-            .run(
-                &mut labels,
-                &px,
-                &cam,
-                &pose,
-                &surface,
-                Some((&cloud, 2)),
-                0.1,
-            )
-            .0
+        check(&mut labels, &surface).0
     };
     assert_eq!(run(3, 0), 0);
     assert_eq!(run(4, 0) as usize, w / 2 * h);
@@ -963,15 +957,7 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
         stereo,
         ..ScanSurface::default()
     };
-    let (n, alarms) = ColourCheck::default().run(
-        &mut labels,
-        &px,
-        &cam,
-        &pose,
-        &surface,
-        Some((&cloud, 2)),
-        0.1,
-    );
+    let (n, alarms) = check(&mut labels, &surface);
     assert_eq!(n, 0);
     // Stereo verdicts are no samples of the false-alarm rate.
     assert_eq!(alarms, FalseAlarms::default());
@@ -981,14 +967,6 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
         stereo: vec![StereoSeen::Ground; 10],
         ..ScanSurface::default()
     };
-    let (n, alarms) = ColourCheck::default().run(
-        &mut labels,
-        &px,
-        &cam,
-        &pose,
-        &surface,
-        Some((&cloud, 2)),
-        0.1,
-    );
+    let (n, alarms) = check(&mut labels, &surface);
     assert_eq!((n, alarms), (0, FalseAlarms::default()));
 }
