@@ -24,7 +24,9 @@ mod color;
 mod gmm;
 pub(crate) mod horizon;
 mod lut;
+pub(crate) mod mwir;
 pub(crate) mod solar;
+pub(crate) mod swir;
 pub(crate) mod thermal;
 
 pub use color::{brightness, saturation, ClassStats, RuleClassifier};
@@ -34,8 +36,9 @@ pub use gmm::{
 };
 pub use horizon::{optical_pose, Horizon, HorizonStats};
 pub use lut::ColorLut;
+pub use mwir::MwirConfig;
 pub use solar::equation_of_time_min;
-pub use thermal::{MwirConfig, SwirConfig};
+pub use swir::SwirConfig;
 
 use image::ImageEncoder;
 use serde::{Deserialize, Serialize};
