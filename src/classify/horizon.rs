@@ -5,7 +5,7 @@
 //! The horizon is either a given image row or comes from the camera model and its pose in
 //! the map frame (full distortion model, any resolution).
 
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Point3, Rotation3, UnitQuaternion, Vector3};
 
 use super::{Label, LabelImage};
 use crate::error::{Error, Result};
@@ -21,6 +21,23 @@ pub(crate) fn pixel_rays_in_map(
         .into_iter()
         .map(|r| r.map(|r| cam_to_map.rotation * r))
         .collect()
+}
+
+/// The pixel of `camera` (row-major index) that sees the direction in which level water at
+/// the end of the map-frame ray `d` mirrors it (`d` with its vertical flipped), seen from the
+/// camera: for what lies far off (the sky, a distant bank) the radiance that water reflects.
+/// `None` where that direction is outside the image. `to_cam` rotates map vectors into
+/// the camera's optical frame.
+pub(crate) fn mirror_pixel(
+    camera: &CameraModel,
+    to_cam: &UnitQuaternion<f64>,
+    d: &Vector3<f64>,
+) -> Option<usize> {
+    let m = to_cam * Vector3::new(d.x, d.y, -d.z);
+    let [u, v] = camera.project(&Point3::from(m))?;
+    let (u, v) = (u.round(), v.round());
+    (u >= 0.0 && v >= 0.0 && (u as usize) < camera.width && (v as usize) < camera.height)
+        .then(|| v as usize * camera.width + u as usize)
 }
 
 /// Rotation from a camera's optical frame (z forward, x right, y down) to its body frame
@@ -133,6 +150,9 @@ pub(crate) struct GroundGeometry {
     pub range: Vec<f32>,
     /// Horizontal distance from the camera to the hit, metres (the lookahead); NaN on a miss.
     pub lookahead: Vec<f32>,
+    /// The pixel that sees what level water at the hit mirrors ([`mirror_pixel`]);
+    /// `u32::MAX` on a miss or where the mirror direction leaves the image.
+    pub mirror: Vec<u32>,
 }
 
 impl GroundGeometry {
@@ -161,6 +181,8 @@ impl GroundGeometry {
         let n = map_rays.len();
         let (mut incidence, mut range, mut lookahead) =
             (vec![f32::NAN; n], vec![f32::NAN; n], vec![f32::NAN; n]);
+        let mut mirror = vec![u32::MAX; n];
+        let to_cam = cam_to_map.rotation.inverse();
         let h = cam_to_map.translation.vector.z - ground_z;
         if h > 0.0 {
             for (i, r) in map_rays.iter().enumerate() {
@@ -170,6 +192,9 @@ impl GroundGeometry {
                     incidence[i] = (-r.z).clamp(0.0, 1.0).acos() as f32;
                     range[i] = t as f32;
                     lookahead[i] = (t * r.xy().norm()) as f32;
+                    mirror[i] = mirror_pixel(camera, &to_cam, r)
+                        .and_then(|j| u32::try_from(j).ok())
+                        .unwrap_or(u32::MAX);
                 }
             }
         }
@@ -179,6 +204,7 @@ impl GroundGeometry {
             incidence,
             range,
             lookahead,
+            mirror,
         }
     }
 }
@@ -229,6 +255,26 @@ pub(crate) mod tests {
         }
         .apply(&mut l, false)
         .is_err());
+    }
+
+    /// A level pinhole camera sees the mirror of row v at row 2·cy − v, in the same column;
+    /// above the horizon (no hit) and where the mirror leaves the image there is none.
+    #[test]
+    fn mirror_pixel_of_a_level_camera_is_the_row_reflected_about_the_horizon() {
+        let cam =
+            CameraModel::new(64, 48, [50.0, 50.0, 31.0, 30.0], Distortion::None, "c").unwrap();
+        let g = GroundGeometry::level(&cam, &cam_pose(1.5, 0.0), 0.0).unwrap();
+        // Row 30 looks along the horizon itself, where rounding decides.
+        for v in (0..48usize).filter(|&v| v != 30) {
+            for u in [0usize, 17, 63] {
+                let m = g.mirror[v * 64 + u];
+                if v > 30 {
+                    assert_eq!(m as usize, (60 - v) * 64 + u, "row {v} column {u}");
+                } else {
+                    assert_eq!(m, u32::MAX, "row {v} column {u}");
+                }
+            }
+        }
     }
 
     proptest! {

@@ -1,9 +1,10 @@
 //! The sky in colour labels: the horizon rule, and the check of colour water against the
 //! sky it would reflect ([`reflection_check`]).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Vector3;
 
 use super::Encoding;
+use crate::classify::horizon::mirror_pixel;
 use crate::classify::{Label, LabelImage};
 use crate::geom::{CameraModel, Pose};
 
@@ -58,7 +59,6 @@ pub fn reflection_check(
     encoding: Encoding,
 ) -> u64 {
     let lin = encoding.table();
-    let (w, h) = (labels.width, labels.height);
     let sky_of =
         |i: usize| -> [Option<f64>; 3] { px[i].map(|v| (v < SATURATED).then(|| lin[v as usize])) };
     // The brightest sky of the image, per channel (a channel with a saturated sky pixel
@@ -93,15 +93,8 @@ pub fn reflection_check(
         let theta = (cos_i.min(1.0).acos() + RIPPLE_TILT).min(89.9f64.to_radians());
         let r = crate::optics::fresnel(theta, N_WATER).map_or(1.0, |f| 0.5 * (f.r_s + f.r_p));
         let k = r + BODY_FRACTION * (1.0 - r);
-        let mirror = to_cam * Vector3::new(d.x, d.y, -d.z);
-        let sky = camera
-            .project(&Point3::from(mirror))
-            .and_then(|[u, v]| {
-                let (u, v) = (u.round(), v.round());
-                (u >= 0.0 && v >= 0.0 && (u as usize) < w && (v as usize) < h)
-                    .then(|| v as usize * w + u as usize)
-            })
-            .filter(|&j| labels.data[j] == Label::Sky)
+        let sky = mirror_pixel(camera, &to_cam, &d)
+            .filter(|&j| labels.data.get(j) == Some(&Label::Sky))
             .map_or(fallback, sky_of);
         let outside =
             (0..3).any(|c| sky[c].is_some_and(|s| lin[px[i][c] as usize] > k * s + NOISE_MARGIN));
