@@ -42,6 +42,7 @@ pub use lidar::{
     Sensitivity, SolidAngleForm,
 };
 pub use thermal::{apparent_temperature, water_reflectance_mwir};
+pub(crate) use thermal::{brightness_temperature, planck_rel, MWIR_UM};
 
 #[cfg(test)]
 mod tests;

@@ -226,6 +226,11 @@ pub struct LabelsConfig {
     /// Degrees east of Greenwich, for the local solar hour; without it, the log's GNSS
     /// fix (`sensor_msgs/NavSatFix`).
     pub longitude_deg: Option<f64>,
+    /// Kelvin per count of the MWIR image (0.01: mono16 centikelvin, as radiometric
+    /// cameras write); a camera of raw counts states its calibration here.
+    pub mwir_kelvin_per_count: f64,
+    /// Kelvin at count 0 of the MWIR image.
+    pub mwir_kelvin_offset: f64,
     /// Label every n-th pixel in x and y.
     pub stride: usize,
     /// Also label every row of pixels whose ground footprint is wider than a map cell.
@@ -255,6 +260,8 @@ impl Default for LabelsConfig {
             colour_model: None,
             hour: None,
             longitude_deg: None,
+            mwir_kelvin_per_count: MwirConfig::default().kelvin_per_count,
+            mwir_kelvin_offset: MwirConfig::default().kelvin_offset,
             stride: f.ray_stride,
             wide_rows: f.wide_rows,
             max_range_m: f.max_range,
@@ -305,7 +312,11 @@ impl LabelsConfig {
                 LabelSensor::Swir => cfg.swir = Some(SwirConfig::default()),
                 LabelSensor::Mwir => {
                     cfg.mwir = Some(MwirLabelConfig {
-                        classifier: MwirConfig::default(),
+                        classifier: MwirConfig {
+                            kelvin_per_count: self.mwir_kelvin_per_count,
+                            kelvin_offset: self.mwir_kelvin_offset,
+                            ..MwirConfig::default()
+                        },
                         hour: self.hour,
                         longitude_deg: self.longitude_deg,
                     })
