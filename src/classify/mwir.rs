@@ -367,8 +367,8 @@ pub(crate) fn classify_mwir(
         }
     }
     // Land-like pixels: dry, unless water found in the image would read like land there.
-    for i in 0..w * h {
-        let Some(p) = px[i] else { continue };
+    for (i, p) in px.iter().enumerate() {
+        let Some(p) = p else { continue };
         if side(i) != 0 {
             continue;
         }
@@ -423,7 +423,7 @@ fn judge(ps: &[Px], noise: f64, land: f64, sign: f64, min_contrast: f64) -> Verd
     let mut res_s: Vec<f64> = ps.iter().map(|p| (p.t_a - t_s).abs() / noise).collect();
     let mut pred: Vec<f64> = ps.iter().map(|p| water_reading(t_w, p.r, p.l_m)).collect();
     let span = quantile(&mut pred, 0.9) - quantile(&mut pred, 0.1);
-    if !(span >= SEPARABLE_K * noise) {
+    if span.is_nan() || span < SEPARABLE_K * noise {
         return Verdict::Unknown;
     }
     let (rw, rs) = (quantile(&mut res_w, 0.5), quantile(&mut res_s, 0.5));
