@@ -4,10 +4,15 @@
 //! **Units.** The rule works in brightness temperature (kelvin), converted to relative
 //! in-band radiance at 4 µm (Planck) wherever radiances mix. An image value `v` is
 //! `kelvin_per_count·v + kelvin_offset` kelvin; the defaults read mono16 centikelvin, what a
-//! radiometric camera (and the simulator) writes. A log of raw counts states its
-//! calibration through `labels.mwir_kelvin_per_count` and `labels.mwir_kelvin_offset`;
-//! an image whose ground reads outside [`MIN_PLAUSIBLE_K`, `MAX_PLAUSIBLE_K`] after the
-//! conversion is not radiometric as configured, and every pixel is Unknown.
+//! radiometric camera (and the simulator) writes. A camera whose counts are linear in
+//! temperature states its calibration through `labels.mwir_kelvin_per_count` and
+//! `labels.mwir_kelvin_offset`. Where over half the ground reads outside
+//! [`MIN_PLAUSIBLE_K`, `MAX_PLAUSIBLE_K`] after the conversion, the values are taken as raw
+//! detector counts (0–65535), linear in in-band radiance with an unknown gain and offset
+//! (a photon detector integrates the flux): emission and reflection then mix as the counts
+//! do, since their weights 1 − R and R sum to one, and every threshold is in units of the
+//! noise measured from the image (the kelvin ones, `min_contrast` and [`MIN_NOISE_K`], do
+//! not apply; counts rise with radiance).
 //!
 //! **Water.** At incidence θ level water reads `L = (1 − R(θ))·B(T_w) + R(θ)·L_m`: it emits
 //! with emissivity 1 − R (Fresnel, n = 1.35 at 3–5 µm) and mirrors the radiance `L_m` of
@@ -61,6 +66,10 @@ pub const MAX_PLAUSIBLE_K: f64 = 400.0;
 /// The least noise (K) assumed: the NETD of the best cooled MWIR cameras is about 20 mK,
 /// and a flat image measures none.
 pub const MIN_NOISE_K: f64 = 0.02;
+/// In raw counts, the least noise assumed: the rounding of a count (σ = 1/√12 ≈ 0.3).
+pub const MIN_NOISE_COUNTS: f64 = 0.5;
+/// The largest raw count (16 bits).
+const MAX_COUNT: f64 = 65535.0;
 /// Water emitting less than this fraction (Fresnel R > 0.9, beyond about 88° at
 /// n = 1.35) shows almost only what it mirrors: its temperature cannot be inferred.
 pub const MIN_EMISSIVITY: f64 = 0.1;
@@ -160,19 +169,42 @@ impl MwirConfig {
     }
 }
 
-/// Relative in-band radiance of a brightness temperature.
-fn radiance(t: f64) -> f64 {
-    planck_rel(MWIR_UM, t)
+/// What the image's values are: kelvin, or raw counts linear in in-band radiance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Scale {
+    /// Brightness temperature; radiances mix through Planck at 4 µm.
+    Kelvin,
+    /// Raw detector counts, an unknown gain and offset from the radiance: radiances mix
+    /// as the counts do, since the weights (1 − R and R) sum to one.
+    Counts,
 }
 
-/// Brightness temperature of a relative in-band radiance (NaN for none).
-fn temperature(l: f64) -> f64 {
-    brightness_temperature(MWIR_UM, l)
-}
+impl Scale {
+    /// The radiance of a reading (relative; for counts the counts themselves).
+    fn radiance(self, t: f64) -> f64 {
+        match self {
+            Scale::Kelvin => planck_rel(MWIR_UM, t),
+            Scale::Counts => t,
+        }
+    }
 
-/// What level water at `t_w` reads with reflectance `r`, mirroring radiance `l_m`.
-fn water_reading(t_w: f64, r: f64, l_m: f64) -> f64 {
-    temperature((1.0 - r) * radiance(t_w) + r * l_m)
+    /// The reading of a radiance ([`Self::radiance`]'s inverse; NaN for none in kelvin).
+    fn reading(self, l: f64) -> f64 {
+        match self {
+            Scale::Kelvin => brightness_temperature(MWIR_UM, l),
+            Scale::Counts => l,
+        }
+    }
+
+    /// What level water at `t_w` reads with reflectance `r`, mirroring radiance `l_m`.
+    fn water_reading(self, t_w: f64, r: f64, l_m: f64) -> f64 {
+        self.reading((1.0 - r) * self.radiance(t_w) + r * l_m)
+    }
+
+    /// Radiance per unit of reading at `t`.
+    fn slope(self, t: f64) -> f64 {
+        (self.radiance(t + 0.05) - self.radiance(t - 0.05)) / 0.1
+    }
 }
 
 /// The `q` quantile (0..1) of `v` (sorted in place); NaN when empty.
@@ -236,7 +268,11 @@ pub(crate) fn classify_mwir(
         ThermalRegime::Night => 1.0,
         ThermalRegime::Day => -1.0,
     };
-    let kelvin: Vec<f64> = img
+    let on_ground: Vec<bool> = (0..w * h)
+        .map(|i| geom.incidence[i].is_finite() && (geom.lookahead[i] as f64) <= cfg.max_lookahead_m)
+        .collect();
+    let n_on_ground = on_ground.iter().filter(|&&g| g).count();
+    let as_kelvin: Vec<f64> = img
         .data
         .iter()
         .map(|&v| {
@@ -248,30 +284,49 @@ pub(crate) fn classify_mwir(
             }
         })
         .collect();
+    let count = |v: &[f64]| {
+        (0..w * h)
+            .filter(|&i| on_ground[i] && v[i].is_finite())
+            .count()
+    };
+    // Most of the ground outside the plausible temperatures: not kelvin as configured, so
+    // raw counts (within 16 bits), linear in radiance.
+    let (scale, kelvin) = if 2 * count(&as_kelvin) >= n_on_ground {
+        (Scale::Kelvin, as_kelvin)
+    } else {
+        let counts: Vec<f64> = img
+            .data
+            .iter()
+            .map(|&v| {
+                let v = v as f64;
+                if (0.0..=MAX_COUNT).contains(&v) {
+                    v
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        (Scale::Counts, counts)
+    };
     let ground: Vec<bool> = (0..w * h)
-        .map(|i| {
-            kelvin[i].is_finite()
-                && geom.incidence[i].is_finite()
-                && (geom.lookahead[i] as f64) <= cfg.max_lookahead_m
-        })
+        .map(|i| on_ground[i] && kelvin[i].is_finite())
         .collect();
-    // A value outside the plausible range became NaN: an image mostly so is not in kelvin.
-    let on_ground = (0..w * h)
-        .filter(|&i| {
-            geom.incidence[i].is_finite() && (geom.lookahead[i] as f64) <= cfg.max_lookahead_m
-        })
-        .count();
     let n_ground = ground.iter().filter(|&&g| g).count();
-    if n_ground < MIN_REGION_PIXELS || 2 * n_ground < on_ground {
+    if n_ground < MIN_REGION_PIXELS || 2 * n_ground < n_on_ground {
         return Ok(out);
     }
+    // Kelvin thresholds apply to kelvin; counts are judged against their noise alone.
+    let (min_noise, min_contrast) = match scale {
+        Scale::Kelvin => (MIN_NOISE_K, cfg.min_contrast as f64),
+        Scale::Counts => (MIN_NOISE_COUNTS, 0.0),
+    };
 
     // The image's noise: horizontal neighbours on the ground differ by √2·σ.
     let mut diffs: Vec<f64> = (0..w * h)
         .filter(|&i| i % w + 1 < w && ground[i] && ground[i + 1])
         .map(|i| (kelvin[i + 1] - kelvin[i]).abs())
         .collect();
-    let noise = (1.4826 * quantile(&mut diffs, 0.5) / std::f64::consts::SQRT_2).max(MIN_NOISE_K);
+    let noise = (1.4826 * quantile(&mut diffs, 0.5) / std::f64::consts::SQRT_2).max(min_noise);
     // The land: the densest half of the ground's readings (the shorth: water's readings
     // spread with its reflectance, on either side of the land's).
     let mut vals: Vec<f64> = (0..w * h)
@@ -280,7 +335,7 @@ pub(crate) fn classify_mwir(
         .collect();
     let (land, land_sd) = shorth(&mut vals);
     let land_sd = land_sd.max(noise);
-    let margin = (cfg.k_sigma as f64 * land_sd).max(cfg.min_contrast as f64);
+    let margin = (cfg.k_sigma as f64 * land_sd).max(min_contrast);
 
     // Per ground pixel with a mirror in view and water there emitting enough.
     let px: Vec<Option<Px>> = (0..w * h)
@@ -294,8 +349,8 @@ pub(crate) fn classify_mwir(
             if !t_m.is_finite() || 1.0 - r < MIN_EMISSIVITY {
                 return None;
             }
-            let (t_a, l_m) = (kelvin[i], radiance(t_m));
-            let t_e = temperature((radiance(t_a) - r * l_m) / (1.0 - r));
+            let (t_a, l_m) = (kelvin[i], scale.radiance(t_m));
+            let t_e = scale.reading((scale.radiance(t_a) - r * l_m) / (1.0 - r));
             Some(Px {
                 t_a,
                 r,
@@ -345,13 +400,19 @@ pub(crate) fn classify_mwir(
         }
         next += 1;
         let ps: Vec<Px> = members.iter().map(|&i| px[i].expect("member")).collect();
-        let verdict = judge(&ps, noise, land, sign, cfg.min_contrast as f64);
+        // How far water must lie on its side of the land: the kelvin contrast, or for counts
+        // the candidates' margin.
+        let premise = match scale {
+            Scale::Kelvin => min_contrast,
+            Scale::Counts => margin,
+        };
+        let verdict = judge(scale, &ps, noise, land, premise, sign);
         for (&i, p) in members.iter().zip(&ps) {
             out.data[i] = match verdict {
                 Verdict::Unknown => Label::Unknown,
                 Verdict::Solid => Label::Other,
                 Verdict::Water { t_w, tol } => {
-                    let shown = p.r * (radiance(t_w) - p.l_m).abs() / dbdt(t_w);
+                    let shown = p.r * (scale.radiance(t_w) - p.l_m).abs() / scale.slope(t_w);
                     if shown < WATER_K * noise {
                         Label::Unknown
                     } else if (p.t_e - t_w).abs() <= WATER_K * p.sd_e.max(tol) {
@@ -374,15 +435,10 @@ pub(crate) fn classify_mwir(
         }
         let hidden = waters
             .iter()
-            .any(|&t_w| (water_reading(t_w, p.r, p.l_m) - land).abs() <= margin);
+            .any(|&t_w| (scale.water_reading(t_w, p.r, p.l_m) - land).abs() <= margin);
         out.data[i] = if hidden { Label::Unknown } else { Label::Other };
     }
     Ok(out)
-}
-
-/// dB/dT at `t` (relative radiance per kelvin).
-fn dbdt(t: f64) -> f64 {
-    (radiance(t + 0.05) - radiance(t - 0.05)) / 0.1
 }
 
 /// What a candidate region is.
@@ -397,7 +453,7 @@ enum Verdict {
 }
 
 /// Fits a region as water (one `t_e`) and as a solid (one `t_a`). See the module docs.
-fn judge(ps: &[Px], noise: f64, land: f64, sign: f64, min_contrast: f64) -> Verdict {
+fn judge(scale: Scale, ps: &[Px], noise: f64, land: f64, premise: f64, sign: f64) -> Verdict {
     if ps.len() < MIN_REGION_PIXELS {
         return Verdict::Unknown;
     }
@@ -421,13 +477,16 @@ fn judge(ps: &[Px], noise: f64, land: f64, sign: f64, min_contrast: f64) -> Verd
         })
         .collect();
     let mut res_s: Vec<f64> = ps.iter().map(|p| (p.t_a - t_s).abs() / noise).collect();
-    let mut pred: Vec<f64> = ps.iter().map(|p| water_reading(t_w, p.r, p.l_m)).collect();
+    let mut pred: Vec<f64> = ps
+        .iter()
+        .map(|p| scale.water_reading(t_w, p.r, p.l_m))
+        .collect();
     let span = quantile(&mut pred, 0.9) - quantile(&mut pred, 0.1);
     if span.is_nan() || span < SEPARABLE_K * noise {
         return Verdict::Unknown;
     }
     let (rw, rs) = (quantile(&mut res_w, 0.5), quantile(&mut res_s, 0.5));
-    if rw < rs && sign * (t_w - land) > min_contrast {
+    if rw < rs && sign * (t_w - land) > premise {
         let mut dev: Vec<f64> = te.iter().map(|t| (t - t_w).abs()).collect();
         Verdict::Water {
             t_w,
@@ -687,19 +746,16 @@ mod tests {
     }
 
     #[test]
-    fn raw_counts_need_their_calibration() {
+    fn counts_linear_in_temperature_with_their_calibration() {
         let g = geometry(10.0);
         let t = render(&g, &night());
-        // A camera whose counts are 20 mK each above 200 K.
+        // A camera whose counts are 20 mK each above 200 K, its calibration stated.
         let counts = MonoImage::new(
             W,
             H,
             t.iter().map(|v| ((v - 200.0) / 0.02) as f32).collect(),
         )
         .unwrap();
-        // Read as centikelvin the image is 40–50 K: not radiometric, nothing decided.
-        let l = classify_mwir(&counts, &g, NIGHT, &MwirConfig::default()).unwrap();
-        assert_eq!(count(&l, |_| true, Label::Unknown), W * H);
         let cfg = MwirConfig {
             kelvin_per_count: 0.02,
             kelvin_offset: 200.0,
@@ -709,6 +765,39 @@ mod tests {
         let ck = classify_mwir(&centikelvin(&t), &g, NIGHT, &MwirConfig::default()).unwrap();
         let same = (0..W * H).filter(|&i| raw.data[i] == ck.data[i]).count();
         assert!(same as f64 > 0.99 * (W * H) as f64, "{same}");
+    }
+
+    #[test]
+    fn raw_counts_linear_in_radiance_without_a_calibration() {
+        let g = geometry(10.0);
+        let t = render(&g, &night());
+        // Counts = gain·radiance + offset (3,600–5,100 here): read as centikelvin they are
+        // 36–51 K, not a scene's temperatures, so the rule mixes them as radiances.
+        let counts: Vec<f32> = t
+            .iter()
+            .map(|&v| (1e9 * planck_rel(MWIR_UM, v) + 1000.0).round() as f32)
+            .collect();
+        let l = classify_mwir(
+            &MonoImage::new(W, H, counts).unwrap(),
+            &g,
+            NIGHT,
+            &MwirConfig::default(),
+        )
+        .unwrap();
+        let n = (0..W * H).filter(|&i| pond(&g, i)).count();
+        let water = count(&l, |i| pond(&g, i), Label::Water);
+        assert!(water as f64 >= 0.6 * n as f64, "{water} of {n}");
+        assert_eq!(count(&l, |i| !pond(&g, i), Label::Water), 0);
+        assert!(count(&l, rock, Label::Other) > 50);
+        // Counts beyond 16 bits are no image at all: nothing decided.
+        let l = classify_mwir(
+            &centikelvin(&vec![1e4; W * H]),
+            &g,
+            NIGHT,
+            &MwirConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(count(&l, |_| true, Label::Unknown), W * H);
     }
 
     #[test]
