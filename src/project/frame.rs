@@ -130,6 +130,18 @@ pub struct FrameLabels {
     bufs: PixelBuffers,
     /// The z-buffer sampler's storage ([`Sampler::Zbuffer`]).
     zbuf: ZBuffer,
+    /// This frame's cell votes of the colour and the SWIR camera, held until both have
+    /// run ([`cross_check`]).
+    pending: [Vec<CellVote>; 2],
+}
+
+/// One cell's vote of one camera in one frame: its raster index, water or not, and the
+/// mean level of its water pixels' hits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct CellVote {
+    cell: u32,
+    water: bool,
+    level: f64,
 }
 
 /// The label stage's per-pixel buffers, kept from frame to frame so that a frame allocates
@@ -191,6 +203,7 @@ impl FrameLabels {
             colour_check: ColourCheck::default(),
             bufs: PixelBuffers::default(),
             zbuf: ZBuffer::default(),
+            pending: [Vec::new(), Vec::new()],
         })
     }
 
@@ -234,6 +247,7 @@ impl FrameLabels {
             z if z.is_finite() => z as f64,
             _ => base.z,
         };
+        self.pending.iter_mut().for_each(Vec::clear);
         for cue in [ImageCue::Colour, ImageCue::Swir, ImageCue::Mwir] {
             let (configured, img) = match cue {
                 ImageCue::Colour => (self.cfg.colour.is_some(), &frame.image),
@@ -282,6 +296,22 @@ impl FrameLabels {
                 ImageCue::Mwir => rep.mwir = Some(st),
             }
         }
+        // The colour and SWIR votes, checked against each other where both saw a cell.
+        let [colour, swir] = &mut self.pending;
+        let (c_out, s_out) = cross_check(colour, swir);
+        for (cue, votes, out) in [
+            (ImageCue::Colour, &*colour, c_out),
+            (ImageCue::Swir, &*swir, s_out),
+        ] {
+            let st = match cue {
+                ImageCue::Colour => rep.colour.as_mut(),
+                _ => rep.swir.as_mut(),
+            };
+            if let Some(st) = st {
+                st.cross_vetoed += out;
+                rep.dropped += add_cell_votes(votes, cue, &surface, grid, st);
+            }
+        }
         self.raster = surface.into_raster();
         Ok(rep)
     }
@@ -313,6 +343,7 @@ impl FrameLabels {
             colour_check,
             bufs,
             zbuf,
+            pending,
             ..
         } = self;
         let map_rays = RayCache::rays_in_map(&mut caches[cue as usize], camera, cam_to_map);
@@ -385,7 +416,17 @@ impl FrameLabels {
             }
         }
         tally_votes(tally, touched, &buf.votes[..nr]);
-        let dropped = add_cell_votes(tally, touched, cue, surface, grid, st);
+        let dropped = match cue {
+            ImageCue::Colour | ImageCue::Swir => {
+                cell_votes(tally, touched, &mut pending[cue as usize]);
+                0
+            }
+            ImageCue::Mwir => {
+                let mut votes = Vec::new();
+                cell_votes(tally, touched, &mut votes);
+                add_cell_votes(&votes, cue, surface, grid, st)
+            }
+        };
         if cue == ImageCue::Colour {
             buf.labels = labels.data;
         }
@@ -534,48 +575,102 @@ fn tally_votes(
     }
 }
 
-/// One vote per `touched` cell of the `tally` (emptied), for the cue's water or dry
-/// evidence: the majority of its pixels, a tie no vote, water with the mean of its levels
-/// as a level sample. Returns the votes that fell outside `grid`'s window.
+/// One vote per `touched` cell of the `tally` (both emptied), into `out`, in raster order:
+/// the majority of its pixels, a tie no vote, water with the mean of its levels.
+fn cell_votes(tally: &mut [(u32, u32, f64)], touched: &mut Vec<u32>, out: &mut Vec<CellVote>) {
+    // Cells in raster order: deterministic whatever the thread count.
+    touched.sort_unstable();
+    out.clear();
+    for &j in touched.iter() {
+        let (wn, dn, zs) = std::mem::take(&mut tally[j as usize]);
+        let water = match wn.cmp(&dn) {
+            std::cmp::Ordering::Greater => true,
+            std::cmp::Ordering::Less => false,
+            std::cmp::Ordering::Equal => continue,
+        };
+        let level = if water { zs / wn as f64 } else { 0.0 };
+        out.push(CellVote {
+            cell: j,
+            water,
+            level,
+        });
+    }
+    touched.clear();
+}
+
+/// The cross-spectral check of one frame's colour and SWIR cell votes (each in raster
+/// order): where both cameras vote on a cell, a water vote stands only where the other
+/// camera votes water too. Water that mirrors the sky is sky-coloured in colour *and* dark
+/// in SWIR; a pale slab or sunlit concrete is sky-coloured but brighter in SWIR than a
+/// reflection of the sky could be; asphalt, paint, wet soil and shadow are dark in SWIR
+/// but not sky-coloured; snow and ice, bright in colour, are darker in SWIR than water
+/// mirroring the sky at their incidence could be, or brighter in colour than the colour
+/// reflection check allows. A vote against water always stands: a cue fooled into
+/// "water" is vetoed by the other, and one that cannot tell casts no vote. Returns the
+/// colour and the SWIR water votes dropped.
+fn cross_check(colour: &mut Vec<CellVote>, swir: &mut Vec<CellVote>) -> (u64, u64) {
+    let (mut i, mut j) = (0, 0);
+    let (mut drop_c, mut drop_s) = (Vec::new(), Vec::new());
+    while i < colour.len() && j < swir.len() {
+        let (c, s) = (&colour[i], &swir[j]);
+        match c.cell.cmp(&s.cell) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                if c.water && !s.water {
+                    drop_c.push(i);
+                } else if s.water && !c.water {
+                    drop_s.push(j);
+                }
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    let remove = |v: &mut Vec<CellVote>, idx: &[usize]| {
+        let mut k = 0;
+        let mut n = 0;
+        v.retain(|_| {
+            let keep = idx.get(k) != Some(&n);
+            if !keep {
+                k += 1;
+            }
+            n += 1;
+            keep
+        });
+    };
+    remove(colour, &drop_c);
+    remove(swir, &drop_s);
+    (drop_c.len() as u64, drop_s.len() as u64)
+}
+
+/// Adds one frame's cell `votes` of `cue` to `grid`'s evidence, water with its level as a
+/// level sample. Returns the votes that fell outside `grid`'s window.
 fn add_cell_votes(
-    tally: &mut [(u32, u32, f64)],
-    touched: &mut Vec<u32>,
+    votes: &[CellVote],
     cue: ImageCue,
     surface: &GridSurface,
     grid: &mut RollingGrid,
     st: &mut SensorLabelStats,
 ) -> u64 {
-    // Cells in raster order: deterministic whatever the thread count.
-    touched.sort_unstable();
     let (nw, o) = (surface.size(), surface.origin());
     let z_ref = grid.config().z_ref;
     let mut dropped = 0;
-    for &j in touched.iter() {
-        let (wn, dn, zs) = std::mem::take(&mut tally[j as usize]);
+    for v in votes {
         let mut e = Evidence::default();
-        let vote = match wn.cmp(&dn) {
-            std::cmp::Ordering::Greater => Some(true),
-            std::cmp::Ordering::Less => Some(false),
-            std::cmp::Ordering::Equal => None,
-        };
-        let Some(water) = vote else { continue };
-        e.add_image_vote(cue.cue(), water);
-        if water {
+        e.add_image_vote(cue.cue(), v.water);
+        if v.water {
             st.cells_water += 1;
-            let level = zs / wn as f64;
-            e.add_level(((level - z_ref) * 1000.0).round() as i32);
+            e.add_level(((v.level - z_ref) * 1000.0).round() as i32);
         } else {
             st.cells_dry += 1;
         }
-        let key = CellKey::new(
-            o.x + (j as usize % nw) as i64,
-            o.y + (j as usize / nw) as i64,
-        );
+        let j = v.cell as usize;
+        let key = CellKey::new(o.x + (j % nw) as i64, o.y + (j / nw) as i64);
         if !grid.add_evidence(key, &e) {
             dropped += 1;
         }
     }
-    touched.clear();
     dropped
 }
 

@@ -39,6 +39,10 @@ pub struct SensorLabelStats {
     /// false-alarm rate.
     #[serde(default)]
     pub false_alarms: FalseAlarms,
+    /// Water cell votes dropped because the other camera (colour or SWIR) voted not water
+    /// in the same cell and frame (the cross-spectral check).
+    #[serde(default)]
+    pub cross_vetoed: u64,
     /// MWIR frames skipped for want of a local solar hour (no hour given, no longitude).
     #[serde(default)]
     pub frames_no_hour: u64,
@@ -63,6 +67,7 @@ impl SensorLabelStats {
         self.beyond_reach += o.beyond_reach;
         self.colour_check_vetoed += o.colour_check_vetoed;
         self.false_alarms.merge(&o.false_alarms);
+        self.cross_vetoed += o.cross_vetoed;
         self.frames_no_hour += o.frames_no_hour;
         self.frames_hour_from_stamp += o.frames_hour_from_stamp;
     }
