@@ -267,6 +267,9 @@ impl RigSpec {
         if let (Some(l), Some(e)) = (cfg.labels.as_mut(), self.colour_encoding()) {
             l.encoding = e;
         }
+        if let (Some(l), Some(c)) = (cfg.labels.as_mut(), self.swir.as_ref()) {
+            l.swir_noise_sd = c.image_noise as f32;
+        }
     }
 
     /// The encoding of the colour camera (the stereo pair's left one, or the camera).

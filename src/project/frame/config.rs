@@ -250,6 +250,9 @@ pub struct LabelsConfig {
     /// Stop counting a colour as water in a log where the lidar finds it on dry ground
     /// (`ColourCheck`).
     pub colour_check: bool,
+    /// Standard deviation of the SWIR camera's pixel noise, grey levels (the rig's
+    /// datasheet): the SWIR rule's noise margin ([`SwirConfig::noise_sd`]).
+    pub swir_noise_sd: f32,
 }
 
 impl Default for LabelsConfig {
@@ -270,6 +273,7 @@ impl Default for LabelsConfig {
             reflection_check: true,
             encoding: Encoding::default(),
             colour_check: true,
+            swir_noise_sd: SwirConfig::default().noise_sd,
         }
     }
 }
@@ -309,7 +313,12 @@ impl LabelsConfig {
                         None => ColorLut::compile(&RuleClassifier::default(), rule_bits)?,
                     })
                 }
-                LabelSensor::Swir => cfg.swir = Some(SwirConfig::default()),
+                LabelSensor::Swir => {
+                    cfg.swir = Some(SwirConfig {
+                        noise_sd: self.swir_noise_sd,
+                        ..SwirConfig::default()
+                    })
+                }
                 LabelSensor::Mwir => {
                     cfg.mwir = Some(MwirLabelConfig {
                         classifier: MwirConfig {
