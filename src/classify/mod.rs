@@ -14,7 +14,8 @@
 //!   [`optical_pose`]), and per-pixel incidence angle and range against a level ground plane.
 //! - The equation of time ([`equation_of_time_min`]): local solar time from a UTC stamp and a
 //!   longitude, for the MWIR regime.
-//! - SWIR darkness with an incidence gate ([`SwirConfig`]), MWIR contrast against local
+//! - SWIR water as a reflection of the sky measured in the same image, Fresnel reflectance
+//!   at each pixel's incidence, no incidence gate ([`SwirConfig`]); MWIR contrast against local
 //!   terrain statistics by time of day with a lookahead limit ([`MwirConfig`]).
 //!
 //! Every classifier writes a [`LabelImage`] of [`Label`] values ([`MonoImage`] for one band;

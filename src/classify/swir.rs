@@ -17,6 +17,11 @@
 //! * brighter than water could be even were it mirroring the brightest thing on its mirror
 //!   ray's vertical plane (the image segment from the pixel to its mirror pixel: farther
 //!   terrain, a far bank, trees, the sky down to the horizon) → [`Label::Other`];
+//! * on a strip of its column of one radiance (within the noise margin and
+//!   [`SAME_SURFACE`]) that holds rows where water's bounds lie wholly above that radiance
+//!   and rows where they lie wholly below → [`Label::Other`]: a reflection's radiance rises
+//!   steeply towards grazing (R · L), a Lambertian surface's (asphalt, soil, concrete) stays
+//!   the same with range;
 //! * brighter than a reflection of the measured sky, but not than that → [`Label::Unknown`]
 //!   (it may be water mirroring bright terrain);
 //! * darker than a reflection of the sky can be → [`Label::Unknown`] (a dark dry surface, or
@@ -280,6 +285,10 @@ pub(crate) fn classify_swir(
             continue;
         }
         let Some((lo, hi)) = b.sky else { continue };
+        if lambertian_strip(img, &bounds, i, w, margin) {
+            out.data[i] = Label::Other;
+            continue;
+        }
         if v > hi || v < lo {
             continue;
         }
@@ -296,6 +305,40 @@ pub(crate) fn classify_swir(
         };
     }
     Ok(out)
+}
+
+/// Whether pixel `i` (radiance v) lies on a strip of its column of one radiance (every pixel
+/// within the noise margin and [`SAME_SURFACE`] of v) that holds both a row where water's
+/// bounds lie wholly above v and one where they lie wholly below: a reflection's radiance
+/// would have to change along it, a Lambertian surface's (asphalt, soil, concrete) does not.
+fn lambertian_strip(
+    img: &MonoImage,
+    bounds: &[Option<WaterBounds>],
+    i: usize,
+    w: usize,
+    margin: f32,
+) -> bool {
+    let v = img.data[i];
+    let tol = margin + SAME_SURFACE * v;
+    let (mut above, mut below) = (false, false);
+    for step in [-(w as isize), w as isize] {
+        let mut j = i as isize;
+        while j >= 0 && (j as usize) < bounds.len() {
+            let Some((lo, hi)) = bounds[j as usize].and_then(|b| b.sky) else {
+                break;
+            };
+            if (img.data[j as usize] - v).abs() > tol {
+                break;
+            }
+            above |= lo > v;
+            below |= hi < v;
+            if above && below {
+                return true;
+            }
+            j += step;
+        }
+    }
+    false
 }
 
 /// Whether the surface at pixel `i` (radiance v) reaches, along its column, a row where water

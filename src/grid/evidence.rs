@@ -428,8 +428,9 @@ impl std::ops::Index<Cue> for CueLogOdds {
 ///   stands only where the log cannot measure the colour labels' false alarms: where its
 ///   lidar samples dry ground in the colour image, the measured rate's 95 % upper
 ///   bound replaces it ([`Fusion::measured`]); SWIR dark
-///   0.8 against 0.05, but dark in SWIR is also snow and ice (the classifier calls them
-///   snow/ice only when a bright visible image says so); MWIR 0.7 against 0.05 (the
+///   0.8 against 0.05 (a reflection of the measured sky at the pixel's incidence; where the
+///   colour camera votes on the same cell, a water vote of either stands only where the
+///   other agrees, so dark dry surfaces and pale sky-coloured ones do not vote water); MWIR 0.7 against 0.05 (the
 ///   contrast test at 3 σ of the local terrain band);
 /// * `prior = 0.05`, `cue_cap = ln 100`, `image_cap = ln 1000` (see the module documentation).
 ///

@@ -3,7 +3,8 @@
 //!
 //! For each configured image sensor present in the frame: classify the image (colour through
 //! a lookup table, pixels above the horizon — from the camera's pose — become sky; SWIR
-//! darkness gated by incidence; MWIR thermal contrast by time of day within a lookahead),
+//! water as a reflection of the sky it mirrors; MWIR thermal contrast by time of day within
+//! a lookahead),
 //! find each pixel's map cell (through the stereo point of the pixel where the colour camera
 //! has one, else by marching the pixel ray over the grid's elevations, [`GridSurface`]),
 //! tally the frame's pixels per cell in a dense raster over the window, and add **one vote
@@ -12,7 +13,9 @@
 //! `mwir_water`/`mwir_dry`), with the mean of the water pixels' levels as a water level
 //! sample: a hit's height, or for water placed over a hole in the map, the tightest bound on
 //! the level among its neighbours in the image (`tighten_hole_levels`). Sky and unknown
-//! pixels do not vote; a tie is no vote.
+//! pixels do not vote; a tie is no vote. Where the colour and the SWIR camera both vote on a
+//! cell in a frame, a water vote stands only where the other votes water too
+//! ([`cross_check`]).
 //!
 //! Only configured sensors run code; a configured sensor missing from the frame (or without
 //! camera info or pose) is skipped and counted in the report.
@@ -133,7 +136,13 @@ pub struct FrameLabels {
     /// This frame's cell votes of the colour and the SWIR camera, held until both have
     /// run ([`cross_check`]).
     pending: [Vec<CellVote>; 2],
+    /// This frame's colour and SWIR labels, each with its camera and pose, for the other
+    /// camera's check of its water pixels ([`seen_check`]).
+    seen: [Option<Seen>; 2],
 }
+
+/// One camera's labels in a frame, with the camera and its pose in the map frame.
+type Seen = (LabelImage, CameraModel, Pose);
 
 /// One cell's vote of one camera in one frame: its raster index, water or not, and the
 /// mean level of its water pixels' hits.
@@ -204,6 +213,7 @@ impl FrameLabels {
             bufs: PixelBuffers::default(),
             zbuf: ZBuffer::default(),
             pending: [Vec::new(), Vec::new()],
+            seen: [None, None],
         })
     }
 
@@ -248,7 +258,31 @@ impl FrameLabels {
             _ => base.z,
         };
         self.pending.iter_mut().for_each(Vec::clear);
-        for cue in [ImageCue::Colour, ImageCue::Swir, ImageCue::Mwir] {
+        self.seen = [None, None];
+        // The colour labels first where SWIR runs too: the SWIR water pixels are checked
+        // against them, and the colour's against the SWIR labels.
+        let mut pre: Option<(LabelImage, SensorLabelStats)> = None;
+        if let (Some(_), Some(_), Some(img)) = (&self.cfg.colour, &self.cfg.swir, &frame.image) {
+            if let Some((cam, pose)) = usable_image(img) {
+                let mut st = SensorLabelStats::default();
+                let stereo = frame.stereo.as_ref();
+                let l = self.classify_cue(
+                    ImageCue::Colour,
+                    img,
+                    cam,
+                    &pose,
+                    stereo,
+                    None,
+                    ground_z,
+                    &surface,
+                    samples,
+                    &mut st,
+                )?;
+                self.seen[0] = Some((l.clone(), cam.clone(), pose));
+                pre = Some((l, st));
+            }
+        }
+        for cue in [ImageCue::Swir, ImageCue::Colour, ImageCue::Mwir] {
             let (configured, img) = match cue {
                 ImageCue::Colour => (self.cfg.colour.is_some(), &frame.image),
                 ImageCue::Swir => (self.cfg.swir.is_some(), &frame.swir),
@@ -257,13 +291,16 @@ impl FrameLabels {
             if !configured {
                 continue;
             }
-            let mut st = SensorLabelStats::default();
-            let usable = img.as_ref().and_then(|i| {
-                let cam = i.camera.as_ref()?;
-                let pose = i.frame_to_map.filter(pose_is_finite)?;
-                (cam.width == i.image.width && cam.height == i.image.height)
-                    .then_some((i, cam, pose))
-            });
+            let (labels, mut st) = match (cue, pre.take()) {
+                (ImageCue::Colour, Some((l, st))) => (Some(l), st),
+                (_, p) => {
+                    pre = p;
+                    (None, SensorLabelStats::default())
+                }
+            };
+            let usable = img
+                .as_ref()
+                .and_then(|i| usable_image(i).map(|(cam, pose)| (i, cam, pose)));
             let hour = match (cue, &self.cfg.mwir) {
                 (ImageCue::Mwir, Some(m)) => m.hour_of(frame),
                 _ => None,
@@ -279,14 +316,21 @@ impl FrameLabels {
                             u64::from(self.cfg.mwir.as_ref().is_some_and(|m| m.hour.is_none()));
                     }
                     st.frames = 1;
+                    st.frames_skipped = 0;
                     let stereo = if cue == ImageCue::Colour {
                         frame.stereo.as_ref()
                     } else {
                         None
                     };
+                    let labels = match labels {
+                        Some(l) => l,
+                        None => self.classify_cue(
+                            cue, img, cam, &pose, stereo, hour, ground_z, &surface, samples,
+                            &mut st,
+                        )?,
+                    };
                     rep.dropped += self.run(
-                        cue, img, cam, &pose, stereo, hour, ground_z, &surface, samples, grid,
-                        &mut st,
+                        cue, labels, cam, &pose, stereo, ground_z, &surface, samples, grid, &mut st,
                     )?;
                 }
             }
@@ -324,11 +368,10 @@ impl FrameLabels {
     fn run(
         &mut self,
         cue: ImageCue,
-        img: &SensorImage,
+        labels: LabelImage,
         camera: &CameraModel,
         cam_to_map: &Pose,
         stereo: Option<&PointCloud>,
-        hour: Option<f64>,
         ground_z: f64,
         surface: &GridSurface,
         samples: Option<&ScanSurface>,
@@ -340,26 +383,13 @@ impl FrameLabels {
             caches,
             tally,
             touched,
-            colour_check,
             bufs,
             zbuf,
             pending,
+            seen,
             ..
         } = self;
         let map_rays = RayCache::rays_in_map(&mut caches[cue as usize], camera, cam_to_map);
-        let view = SensorView {
-            cue,
-            img,
-            camera,
-            cam_to_map,
-            map_rays,
-            stereo,
-            hour,
-            ground_z,
-            samples,
-            resolution: surface.resolution(),
-        };
-        let labels = Self::classify(cfg, &view, &mut bufs.labels, colour_check, st)?;
         let (w, h) = (camera.width, camera.height);
         let origin = Point3::from(cam_to_map.translation.vector);
         let max_range = cfg.max_range;
@@ -400,6 +430,19 @@ impl FrameLabels {
             reach: samples.and_then(|l| l.reach.as_ref()),
         };
         placer.place_all(&buf.rows, &buf.cols, &mut buf.hits, &mut buf.counts);
+        // Each camera's water pixels against what the other saw at their points.
+        let other = match cue {
+            ImageCue::Colour => seen[1].as_ref(),
+            ImageCue::Swir => seen[0].as_ref(),
+            ImageCue::Mwir => None,
+        };
+        if let Some(other) = other {
+            let n = (nr * nc).min(buf.hits.len());
+            st.cross_vetoed += seen_check(&mut buf.hits[..n], other);
+        }
+        if cue == ImageCue::Swir {
+            seen[1] = Some((labels.clone(), camera.clone(), *cam_to_map));
+        }
         tighten_hole_levels(&mut buf.hits, nc, origin, &mut buf.levels);
         quad_votes(surface, &buf.hits, nr, nc, &mut buf.votes);
         for n in &buf.counts[..nr] {
@@ -432,6 +475,44 @@ impl FrameLabels {
         }
         self.bufs = buf;
         Ok(dropped)
+    }
+
+    /// The labels of one sensor's image in the frame ([`Self::classify`]).
+    #[allow(clippy::too_many_arguments)]
+    fn classify_cue(
+        &mut self,
+        cue: ImageCue,
+        img: &SensorImage,
+        camera: &CameraModel,
+        cam_to_map: &Pose,
+        stereo: Option<&PointCloud>,
+        hour: Option<f64>,
+        ground_z: f64,
+        surface: &GridSurface,
+        samples: Option<&ScanSurface>,
+        st: &mut SensorLabelStats,
+    ) -> Result<LabelImage> {
+        let FrameLabels {
+            cfg,
+            caches,
+            colour_check,
+            bufs,
+            ..
+        } = self;
+        let map_rays = RayCache::rays_in_map(&mut caches[cue as usize], camera, cam_to_map);
+        let view = SensorView {
+            cue,
+            img,
+            camera,
+            cam_to_map,
+            map_rays,
+            stereo,
+            hour,
+            ground_z,
+            samples,
+            resolution: surface.resolution(),
+        };
+        Self::classify(cfg, &view, &mut bufs.labels, colour_check, st)
     }
 
     /// The labels of the view's image: colour through the lookup table
@@ -532,6 +613,14 @@ impl FrameLabels {
     }
 }
 
+/// The camera and pose of a sensor image that can be labelled: with camera info of its size
+/// and a finite pose.
+fn usable_image(i: &SensorImage) -> Option<(&CameraModel, Pose)> {
+    let cam = i.camera.as_ref()?;
+    let pose = i.frame_to_map.filter(pose_is_finite)?;
+    (cam.width == i.image.width && cam.height == i.image.height).then_some((cam, pose))
+}
+
 /// One sensor's image in one frame, and what its labels are placed with.
 struct SensorView<'a> {
     cue: ImageCue,
@@ -596,6 +685,38 @@ fn cell_votes(tally: &mut [(u32, u32, f64)], touched: &mut Vec<u32>, out: &mut V
         });
     }
     touched.clear();
+}
+
+/// One camera's water pixels checked against the other camera's labels of the same frame
+/// (`seen`: labels, camera, pose), point by point: a water pixel whose placed point the
+/// other camera labels not water ([`Label::Other`], or snow/ice) votes dry. Colour water
+/// that SWIR sees brighter than a reflection could be is sky-coloured but no reflection of
+/// the sky (a pale slab, sunlit concrete, paint, snow); SWIR water that the colour camera
+/// sees not sky-coloured is a dark dry surface (asphalt, wet soil, shadow, a mud bank) or
+/// water mirroring something other than the sky, which the colour camera cannot confirm.
+/// Where the other camera cannot tell (unknown, sky, outside its image) the pixel keeps its
+/// label. Returns the pixels turned.
+fn seen_check(hits: &mut [Option<Hit>], seen: &Seen) -> u64 {
+    let (labels, camera, cam_to_map) = seen;
+    let to_cam = cam_to_map.inverse();
+    let mut turned = 0;
+    for h in hits.iter_mut().flatten().filter(|h| h.wet) {
+        let Some([u, v]) = camera.project(&(to_cam * h.p)) else {
+            continue;
+        };
+        let (u, v) = (u.round(), v.round());
+        if !(u >= 0.0 && v >= 0.0 && u < labels.width as f64 && v < labels.height as f64) {
+            continue;
+        }
+        if matches!(
+            labels.data[v as usize * labels.width + u as usize],
+            Label::Other | Label::SnowIce
+        ) {
+            h.wet = false;
+            turned += 1;
+        }
+    }
+    turned
 }
 
 /// The cross-spectral check of one frame's colour and SWIR cell votes (each in raster

@@ -320,3 +320,23 @@ proptest! {
         prop_assert!(n == 0 || water as f64 >= 0.8 * n as f64, "{} of {}", water, n);
     }
 }
+
+/// A dark Lambertian surface over a wide range of rows (an asphalt lot) is dry: its radiance
+/// stays the same across rows where water would be brighter and rows where it would be
+/// darker.
+#[test]
+fn an_asphalt_lot_is_dry() {
+    let (_, g, rays) = camera(1.55, 8.0);
+    let img = render(&g, &rays, 60.0, 40.0, 0..0, |_| Ground::Terrain);
+    let l = classify_swir(&img, &g, None, &SwirConfig::default()).unwrap();
+    assert!(!l.data.contains(&Label::Water));
+    // Where water could be as dark as the asphalt (about 80–86°), the lot is dry too.
+    let (mut n, mut other) = (0, 0);
+    for i in 0..l.data.len() {
+        if (80.0..86.0).contains(&deg(&g, i)) {
+            n += 1;
+            other += usize::from(l.data[i] == Label::Other);
+        }
+    }
+    assert!(n > 500 && other as f64 > 0.9 * n as f64, "{other} of {n}");
+}

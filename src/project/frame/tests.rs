@@ -970,3 +970,25 @@ fn colour_check_counts_stereo_verdicts_at_their_pixels() {
     let (n, alarms) = check(&mut labels, &surface);
     assert_eq!((n, alarms), (0, FalseAlarms::default()));
 }
+
+/// Where both cameras vote on a cell, a water vote stands only where the other agrees; a
+/// vote against water always stands; a cell only one camera saw keeps its vote.
+#[test]
+fn cross_check_keeps_water_only_where_both_agree() {
+    let v = |cell: u32, water: bool| CellVote {
+        cell,
+        water,
+        level: 0.0,
+    };
+    // Cells: 1 both water, 2 colour water / SWIR dry (a pale slab), 3 colour dry / SWIR
+    // water (asphalt), 4 both dry, 5 colour only, 6 SWIR only.
+    let mut colour = vec![v(1, true), v(2, true), v(3, false), v(4, false), v(5, true)];
+    let mut swir = vec![v(1, true), v(2, false), v(3, true), v(4, false), v(6, true)];
+    let (c, s) = cross_check(&mut colour, &mut swir);
+    assert_eq!((c, s), (1, 1));
+    assert_eq!(
+        colour,
+        vec![v(1, true), v(3, false), v(4, false), v(5, true)]
+    );
+    assert_eq!(swir, vec![v(1, true), v(2, false), v(4, false), v(6, true)]);
+}
