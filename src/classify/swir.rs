@@ -15,8 +15,9 @@
 //! margin of [`NOISE_SIGMAS`] × the camera's pixel noise. Then:
 //!
 //! * brighter than water could be even were it mirroring the brightest thing on its mirror
-//!   ray's vertical plane (the image segment from the pixel to its mirror pixel: farther
-//!   terrain, a far bank, trees, the sky down to the horizon) → [`Label::Other`];
+//!   ray's vertical plane (the image segment from the horizon to its mirror pixel: trees, a
+//!   far bank, clouds, the sky down to the horizon; level ground farther out is not on the
+//!   rising mirror ray) → [`Label::Other`];
 //! * on a strip of its column of one radiance (within the noise margin and
 //!   [`SAME_SURFACE`]) that holds rows where water's bounds lie wholly above that radiance
 //!   and rows where they lie wholly below → [`Label::Other`]: a reflection's radiance rises
@@ -139,9 +140,11 @@ fn column_window(geom: &GroundGeometry, i: usize, span: f32, mut f: impl FnMut(u
     }
 }
 
-/// Largest value on the image segment from pixel `a` to pixel `b` (`a` itself excluded):
-/// what a mirror ray from `a`'s ground point may meet, nearer than the sky.
-fn segment_max(img: &MonoImage, a: usize, b: usize) -> f32 {
+/// Largest value above the horizon on the image segment from pixel `a` to its mirror pixel
+/// `b`: what stands up on the mirror ray's vertical plane between the horizon and the
+/// mirror direction (trees, a far bank, clouds, the sky), which water at `a` may mirror.
+/// Level ground farther out is not on the mirror ray, which rises from the water.
+fn segment_max(img: &MonoImage, geom: &GroundGeometry, a: usize, b: usize) -> f32 {
     let w = img.width;
     let (ax, ay) = ((a % w) as f64, (a / w) as f64);
     let (bx, by) = ((b % w) as f64, (b / w) as f64);
@@ -150,8 +153,10 @@ fn segment_max(img: &MonoImage, a: usize, b: usize) -> f32 {
         .map(|k| {
             let t = k as f64 / n as f64;
             let (x, y) = ((ax + t * (bx - ax)).round(), (ay + t * (by - ay)).round());
-            img.data[y as usize * w + x as usize]
+            y as usize * w + x as usize
         })
+        .filter(|&j| geom.incidence[j].is_nan())
+        .map(|j| img.data[j])
         .fold(f32::NEG_INFINITY, f32::max)
 }
 
@@ -182,12 +187,9 @@ fn water_bounds(
     let Some(m0) = m0 else {
         // No mirror pixel: only "brighter than a reflection of anything in view" is known,
         // and only with sky in view (as the colour reflection check).
-        let far = (0..i / geom.width)
-            .map(|y| img.data[y * geom.width + i % geom.width])
-            .fold(f32::NEG_INFINITY, f32::max);
         return Some(WaterBounds {
             sky: None,
-            hi_any: brightest.map_or(f32::INFINITY, |b| r_hi * unbounded(b.max(far)) + margin),
+            hi_any: brightest.map_or(f32::INFINITY, |b| r_hi * unbounded(b) + margin),
         });
     };
     let (mut lmin, mut lmax) = (f32::INFINITY, f32::NEG_INFINITY);
@@ -199,7 +201,7 @@ fn water_bounds(
         }
     });
     // A saturated pixel on the mirror plane (the sun, a glint): no upper bound at all.
-    let any = unbounded(segment_max(img, i, m0).max(lmax));
+    let any = unbounded(segment_max(img, geom, i, m0).max(lmax));
     let sky = (lmin <= lmax && lmax < SATURATED && lmin.is_finite())
         .then(|| (r_lo * lmin - margin, r_hi * lmax + margin));
     Some(WaterBounds {
