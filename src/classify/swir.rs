@@ -203,7 +203,7 @@ fn water_bounds(
     // A saturated pixel on the mirror plane (the sun, a glint): no upper bound at all.
     let any = unbounded(segment_max(img, geom, i, m0).max(lmax));
     let sky = (lmin <= lmax && lmax < SATURATED && lmin.is_finite())
-        .then(|| (r_lo * lmin - margin, r_hi * lmax + margin));
+        .then_some((r_lo * lmin - margin, r_hi * lmax + margin));
     Some(WaterBounds {
         sky,
         hi_any: r_hi * any + margin,
@@ -297,8 +297,13 @@ pub(crate) fn classify_swir(
         let Some(r) = refs[i / w].as_ref().map(|r| r[0]) else {
             continue;
         };
-        // The terrain must be brighter than water's bound by the noise margin.
-        if !(hi + margin <= r) || same_surface_elsewhere(img, &bounds, i, w, margin) {
+        // The terrain must be brighter than water's bound by the noise margin (a NaN
+        // reference decides nothing).
+        let informative = matches!(
+            (hi + margin).partial_cmp(&r),
+            Some(std::cmp::Ordering::Less | std::cmp::Ordering::Equal)
+        );
+        if !informative || same_surface_elsewhere(img, &bounds, i, w, margin) {
             continue;
         }
         out.data[i] = match visible {
