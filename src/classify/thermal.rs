@@ -1,10 +1,10 @@
-//! What the SWIR and MWIR classifiers share (paper sections 4 and 5).
-//!
-//! Both compare a pixel with the *terrain at the same range*: a band of image rows around the
-//! pixel's row (on level ground, a row is a range ring), restricted to pixels whose ray meets
-//! the ground within the sensor's valid geometry. The terrain statistics come from the side of
-//! the band's distribution water does not reach, so they hold while water covers up to
-//! three quarters of a band. The SWIR rule is in `swir`, the MWIR rule in `mwir`.
+//! What the SWIR and MWIR classifiers share (paper sections 4 and 5): the check that an
+//! image and its ground geometry have one size, and percentiles over a band of image rows
+//! around a pixel's row (on level ground, a row is a range ring), restricted to pixels whose
+//! ray meets the ground within the sensor's valid geometry. The SWIR rule takes its terrain
+//! reference from the side of that distribution water does not reach, so it holds while
+//! water covers up to three quarters of a band. The SWIR rule is in `swir`, the MWIR rule
+//! in `mwir`.
 
 use super::horizon::GroundGeometry;
 use super::MonoImage;
@@ -114,31 +114,10 @@ pub(super) fn check_sizes(img: &MonoImage, g: &GroundGeometry, what: &str) -> Re
 
 #[cfg(test)]
 pub(super) mod tests {
-    use super::*;
-    use crate::classify::horizon::tests::cam_pose;
-    use crate::geom::{CameraModel, Distortion};
-
     /// Deterministic pseudo-noise in [−1, 1).
     pub(crate) fn noise(i: usize) -> f32 {
         let mut z = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
         z = (z ^ (z >> 31)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         ((z >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-    }
-
-    /// 80 × 60 camera 1.5 m up, pitched 20° down; a "pond" in image columns 30..50, rows 40..55.
-    pub(crate) fn scene() -> (CameraModel, GroundGeometry, Vec<bool>) {
-        let cam = CameraModel::new(
-            80,
-            60,
-            [60.0, 60.0, 39.5, 29.5],
-            Distortion::PlumbBob([-0.05, 0.01, 0.0, 0.0, 0.0]),
-            "c",
-        )
-        .unwrap();
-        let g = GroundGeometry::level(&cam, &cam_pose(1.5, 20f64.to_radians()), 0.0).unwrap();
-        let water = (0..80 * 60)
-            .map(|i| (30..50).contains(&(i % 80)) && (40..55).contains(&(i / 80)))
-            .collect();
-        (cam, g, water)
     }
 }
