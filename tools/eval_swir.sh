@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The SWIR labels on every rig that carries a SWIR camera × the water and dry scenes, each
+# The SWIR labels on the rigs with a SWIR camera of their own × the water and dry scenes, each
 # range band on its own. Each log is built three ways and scored against the simulator's
 # truth (`tarn eval`):
 #
@@ -10,7 +10,7 @@
 #
 # and docs/swir.md is written from the scores, citing this command and the commit.
 #
-#   tools/eval_swir.sh                                  # every rig with SWIR × every scene
+#   tools/eval_swir.sh                                  # both SWIR rigs × every scene
 #   RIGS="swir_small" SCENES="default dry_paved" tools/eval_swir.sh
 #   TARN_BIN=target/release/tarn tools/eval_swir.sh     # skip the release build
 #   REUSE_SIMS=1 tools/eval_swir.sh                     # keep logs already simulated in OUT
@@ -23,9 +23,10 @@ if [ -z "${TARN_BIN:-}" ]; then
 fi
 OUT="${OUT:-out/swir}"
 DOC="${DOC:-docs/swir.md}"
-# Rigs whose datasheet has a [swir] section.
-RIGS="${RIGS:-$(grep -l '^\[swir\]' maps/rigs/*.toml | xargs -n1 basename | sed 's/\.toml$//' | tr '\n' ' ')}"
-SCENES="${SCENES:-default pond_far_shore pond_trees track_puddles puddles fig4_reflections reservoir_night dry_paved dry_decoys snow_ice}"
+# The rigs with a SWIR camera of their own (wide_gps is wide with a GNSS receiver: the same
+# SWIR camera).
+RIGS="${RIGS:-wide swir_small}"
+SCENES="${SCENES:-default pond_far_shore pond_trees track_puddles reservoir_night dry_paved dry_decoys snow_ice}"
 mkdir -p "$OUT"
 nocheck="$OUT/no_range_checks.toml"
 # Every sensor's section present (absent is off), the colour check against lidar and stereo off.
@@ -77,7 +78,7 @@ def bands(rig, scene, name):
 print("# SWIR labels by range band")
 print()
 print("Written by `tools/eval_swir.sh` (do not edit by hand) at commit")
-print(f"`{commit}`, {secs} s. Every rig in `maps/rigs/` with a SWIR camera × the scenes below,")
+print(f"`{commit}`, {secs} s. The rigs {', '.join(f'`{r}`' for r in rigs)}, each with a SWIR camera of its own, × the scenes below,")
 print("simulated (`tarn simulate maps/SCENE.toml --rig maps/rigs/RIG.toml`) and built three ways:")
 print()
 print("- **SWIR alone**: `tarn build LOG --rig RIG --cues none --labels swir`;")
