@@ -438,7 +438,8 @@ impl FrameLabels {
         };
         if let Some(other) = other {
             let n = (nr * nc).min(buf.hits.len());
-            st.cross_vetoed += seen_check(&mut buf.hits[..n], other);
+            // SWIR's "other" bounds colour water physically; colour's does not bound SWIR's.
+            st.cross_vetoed += seen_check(&mut buf.hits[..n], other, cue == ImageCue::Colour);
         }
         if cue == ImageCue::Swir {
             seen[1] = Some((labels.clone(), camera.clone(), *cam_to_map));
@@ -688,19 +689,24 @@ fn cell_votes(tally: &mut [(u32, u32, f64)], touched: &mut Vec<u32>, out: &mut V
 }
 
 /// One camera's water pixels checked against the other camera's labels of the same frame
-/// (`seen`: labels, camera, pose), point by point: a water pixel whose placed point the
-/// other camera labels not water ([`Label::Other`], or snow/ice) votes dry. Colour water
-/// that SWIR sees brighter than a reflection could be is sky-coloured but no reflection of
-/// the sky (a pale slab, sunlit concrete, paint, snow); SWIR water that the colour camera
-/// sees not sky-coloured is a dark dry surface (asphalt, wet soil, shadow, a mud bank) or
-/// water mirroring something other than the sky, which the colour camera cannot confirm.
-/// Where the other camera cannot tell (unknown, sky, outside its image) the pixel keeps its
-/// label. Returns the pixels turned.
-fn seen_check(hits: &mut [Option<Hit>], seen: &Seen) -> u64 {
+/// (`seen`: labels, camera, pose), point by point, where the other camera labels the placed
+/// point not water ([`Label::Other`], or snow/ice). Colour water that SWIR sees brighter
+/// than a reflection could be is sky-coloured but no reflection of the sky (a pale slab,
+/// sunlit concrete, paint, snow): SWIR's "other" is that physical bound, so the pixel
+/// votes dry (`turn_dry`). SWIR water that the colour camera sees not sky-coloured is a
+/// dark dry surface (asphalt, wet soil, shadow, a mud bank) or water mirroring something
+/// other than the sky (the far half of a pond mirroring its far bank), which the colour
+/// camera's "other" cannot tell apart: the pixel loses its vote, and the colour camera's
+/// own vote there stands. Where the other camera cannot tell (unknown, sky, outside its
+/// image) the pixel keeps its label. Returns the pixels turned or dropped.
+fn seen_check(hits: &mut [Option<Hit>], seen: &Seen, turn_dry: bool) -> u64 {
     let (labels, camera, cam_to_map) = seen;
     let to_cam = cam_to_map.inverse();
     let mut turned = 0;
-    for h in hits.iter_mut().flatten().filter(|h| h.wet) {
+    for slot in hits.iter_mut() {
+        let Some(h) = slot.as_mut().filter(|h| h.wet) else {
+            continue;
+        };
         let Some([u, v]) = camera.project(&(to_cam * h.p)) else {
             continue;
         };
@@ -712,7 +718,11 @@ fn seen_check(hits: &mut [Option<Hit>], seen: &Seen) -> u64 {
             labels.data[v as usize * labels.width + u as usize],
             Label::Other | Label::SnowIce
         ) {
-            h.wet = false;
+            if turn_dry {
+                h.wet = false;
+            } else {
+                *slot = None;
+            }
             turned += 1;
         }
     }

@@ -992,3 +992,33 @@ fn cross_check_keeps_water_only_where_both_agree() {
     );
     assert_eq!(swir, vec![v(1, true), v(2, false), v(4, false), v(6, true)]);
 }
+
+/// The point-by-point check: colour water the SWIR camera calls other (brighter than any
+/// reflection) votes dry; SWIR water the colour camera calls other (not sky-coloured, which
+/// water mirroring a bank is too) loses its vote; where the other camera says unknown the
+/// pixel keeps its label.
+#[test]
+fn seen_check_turns_colour_water_dry_and_drops_swir_water() {
+    let cam = CameraModel::new(8, 8, [8.0, 8.0, 3.5, 3.5], Distortion::None, "c").unwrap();
+    let pose = optical_pose(&pose_xyz_rpy(0.0, 0.0, 1.5, 0.0, 0.6, 0.0));
+    let mut labels = LabelImage::filled(8, 8, Label::Other);
+    // The point straight ahead on the optical axis, 3 m out.
+    let p = pose * Point3::new(0.0, 0.0, 3.0);
+    let seen: Seen = (labels.clone(), cam.clone(), pose);
+    let hit = || Some(Hit::at(p, true));
+    let mut hits = vec![hit(), Some(Hit::at(p, false)), None];
+    assert_eq!(seen_check(&mut hits, &seen, true), 1);
+    assert!(hits[0].as_ref().is_some_and(|h| !h.wet));
+    assert!(hits[1].as_ref().is_some_and(|h| !h.wet) && hits[2].is_none());
+    let mut hits = vec![hit()];
+    assert_eq!(seen_check(&mut hits, &seen, false), 1);
+    assert!(hits[0].is_none());
+    // The other camera cannot tell there: the water pixel keeps its vote either way.
+    labels.data.fill(Label::Unknown);
+    let seen: Seen = (labels, cam, pose);
+    for dry in [true, false] {
+        let mut hits = vec![hit()];
+        assert_eq!(seen_check(&mut hits, &seen, dry), 0);
+        assert!(hits[0].as_ref().is_some_and(|h| h.wet));
+    }
+}
