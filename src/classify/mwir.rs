@@ -253,12 +253,6 @@ pub(crate) fn classify_mwir(
     cfg: &MwirConfig,
 ) -> Result<LabelImage> {
     check_sizes(img, geom, "MWIR image")?;
-    if geom.mirror.len() != img.data.len() {
-        return Err(Error::invalid(
-            "MWIR image",
-            "geometry has no mirror pixels",
-        ));
-    }
     cfg.validate()?;
     let regime = cfg.regime(hour)?;
     let (w, h) = (img.width, img.height);

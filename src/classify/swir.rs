@@ -220,16 +220,6 @@ pub(crate) fn classify_swir(
     cfg: &SwirConfig,
 ) -> Result<LabelImage> {
     check_sizes(img, geom, "SWIR image")?;
-    if geom.mirror.len() != img.data.len() {
-        return Err(Error::invalid(
-            "SWIR geometry",
-            format!(
-                "{} mirror pixels for {} pixels",
-                geom.mirror.len(),
-                img.data.len()
-            ),
-        ));
-    }
     if let Some(v) = visible {
         check_sizes(v, geom, "visible image for SWIR")?;
     }
@@ -329,12 +319,8 @@ fn lambertian_strip(
     let tol = margin + SAME_SURFACE * v;
     let (mut above, mut below) = (false, false);
     for step in [-(w as isize), w as isize] {
-        let mut j = i as isize;
-        while j >= 0 && (j as usize) < bounds.len() {
-            let Some((lo, hi)) = bounds[j as usize].and_then(|b| b.sky) else {
-                break;
-            };
-            if (img.data[j as usize] - v).abs() > tol {
+        for (j, lo, hi) in sky_bounds_along(bounds, i, step) {
+            if (img.data[j] - v).abs() > tol {
                 break;
             }
             above |= lo > v;
@@ -342,10 +328,21 @@ fn lambertian_strip(
             if above && below {
                 return true;
             }
-            j += step;
         }
     }
     false
+}
+
+/// From pixel `i` along its column by `step` (± the width), each pixel with its water
+/// bounds of a sky reflection, while they last: `(index, lo, hi)`, pixel `i` first.
+fn sky_bounds_along(
+    bounds: &[Option<WaterBounds>],
+    i: usize,
+    step: isize,
+) -> impl Iterator<Item = (usize, f32, f32)> + '_ {
+    std::iter::successors(Some(i as isize), move |j| Some(j + step))
+        .map_while(|j| usize::try_from(j).ok().filter(|&j| j < bounds.len()))
+        .map_while(|j| bounds[j].and_then(|b| b.sky).map(|(lo, hi)| (j, lo, hi)))
 }
 
 /// Whether the surface at pixel `i` (radiance v) reaches, along its column, a row where water
@@ -361,29 +358,18 @@ fn same_surface_elsewhere(
 ) -> bool {
     let v = img.data[i];
     let tol = margin + SAME_SURFACE * v;
-    // Farther out (up the image) water is brighter; nearer (down), darker.
-    for (step, beyond) in [
-        (
-            -(w as isize),
-            (|lo: f32, _: f32, v: f32, tol: f32| lo > v + tol) as fn(_, _, _, _) -> _,
-        ),
-        (w as isize, |_: f32, hi: f32, v: f32, tol: f32| hi < v - tol),
-    ] {
-        let mut j = i as isize + step;
-        while j >= 0 && (j as usize) < bounds.len() {
-            let Some((lo, hi)) = bounds[j as usize].and_then(|b| b.sky) else {
-                break;
-            };
-            if beyond(lo, hi, v, tol) {
-                if (img.data[j as usize] - v).abs() <= tol {
-                    return true;
-                }
-                break;
-            }
-            j += step;
-        }
-    }
-    false
+    // Farther out (up the image) water is brighter; nearer (down), darker: the first row
+    // each way whose bounds lie wholly beyond v decides.
+    let up = sky_bounds_along(bounds, i, -(w as isize))
+        .skip(1)
+        .find(|&(_, lo, _)| lo > v + tol);
+    let down = sky_bounds_along(bounds, i, w as isize)
+        .skip(1)
+        .find(|&(_, _, hi)| hi < v - tol);
+    [up, down]
+        .into_iter()
+        .flatten()
+        .any(|(j, _, _)| (img.data[j] - v).abs() <= tol)
 }
 
 #[cfg(test)]

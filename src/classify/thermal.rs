@@ -96,6 +96,7 @@ pub(super) fn check_sizes(img: &MonoImage, g: &GroundGeometry, what: &str) -> Re
         || g.incidence.len() != n
         || g.range.len() != n
         || g.lookahead.len() != n
+        || g.mirror.len() != n
     {
         return Err(Error::invalid(
             what,

@@ -291,12 +291,11 @@ impl FrameLabels {
             if !configured {
                 continue;
             }
-            let (labels, mut st) = match (cue, pre.take()) {
-                (ImageCue::Colour, Some((l, st))) => (Some(l), st),
-                (_, p) => {
-                    pre = p;
-                    (None, SensorLabelStats::default())
-                }
+            let (labels, mut st) = match cue {
+                ImageCue::Colour => pre
+                    .take()
+                    .map_or((None, Default::default()), |(l, st)| (Some(l), st)),
+                _ => (None, SensorLabelStats::default()),
             };
             let usable = img
                 .as_ref()
@@ -316,7 +315,6 @@ impl FrameLabels {
                             u64::from(self.cfg.mwir.as_ref().is_some_and(|m| m.hour.is_none()));
                     }
                     st.frames = 1;
-                    st.frames_skipped = 0;
                     let stereo = if cue == ImageCue::Colour {
                         frame.stereo.as_ref()
                     } else {
@@ -441,7 +439,8 @@ impl FrameLabels {
             // SWIR's "other" bounds colour water physically; colour's does not bound SWIR's.
             st.cross_vetoed += seen_check(&mut buf.hits[..n], other, cue == ImageCue::Colour);
         }
-        if cue == ImageCue::Swir {
+        // Kept for the colour camera's check, which runs after this one.
+        if cue == ImageCue::Swir && cfg.colour.is_some() {
             seen[1] = Some((labels.clone(), camera.clone(), *cam_to_map));
         }
         tighten_hole_levels(&mut buf.hits, nc, origin, &mut buf.levels);
