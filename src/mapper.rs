@@ -50,7 +50,7 @@ use std::time::Instant;
 use crate::calib::{Calibration, CalibrationReport, Source, Sourced};
 use crate::cues::{estimate_sensor_height, FrameCues, WaterPrior};
 use crate::error::{Error, Result};
-use crate::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
+use crate::grid::{GridConfig, LabelFalseAlarms, RangeNoise, RollingGrid, TileMap};
 use crate::hazard::{HazardConfig, HazardMap};
 use crate::sensor::Frame;
 
@@ -500,9 +500,13 @@ impl Mapper {
         let t = Instant::now();
         if let Some(fl) = self.labels.as_mut() {
             let labels = fl.apply(frame, grid, surface.as_ref())?;
-            if let Some(c) = &labels.colour {
-                self.global.add_colour_false_alarms(&c.false_alarms);
-            }
+            let of = |s: &Option<crate::project::SensorLabelStats>| {
+                s.map(|s| s.false_alarms).unwrap_or_default()
+            };
+            self.global.add_false_alarms(&LabelFalseAlarms {
+                colour: of(&labels.colour),
+                swir: of(&labels.swir),
+            });
             rep.labels = Some(labels);
         }
         times.labels = t.elapsed().as_secs_f64();
@@ -574,13 +578,13 @@ impl Mapper {
 
     /// The water stage's settings: the config's ([`MapperConfig::hazard_config`]), its
     /// fusion rule measured on the frames so far ([`crate::grid::Fusion::measured`] of the
-    /// colour labels' false alarms on the dry ground the lidar sampled): what
+    /// colour and SWIR labels' false alarms on the dry ground the lidar sampled): what
     /// its window's maps assume.
     pub fn hazard_config(&self) -> HazardConfig {
         let alarms = self
             .labels
             .as_ref()
-            .map(|l| l.colour_false_alarms())
+            .map(|l| l.false_alarms())
             .unwrap_or_default();
         self.cfg.hazard_config().measured(&alarms)
     }

@@ -92,20 +92,35 @@ impl TileSet {
     /// (`blocks`, `select_near`, `partition` but its first part) holds none.
     #[getter]
     fn colour_false_alarms(&self) -> (u64, u64) {
-        let a = self.tiles.colour_false_alarms();
+        let a = self.tiles.false_alarms().colour;
         (a.samples, a.water)
     }
 
-    /// Adds false alarms `(samples, labelled water)` measured on this set's logs: a region
-    /// cut from a merged map is finished with the whole build's.
+    /// The SWIR labels' false alarms, as `colour_false_alarms`.
+    #[getter]
+    fn swir_false_alarms(&self) -> (u64, u64) {
+        let a = self.tiles.false_alarms().swir;
+        (a.samples, a.water)
+    }
+
+    /// Adds colour false alarms `(samples, labelled water)` measured on this set's logs: a
+    /// region cut from a merged map is finished with the whole build's.
     fn add_colour_false_alarms(&mut self, samples: u64, water: u64) -> PyResult<()> {
-        if water > samples {
-            return Err(PyValueError::new_err(format!(
-                "{water} false alarms of {samples} samples"
-            )));
-        }
-        self.tiles
-            .add_colour_false_alarms(&tarn::grid::FalseAlarms { samples, water });
+        let colour = false_alarms(samples, water)?;
+        self.tiles.add_false_alarms(&tarn::grid::LabelFalseAlarms {
+            colour,
+            ..Default::default()
+        });
+        Ok(())
+    }
+
+    /// Adds SWIR false alarms, as `add_colour_false_alarms`.
+    fn add_swir_false_alarms(&mut self, samples: u64, water: u64) -> PyResult<()> {
+        let swir = false_alarms(samples, water)?;
+        self.tiles.add_false_alarms(&tarn::grid::LabelFalseAlarms {
+            swir,
+            ..Default::default()
+        });
         Ok(())
     }
 
@@ -266,4 +281,14 @@ pub(crate) fn build_many(
         })
         .map_err(err)?;
     Ok(Map::new(map))
+}
+
+/// False alarms `(samples, labelled water)`, refused when there are more alarms than samples.
+fn false_alarms(samples: u64, water: u64) -> PyResult<tarn::grid::FalseAlarms> {
+    if water > samples {
+        return Err(PyValueError::new_err(format!(
+            "{water} false alarms of {samples} samples"
+        )));
+    }
+    Ok(tarn::grid::FalseAlarms { samples, water })
 }

@@ -71,13 +71,15 @@ def _near(t, region: list, halo: int):
 
 
 def _alarms(t) -> tuple:
-    return t.colour_false_alarms
+    return t.colour_false_alarms, t.swir_false_alarms
 
 
 def _finish(crops: list, region: list, halo: int, bounds, config: Optional[str], alarms):
     # The crops hold cells only: the region is finished under the whole build's rates.
     m = tarn.merge(crops)
-    m.add_colour_false_alarms(*alarms)
+    colour, swir = alarms
+    m.add_colour_false_alarms(*colour)
+    m.add_swir_false_alarms(*swir)
     return tarn.finish_region(m, region, halo, bounds, config)
 
 
@@ -140,7 +142,10 @@ def build_many(
         for ks in client.gather([client.submit(_keys, f, pure=False) for f in per_log])
     ]
     per_log_alarms = client.gather([client.submit(_alarms, f, pure=False) for f in per_log])
-    alarms = tuple(sum(a[i] for a in per_log_alarms) for i in range(2))
+    # Per camera (colour, SWIR): (samples, labelled water), summed over the logs.
+    alarms = tuple(
+        tuple(sum(a[cam][i] for a in per_log_alarms) for i in range(2)) for cam in range(2)
+    )
     every = sorted(set().union(*map(set, keys)))
     if not every:
         # Nothing observed: the empty map, with the logs' resolution.

@@ -273,15 +273,17 @@ def test_regions_with_a_halo_join_to_the_whole_finish(logs, one_process):
         (max(k[0] for k in keys), max(k[1] for k in keys)),
     )
     # One region per tile, one tile of halo, each given only the tiles it reads (and the
-    # build's colour false alarms, which a cut does not hold) and sent through pickle;
+    # build's colour and SWIR false alarms, which a cut does not hold) and sent through pickle;
     # undecided tiles finished again with twice the halo.
     assert whole.colour_false_alarms[0] > 0
     regions, pending, again = [], [([k], 1) for k in keys], 0
     while pending:
         region, h = pending.pop()
         crop = whole.select_near(region, h)
-        assert crop.colour_false_alarms == (0, 0)
+        assert crop.colour_false_alarms == (0, 0) and crop.swir_false_alarms == (0, 0)
         crop.add_colour_false_alarms(*whole.colour_false_alarms)
+        crop.add_swir_false_alarms(*whole.swir_false_alarms)
+        assert crop.swir_false_alarms == whole.swir_false_alarms
         r = tarn.finish_region(crop, region, h, bounds)
         r = pickle.loads(pickle.dumps(r))
         assert r.tiles_read <= (2 * h + 1) ** 2

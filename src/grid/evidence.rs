@@ -466,7 +466,8 @@ pub struct Fusion {
     pub p_colour_false: f64,
     /// Probability that a frame's SWIR labels call a water cell dark.
     pub p_swir_detect: f64,
-    /// Probability that a frame's SWIR labels call a dry cell dark.
+    /// Probability that a frame's SWIR labels call a dry cell dark: the stated rate, used
+    /// where the log cannot measure it (see `swir_false_from_log`).
     pub p_swir_false: f64,
     /// Probability that a frame's MWIR labels call a water cell water.
     pub p_mwir_detect: f64,
@@ -480,6 +481,9 @@ pub struct Fusion {
     /// sampled dry ground in the colour image ([`Fusion::measured`]), in place of
     /// `p_colour_false`.
     pub colour_false_from_log: bool,
+    /// The same for the SWIR cue's rate, where the lidar sampled dry ground in the SWIR
+    /// image, in place of `p_swir_false`.
+    pub swir_false_from_log: bool,
 }
 
 impl Default for Fusion {
@@ -503,6 +507,7 @@ impl Default for Fusion {
             cue_cap: 100f64.ln(),
             image_cap: 1000f64.ln(),
             colour_false_from_log: true,
+            swir_false_from_log: true,
         }
     }
 }
@@ -794,6 +799,7 @@ mod tests {
                 cue_cap: caps.0,
                 image_cap: caps.1,
                 colour_false_from_log: true,
+                swir_false_from_log: true,
             };
             let r = reference_probability(&e, &f);
             prop_assert_eq!(e.water_probability(&f).to_bits(), r.to_bits());

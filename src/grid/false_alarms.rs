@@ -1,5 +1,6 @@
-//! A cue's false-alarm rate measured from the log ([`FalseAlarms`]), and the fusion rule
-//! that uses it in place of the stated one ([`Fusion::measured`]).
+//! A cue's false-alarm rate measured from the log ([`FalseAlarms`], one per labelling camera
+//! in [`LabelFalseAlarms`]), and the fusion rule that uses it in place of the stated one
+//! ([`Fusion::measured`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -45,16 +46,43 @@ impl FalseAlarms {
     }
 }
 
+/// The false alarms of each labelling camera that the log's lidar can check: colour and
+/// SWIR. (MWIR's contrast is of temperature, which the lidar's dry ground does not bound.)
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LabelFalseAlarms {
+    /// The colour labels'.
+    pub colour: FalseAlarms,
+    /// The SWIR labels'.
+    #[serde(default)]
+    pub swir: FalseAlarms,
+}
+
+impl LabelFalseAlarms {
+    /// Adds another log's (or frame's) counts.
+    pub fn merge(&mut self, o: &LabelFalseAlarms) {
+        self.colour.merge(&o.colour);
+        self.swir.merge(&o.swir);
+    }
+}
+
 impl Fusion {
-    /// The rule with the colour cue's false-alarm rate measured from the log (`colour`) in
-    /// place of the stated `p_colour_false`, where [`Fusion::colour_false_from_log`] is on
-    /// and there are samples: the rate's 95 % upper bound
-    /// ([`FalseAlarms::upper_bound`]). A rate as high as the cue's detection rate makes its
-    /// votes no evidence either way (both ratios 1), never evidence against what they say.
-    pub fn measured(&self, colour: &FalseAlarms) -> Fusion {
+    /// The rule with each labelling camera's false-alarm rate measured from the log in
+    /// place of the stated one (`p_colour_false`, `p_swir_false`), where its switch
+    /// ([`Fusion::colour_false_from_log`], [`Fusion::swir_false_from_log`]) is on and there
+    /// are samples: the rate's 95 % upper bound ([`FalseAlarms::upper_bound`]). A rate as
+    /// high as the cue's detection rate makes its votes no evidence either way (both ratios
+    /// 1), never evidence against what they say.
+    pub fn measured(&self, a: &LabelFalseAlarms) -> Fusion {
         let mut f = *self;
-        if let Some(p) = colour.upper_bound().filter(|_| self.colour_false_from_log) {
-            f.p_colour_false = p.clamp(f64::MIN_POSITIVE, self.p_colour_detect);
+        let rate = |alarms: &FalseAlarms, on: bool, detect: f64| {
+            let p = alarms.upper_bound().filter(|_| on)?;
+            Some(p.clamp(f64::MIN_POSITIVE, detect))
+        };
+        if let Some(p) = rate(&a.colour, self.colour_false_from_log, self.p_colour_detect) {
+            f.p_colour_false = p;
+        }
+        if let Some(p) = rate(&a.swir, self.swir_false_from_log, self.p_swir_detect) {
+            f.p_swir_false = p;
         }
         f
     }
@@ -69,7 +97,7 @@ mod tests {
     fn no_samples_keep_the_stated_rate() {
         let f = Fusion::default();
         assert_eq!(FalseAlarms::default().upper_bound(), None);
-        assert_eq!(f.measured(&FalseAlarms::default()), f);
+        assert_eq!(f.measured(&LabelFalseAlarms::default()), f);
     }
 
     #[test]
@@ -91,11 +119,16 @@ mod tests {
 
     #[test]
     fn a_rate_as_high_as_detection_makes_votes_no_evidence() {
-        let f = Fusion::default().measured(&FalseAlarms {
+        let high = FalseAlarms {
             samples: 1000,
             water: 900,
+        };
+        let f = Fusion::default().measured(&LabelFalseAlarms {
+            colour: high,
+            swir: high,
         });
         assert_eq!(f.p_colour_false, f.p_colour_detect);
+        assert_eq!(f.p_swir_false, f.p_swir_detect);
         let l = f.logs();
         let mut e = crate::grid::Evidence::default();
         e.add_image_vote(crate::grid::Cue::Colour, true);
@@ -108,14 +141,26 @@ mod tests {
     fn off_keeps_the_stated_rate() {
         let f = Fusion {
             colour_false_from_log: false,
+            swir_false_from_log: false,
             ..Fusion::default()
         };
-        let many = FalseAlarms {
+        let few = FalseAlarms {
             samples: 1_000_000,
             water: 3,
         };
+        let many = LabelFalseAlarms {
+            colour: few,
+            swir: few,
+        };
         assert_eq!(f.measured(&many), f);
-        assert!(Fusion::default().measured(&many).p_colour_false < 1e-4);
+        let m = Fusion::default().measured(&many);
+        assert!(m.p_colour_false < 1e-4 && m.p_swir_false < 1e-4, "{m:?}");
+        // Each camera's rate from its own samples only.
+        let colour_only = Fusion::default().measured(&LabelFalseAlarms {
+            colour: few,
+            ..Default::default()
+        });
+        assert_eq!(colour_only.p_swir_false, Fusion::default().p_swir_false);
     }
 
     proptest! {
@@ -131,9 +176,10 @@ mod tests {
             // Ten times the samples at the same rate: a bound no higher.
             let more = FalseAlarms { samples: n * 10, water: k * 10 };
             prop_assert!(more.upper_bound().unwrap() <= b + 1e-12);
-            let f = Fusion::default().measured(&a);
+            let f = Fusion::default().measured(&LabelFalseAlarms { colour: a, swir: a });
             prop_assert!(f.validate().is_ok());
             prop_assert!(f.p_colour_false <= f.p_colour_detect);
+            prop_assert!(f.p_swir_false <= f.p_swir_detect);
         }
 
         #[test]

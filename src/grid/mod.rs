@@ -30,7 +30,7 @@ pub(crate) use cell::quantize_mm;
 pub use cell::{quantize_weight, CellStats};
 pub use evidence::{Cue, CueLogOdds, Evidence, Fusion};
 pub(crate) use evidence::{FusionLogs, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS};
-pub use false_alarms::FalseAlarms;
+pub use false_alarms::{FalseAlarms, LabelFalseAlarms};
 pub use ingest::{IngestStats, RangeNoise};
 pub(crate) use layers::{Elev, Layers};
 pub(crate) use tiles::ByteReader;

@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{centre_of, CellKey, CellSink, CellStats, FalseAlarms, GridConfig, RollingGrid};
+use super::{centre_of, CellKey, CellSink, CellStats, GridConfig, LabelFalseAlarms, RollingGrid};
 use crate::error::{Error, Result};
 
 #[path = "tiles_codec.rs"]
@@ -111,8 +111,8 @@ impl PartialEq for Tile {
 /// A sparse global map of cells at one resolution and reference height. Keys are
 /// unbounded; memory grows with the observed area only.
 ///
-/// Beside the cells it holds the colour labels' false alarms measured on the logs its
-/// cells came from ([`FalseAlarms`]): the water stage reads the rate of the map's own
+/// Beside the cells it holds the colour and SWIR labels' false alarms measured on the logs
+/// its cells came from ([`LabelFalseAlarms`]): the water stage reads the rate of the map's own
 /// logs. They merge with the cells (sums); a part of a map cut by tile
 /// ([`TileMap::select`], [`TileMap::partition`]) holds cells only.
 #[derive(Debug, Clone, PartialEq)]
@@ -120,7 +120,7 @@ pub struct TileMap {
     resolution: f64,
     z_ref: f64,
     tiles: BTreeMap<(i64, i64), Tile>,
-    colour_false_alarms: FalseAlarms,
+    false_alarms: LabelFalseAlarms,
 }
 
 #[inline]
@@ -144,7 +144,7 @@ impl TileMap {
             resolution,
             z_ref,
             tiles: BTreeMap::new(),
-            colour_false_alarms: FalseAlarms::default(),
+            false_alarms: LabelFalseAlarms::default(),
         })
     }
 
@@ -155,7 +155,7 @@ impl TileMap {
             resolution: self.resolution,
             z_ref: self.z_ref,
             tiles: std::mem::take(&mut self.tiles),
-            colour_false_alarms: std::mem::take(&mut self.colour_false_alarms),
+            false_alarms: std::mem::take(&mut self.false_alarms),
         }
     }
 
@@ -165,19 +165,19 @@ impl TileMap {
             resolution: grid.resolution(),
             z_ref: grid.config().z_ref,
             tiles: BTreeMap::new(),
-            colour_false_alarms: FalseAlarms::default(),
+            false_alarms: LabelFalseAlarms::default(),
         }
     }
 
-    /// The colour labels' false alarms on the dry ground of the logs this map's cells came
-    /// from.
-    pub fn colour_false_alarms(&self) -> FalseAlarms {
-        self.colour_false_alarms
+    /// The colour and SWIR labels' false alarms on the dry ground of the logs this map's
+    /// cells came from.
+    pub fn false_alarms(&self) -> LabelFalseAlarms {
+        self.false_alarms
     }
 
     /// Adds false alarms measured on the logs this map's cells come from.
-    pub fn add_colour_false_alarms(&mut self, a: &FalseAlarms) {
-        self.colour_false_alarms.merge(a);
+    pub fn add_false_alarms(&mut self, a: &LabelFalseAlarms) {
+        self.false_alarms.merge(a);
     }
 
     /// Cell edge length, metres.
@@ -222,7 +222,7 @@ impl TileMap {
         for (k, c) in other.observed() {
             self.add(k, &c);
         }
-        self.colour_false_alarms.merge(&other.colour_false_alarms);
+        self.false_alarms.merge(&other.false_alarms);
         Ok(())
     }
 

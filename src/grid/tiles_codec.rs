@@ -1,16 +1,17 @@
 //! The tile set file format: a [`TileMap`] as compact, versioned bytes, for moving partial
 //! maps between processes (one log's tiles built on one machine, merged on another).
 //!
-//! Everything is little-endian. Version 3:
+//! Everything is little-endian. Version 4:
 //!
 //! | bytes | field |
 //! | --- | --- |
 //! | 8 | magic `TARNTILE` |
-//! | 4 | version, `u32` = 3 |
+//! | 4 | version, `u32` = 4 |
 //! | 4 | cells per tile side, `u32` = [`TILE_CELLS`] |
 //! | 8 | resolution (m), `f64` |
 //! | 8 | reference height `z_ref` (m), `f64` |
 //! | 16 | the colour labels' false alarms ([`FalseAlarms`]): dry samples, of them water, `u64` each |
+//! | 16 | the SWIR labels' false alarms, the same |
 //! | 8 | number of tiles, `u64` |
 //! | … | the tiles, in increasing `(tx, ty)` |
 //! | 4 | CRC-32 (IEEE) of every byte before it |
@@ -30,6 +31,8 @@
 //! the encoding is canonical: equal maps give equal bytes, whatever order their cells were
 //! merged in. A dry cell costs 63–67 bytes, a cell with water evidence 117–121.
 //!
+//! Version 3 is read too: it is version 4 without the SWIR labels' false alarms (none).
+//!
 //! Reading checks everything: the magic, the version, the CRC, every length against the
 //! bytes that remain (so a corrupt count cannot make it allocate more than the input's
 //! size), the order of tiles and cells, unknown flag bits, empty blocks, and the resolution
@@ -37,13 +40,14 @@
 
 use super::{Tile, TileMap, TILE_CELLS};
 use crate::error::{Error, Result};
-use crate::grid::{CellStats, Evidence, FalseAlarms, EVIDENCE_COUNTS};
+use crate::grid::{CellStats, Evidence, FalseAlarms, LabelFalseAlarms, EVIDENCE_COUNTS};
 
 /// The first eight bytes of a tile set.
 pub const TILESET_MAGIC: &[u8; 8] = b"TARNTILE";
-/// The version written, and the only one read.
-pub const TILESET_VERSION: u32 = 3;
+/// The version written; it and version 3 are read.
+pub const TILESET_VERSION: u32 = 4;
 
+/// The header of the oldest version read (3), the shortest.
 const HEADER: usize = 8 + 4 + 4 + 8 + 8 + 16 + 8;
 const TILE_HEADER: usize = 8 + 8 + 4;
 const CELL_MIN: usize = 2 + 1 + 4;
@@ -223,8 +227,10 @@ impl TileMap {
         out.extend_from_slice(&(TILE_CELLS as u32).to_le_bytes());
         out.extend_from_slice(&self.resolution.to_le_bytes());
         out.extend_from_slice(&self.z_ref.to_le_bytes());
-        out.extend_from_slice(&self.colour_false_alarms.samples.to_le_bytes());
-        out.extend_from_slice(&self.colour_false_alarms.water.to_le_bytes());
+        for a in [&self.false_alarms.colour, &self.false_alarms.swir] {
+            out.extend_from_slice(&a.samples.to_le_bytes());
+            out.extend_from_slice(&a.water.to_le_bytes());
+        }
         out.extend_from_slice(&(self.tiles.len() as u64).to_le_bytes());
         for (&(tx, ty), tile) in &self.tiles {
             out.extend_from_slice(&tx.to_le_bytes());
@@ -258,10 +264,10 @@ impl TileMap {
             format: "tile set",
         };
         let version = r.u32("version")?;
-        if version != TILESET_VERSION {
+        if version != TILESET_VERSION && version != 3 {
             return Err(corrupt(
                 8,
-                format!("version {version}; this tarn reads version {TILESET_VERSION}"),
+                format!("version {version}; this tarn reads versions 3 and {TILESET_VERSION}"),
             ));
         }
         let mut crc_bytes = [0u8; 4];
@@ -283,14 +289,28 @@ impl TileMap {
         let resolution = r.f64("resolution")?;
         let z_ref = r.f64("z_ref")?;
         let mut map = TileMap::new(resolution, z_ref).map_err(|e| corrupt(16, e))?;
-        let at = r.pos;
-        map.colour_false_alarms = FalseAlarms {
-            samples: r.u64("false alarm samples")?,
-            water: r.u64("false alarms")?,
+        let mut alarms = |camera: &str| {
+            let at = r.pos;
+            let a = FalseAlarms {
+                samples: r.u64(&format!("{camera} false alarm samples"))?,
+                water: r.u64(&format!("{camera} false alarms"))?,
+            };
+            if a.water > a.samples {
+                return Err(corrupt(
+                    at,
+                    format!("more {camera} false alarms than samples"),
+                ));
+            }
+            Ok(a)
         };
-        if map.colour_false_alarms.water > map.colour_false_alarms.samples {
-            return Err(corrupt(at, "more false alarms than samples"));
-        }
+        map.false_alarms = LabelFalseAlarms {
+            colour: alarms("colour")?,
+            swir: if version >= 4 {
+                alarms("SWIR")?
+            } else {
+                FalseAlarms::default()
+            },
+        };
         let at = r.pos;
         let tiles = r.u64("tile count")?;
         if tiles > (r.remaining() / (TILE_HEADER + CELL_MIN)) as u64 {
@@ -360,7 +380,7 @@ impl TileMap {
                 .filter(|(&k, _)| keep(k))
                 .map(|(&k, t)| (k, t.clone()))
                 .collect(),
-            colour_false_alarms: FalseAlarms::default(),
+            false_alarms: LabelFalseAlarms::default(),
         }
     }
 
@@ -375,13 +395,13 @@ impl TileMap {
                 resolution: self.resolution,
                 z_ref: self.z_ref,
                 tiles: Default::default(),
-                colour_false_alarms: FalseAlarms::default(),
+                false_alarms: LabelFalseAlarms::default(),
             })
             .collect();
         for (&k, t) in &self.tiles {
             out[Self::part_of(k, parts)].tiles.insert(k, t.clone());
         }
-        out[0].colour_false_alarms = self.colour_false_alarms;
+        out[0].false_alarms = self.false_alarms;
         out
     }
 
@@ -534,12 +554,18 @@ mod tests {
             c
         });
         let bytes = m.to_bytes();
-        assert_eq!(bytes.len(), HEADER + TILE_HEADER + 3 + 60 + 4);
+        assert_eq!(bytes.len(), HEADER + 16 + TILE_HEADER + 3 + 60 + 4);
         // The false alarms travel with the cells.
         let mut a = m.clone();
-        a.add_colour_false_alarms(&FalseAlarms {
-            samples: 7,
-            water: 2,
+        a.add_false_alarms(&LabelFalseAlarms {
+            colour: FalseAlarms {
+                samples: 7,
+                water: 2,
+            },
+            swir: FalseAlarms {
+                samples: 5,
+                water: 1,
+            },
         });
         assert_eq!(TileMap::from_bytes(&a.to_bytes()).unwrap(), a);
         assert_ne!(a, m);
@@ -550,9 +576,9 @@ mod tests {
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
         assert!(e.contains("magic"), "{e}");
         let mut v = bytes.clone();
-        v[8] = 4;
+        v[8] = 5;
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
-        assert!(e.contains("version 4"), "{e}");
+        assert!(e.contains("version 5"), "{e}");
         // More false alarms than samples, with a valid CRC.
         let mut v = bytes[..bytes.len() - 4].to_vec();
         v[32..40].copy_from_slice(&5u64.to_le_bytes());
@@ -561,12 +587,37 @@ mod tests {
         v.extend_from_slice(&crc.to_le_bytes());
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();
         assert!(
-            e.contains("at byte 32: more false alarms than samples"),
+            e.contains("at byte 32: more colour false alarms than samples"),
             "{e}"
         );
+        let mut v = bytes[..bytes.len() - 4].to_vec();
+        v[48..56].copy_from_slice(&1u64.to_le_bytes());
+        v[56..64].copy_from_slice(&2u64.to_le_bytes());
+        let crc = crc32fast::hash(&v);
+        v.extend_from_slice(&crc.to_le_bytes());
+        let e = TileMap::from_bytes(&v).unwrap_err().to_string();
+        assert!(
+            e.contains("at byte 48: more SWIR false alarms than samples"),
+            "{e}"
+        );
+        // Version 3, without the SWIR false alarms, reads as none.
+        let v4 = a.to_bytes();
+        let mut v = [
+            &v4[..8],
+            &3u32.to_le_bytes(),
+            &v4[12..48],
+            &v4[64..v4.len() - 4],
+        ]
+        .concat();
+        let crc = crc32fast::hash(&v);
+        v.extend_from_slice(&crc.to_le_bytes());
+        let old = TileMap::from_bytes(&v).unwrap();
+        assert_eq!(old.false_alarms().colour, a.false_alarms().colour);
+        assert_eq!(old.false_alarms().swir, FalseAlarms::default());
+        assert_eq!(old.observed_count(), a.observed_count());
         // A tile count of 2^40 with a valid CRC: refused before any allocation.
         let mut v = bytes[..bytes.len() - 4].to_vec();
-        v[48..56].copy_from_slice(&(1u64 << 40).to_le_bytes());
+        v[64..72].copy_from_slice(&(1u64 << 40).to_le_bytes());
         let crc = crc32fast::hash(&v);
         v.extend_from_slice(&crc.to_le_bytes());
         let e = TileMap::from_bytes(&v).unwrap_err().to_string();

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{check, Error, Result};
-use crate::grid::{FalseAlarms, Fusion, TileMap};
+use crate::grid::{Fusion, LabelFalseAlarms, TileMap};
 use crate::water::WaterConfig;
 
 /// What the vehicle can drive through.
@@ -68,16 +68,16 @@ impl HazardConfig {
     }
 
     /// The config with the fusion rule measured on the logs of `tiles`
-    /// ([`Fusion::measured`] of [`TileMap::colour_false_alarms`]).
+    /// ([`Fusion::measured`] of [`TileMap::false_alarms`]).
     pub fn measured_on(&self, tiles: &TileMap) -> HazardConfig {
-        self.measured(&tiles.colour_false_alarms())
+        self.measured(&tiles.false_alarms())
     }
 
-    /// The config with the fusion rule measured on the colour labels' false alarms
-    /// `colour` ([`Fusion::measured`]).
-    pub fn measured(&self, colour: &FalseAlarms) -> HazardConfig {
+    /// The config with the fusion rule measured on the colour and SWIR labels' false
+    /// alarms `alarms` ([`Fusion::measured`]).
+    pub fn measured(&self, alarms: &LabelFalseAlarms) -> HazardConfig {
         HazardConfig {
-            fusion: self.fusion.measured(colour),
+            fusion: self.fusion.measured(alarms),
             ..*self
         }
     }

@@ -131,7 +131,7 @@ impl Domain {
 /// tiles of the region (it may hold more: only those are read); `halo` is at least 1. The
 /// fusion rule is measured on `tiles`' false alarms ([`HazardConfig::measured_on`]); a cut
 /// of a map holds none ([`TileMap::select`]), so give a region cut from a merged map the
-/// whole build's ([`TileMap::add_colour_false_alarms`]) for the map the whole build gives.
+/// whole build's ([`TileMap::add_false_alarms`]) for the map the whole build gives.
 pub fn finish_region(
     tiles: &TileMap,
     region: &[TileKey],

@@ -48,9 +48,9 @@ use crate::classify::{Label, LabelImage, MonoImage};
 use crate::cues::ScanSurface;
 use crate::error::{Error, Result};
 use crate::geom::{pose_is_finite, CameraModel, PointCloud, Pose};
-use crate::grid::{CellKey, Cue, Evidence, FalseAlarms, RollingGrid};
+use crate::grid::{CellKey, Cue, Evidence, FalseAlarms, LabelFalseAlarms, RollingGrid};
 use crate::sensor::{Frame, Pixels, SensorImage};
-use colour_check::ColourCheck;
+use colour_check::{false_alarms_at, ColourCheck};
 use place::{sampled_rows, tighten_hole_levels, Hit, Placer};
 use quad::quad_votes;
 use sky::apply_horizon;
@@ -129,6 +129,8 @@ pub struct FrameLabels {
     raster: Vec<f32>,
     /// What the log's range sensors said of the ground under each colour so far.
     colour_check: ColourCheck,
+    /// The SWIR labels' false alarms on the lidar's dry ground so far.
+    swir_alarms: FalseAlarms,
     /// Per-pixel storage of the last frame, reused.
     bufs: PixelBuffers,
     /// The z-buffer sampler's storage ([`Sampler::Zbuffer`]).
@@ -210,6 +212,7 @@ impl FrameLabels {
             touched: Vec::new(),
             raster: Vec::new(),
             colour_check: ColourCheck::default(),
+            swir_alarms: FalseAlarms::default(),
             bufs: PixelBuffers::default(),
             zbuf: ZBuffer::default(),
             pending: [Vec::new(), Vec::new()],
@@ -217,11 +220,14 @@ impl FrameLabels {
         })
     }
 
-    /// The colour labels' false alarms on the dry ground the log's lidar
-    /// sampled, over every frame so far ([`FalseAlarms`]; none without the colour check or
-    /// its samples).
-    pub fn colour_false_alarms(&self) -> FalseAlarms {
-        self.colour_check.alarms()
+    /// The colour and SWIR labels' false alarms on the dry ground the log's lidar sampled,
+    /// over every frame so far ([`LabelFalseAlarms`]; none for the colour labels without
+    /// the colour check, none for either without the lidar's samples).
+    pub fn false_alarms(&self) -> LabelFalseAlarms {
+        LabelFalseAlarms {
+            colour: self.colour_check.alarms(),
+            swir: self.swir_alarms,
+        }
     }
 
     /// Bytes allocated per window cell between frames (capacities): the vote tally, the
@@ -353,6 +359,9 @@ impl FrameLabels {
                 st.cross_vetoed += out;
                 rep.dropped += add_cell_votes(votes, cue, &surface, grid, st);
             }
+        }
+        if let Some(st) = &rep.swir {
+            self.swir_alarms.merge(&st.false_alarms);
         }
         self.raster = surface.into_raster();
         Ok(rep)
@@ -537,7 +546,12 @@ impl FrameLabels {
             ImageCue::Colour => Self::classify_colour(cfg, view, buf, colour_check, st)?,
             ImageCue::Swir => {
                 let g = GroundGeometry::of_rays(camera, map_rays, cam_to_map, ground_z);
-                classify_swir(&mono_of(img), &g, None, cfg.swir.as_ref().expect("cfg"))?
+                let l = classify_swir(&mono_of(img), &g, None, cfg.swir.as_ref().expect("cfg"))?;
+                if let Some(samples) = view.samples {
+                    let a = false_alarms_at(&l, camera, cam_to_map, &samples.dry, view.resolution);
+                    st.false_alarms.merge(&a);
+                }
+                l
             }
             ImageCue::Mwir => {
                 let m = cfg.mwir.as_ref().expect("configured");

@@ -482,10 +482,15 @@ fn print_log_summary(r: &LogBuildReport) {
                         s.cells_dry
                     );
                     let fa = s.false_alarms;
-                    if name == "colour" && fa.samples > 0 {
+                    let rate = match name {
+                        "colour" => Some(("p_colour_false", r.fusion.p_colour_false)),
+                        "swir" => Some(("p_swir_false", r.fusion.p_swir_false)),
+                        _ => None,
+                    };
+                    if let Some((field, p)) = rate.filter(|_| fa.samples > 0) {
                         println!(
-                            "    false alarms: {} of {} dry-ground samples of the lidar labelled water; fusion p_colour_false {:.2e} (the rate's 95 % bound)",
-                            fa.water, fa.samples, r.fusion.p_colour_false
+                            "    false alarms: {} of {} dry-ground samples of the lidar labelled water; fusion {field} {p:.2e} (the rate's 95 % bound)",
+                            fa.water, fa.samples
                         );
                     }
                 }

@@ -123,7 +123,7 @@ fn a_pond_cut_by_regions_finishes_to_the_whole_map() {
                 .any(|r| r.0.abs_diff(t.0) <= halo as u64 && r.1.abs_diff(t.1) <= halo as u64)
         };
         let mut own = tiles.select(near);
-        own.add_colour_false_alarms(&tiles.colour_false_alarms());
+        own.add_false_alarms(&tiles.false_alarms());
         let r = finish_tile_region(&own, &region, halo, (lo, hi), &mapper).unwrap();
         let r = RegionMap::from_bytes(&r.to_bytes()).unwrap();
         if !r.undecided.is_empty() {

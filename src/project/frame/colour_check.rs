@@ -1,5 +1,7 @@
 //! The colour classifier checked by the log's lidar and stereo ([`ColourCheck`]).
 
+use nalgebra::Point3;
+
 use crate::classify::{Label, LabelImage};
 use crate::cues::{ScanSurface, StereoSeen};
 use crate::geom::{CameraModel, PointCloud, Pose};
@@ -59,8 +61,6 @@ pub(super) struct ColourCheck {
     /// Per bin: lidar samples on dry ground and on water whose pixel is colour water.
     dry: Vec<u32>,
     wet: Vec<u32>,
-    /// The map cells and pixels of this frame's lidar dry samples (scratch).
-    dry_px: Vec<((i64, i64), usize)>,
     /// The false alarms of every frame so far.
     alarms: FalseAlarms,
 }
@@ -108,7 +108,6 @@ impl ColourCheck {
         let bins = 1 << (3 * CHECK_BITS);
         self.dry.resize(bins, 0);
         self.wet.resize(bins, 0);
-        self.dry_px.clear();
         let (w, h) = (labels.width, labels.height);
         if let Some((cloud, k)) = stereo.filter(|(c, _)| c.len() == samples.stereo.len()) {
             let half = (k - 1) / 2;
@@ -136,10 +135,6 @@ impl ColourCheck {
                     continue;
                 }
                 let (u, v) = (u as usize, v as usize);
-                if dry {
-                    let cell = |c: f64| (c / resolution).floor() as i64;
-                    self.dry_px.push(((cell(p.x), cell(p.y)), v * w + u));
-                }
                 if !inside_water(labels, u, v) {
                     continue;
                 }
@@ -153,22 +148,7 @@ impl ColourCheck {
                 vetoed += 1;
             }
         }
-        let mut alarms = FalseAlarms::default();
-        self.dry_px.sort_unstable();
-        for cell in self.dry_px.chunk_by(|a, b| a.0 == b.0) {
-            let (mut water, mut dry) = (0u32, 0u32);
-            for &(_, i) in cell {
-                match labels.data[i] {
-                    Label::Water => water += 1,
-                    Label::Other | Label::SnowIce => dry += 1,
-                    _ => {}
-                }
-            }
-            if water != dry {
-                alarms.samples += 1;
-                alarms.water += u64::from(water > dry);
-            }
-        }
+        let alarms = false_alarms_at(labels, camera, cam_to_map, &samples.dry, resolution);
         self.alarms.merge(&alarms);
         (vetoed, alarms)
     }
@@ -177,4 +157,47 @@ impl ColourCheck {
     pub(super) fn alarms(&self) -> FalseAlarms {
         self.alarms
     }
+}
+
+/// A camera's false alarms on the lidar's dry samples `dry` (map frame) of one frame: the
+/// map cells (`resolution` m) holding samples that project into the image, each called
+/// water or not by the majority of its samples' labelled pixels (a tie is no sample, as it
+/// is no vote). The event is the fusion rule's, a map cell in a frame: the points of one
+/// cell are one patch of ground, not independent draws.
+pub(super) fn false_alarms_at(
+    labels: &LabelImage,
+    camera: &CameraModel,
+    cam_to_map: &Pose,
+    dry: &[Point3<f64>],
+    resolution: f64,
+) -> FalseAlarms {
+    let (w, h) = (labels.width, labels.height);
+    let to_cam = cam_to_map.inverse();
+    let cell = |c: f64| (c / resolution).floor() as i64;
+    let mut px: Vec<((i64, i64), usize)> = dry
+        .iter()
+        .filter_map(|p| {
+            let [u, v] = camera.project(&(to_cam * p))?;
+            let (u, v) = (u.round(), v.round());
+            (u >= 0.0 && v >= 0.0 && u < w as f64 && v < h as f64)
+                .then(|| ((cell(p.x), cell(p.y)), v as usize * w + u as usize))
+        })
+        .collect();
+    px.sort_unstable();
+    let mut alarms = FalseAlarms::default();
+    for cell in px.chunk_by(|a, b| a.0 == b.0) {
+        let (mut water, mut dry) = (0u32, 0u32);
+        for &(_, i) in cell {
+            match labels.data[i] {
+                Label::Water => water += 1,
+                Label::Other | Label::SnowIce => dry += 1,
+                _ => {}
+            }
+        }
+        if water != dry {
+            alarms.samples += 1;
+            alarms.water += u64::from(water > dry);
+        }
+    }
+    alarms
 }

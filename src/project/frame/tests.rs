@@ -877,6 +877,57 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
     assert_eq!(run(6, 6).0, 0);
 }
 
+/// A camera's false alarms are counted per map cell and frame, the fusion rule's event:
+/// each cell holding dry samples in view is one sample, called water by the majority of its
+/// samples' labelled pixels; a tie, or samples on sky or unknown pixels only, is none, and
+/// a sample no pixel sees is none. The same count serves the colour and the SWIR labels.
+#[test]
+fn false_alarms_are_counted_per_cell_by_majority() {
+    let (cam, pose) = camera();
+    let (w, h) = (cam.width, cam.height);
+    let ground_at = |u: usize, v: usize| {
+        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
+        let t = pose.translation.z / -r.z;
+        Point3::from(pose.translation.vector + r * t)
+    };
+    // Labels: water in the bottom ten rows, sky in the top four, other between.
+    let mut labels = LabelImage::filled(w, h, Label::Other);
+    for (i, l) in labels.data.iter_mut().enumerate() {
+        if i / w < 4 {
+            *l = Label::Sky;
+        } else if i / w >= h - 10 {
+            *l = Label::Water;
+        }
+    }
+    // On water and on other ground, in one column: on the same side of every axis.
+    let (a, b) = (ground_at(5, h - 5), ground_at(5, h - 20));
+    assert!(a.x * b.x > 0.0 && a.y * b.y > 0.0);
+    // Cells of 100 m hold both points: one sample whose majority decides.
+    let one_cell = |pts: Vec<Point3<f64>>| false_alarms_at(&labels, &cam, &pose, &pts, 100.0);
+    let alarm = |water| FalseAlarms { samples: 1, water };
+    assert_eq!(one_cell(vec![a, a, b]), alarm(1));
+    assert_eq!(one_cell(vec![a, b, b]), alarm(0));
+    assert_eq!(one_cell(vec![a, b]), FalseAlarms::default(), "a tie");
+    assert_eq!(
+        one_cell(vec![Point3::new(-5.0, 0.0, 0.0)]),
+        FalseAlarms::default()
+    );
+    // Cells of 1 cm: each point its own cell (a and b lie far apart).
+    let many = false_alarms_at(&labels, &cam, &pose, &[a, b, b], 0.01);
+    assert_eq!(
+        many,
+        FalseAlarms {
+            samples: 2,
+            water: 1
+        }
+    );
+    // A point on a sky pixel is labelled neither way.
+    let r = pose.rotation * cam.pixel_ray(w as f64 / 4.0, 1.0).unwrap();
+    let sky = Point3::from(pose.translation.vector + r * 10.0);
+    let n = false_alarms_at(&labels, &cam, &pose, &[sky], 0.01);
+    assert_eq!(n, FalseAlarms::default());
+}
+
 /// A lidar point counts only where the colour water around its pixel is unbroken: four dry
 /// returns on the edge column of a strip of colour water (a puddle's rim) say nothing;
 /// the same four a column inside it veto the colour.

@@ -72,7 +72,7 @@ pub fn build_log(
     let t2 = Instant::now();
     let mut warnings = fused.warnings();
     let (tiles, map) = mapper.finish_map()?;
-    let fusion = fusion.measured(&tiles.colour_false_alarms());
+    let fusion = fusion.measured(&tiles.false_alarms());
     if map.cells.is_empty() {
         return Err(nothing_observed(input, &log_cfg, &fused));
     }

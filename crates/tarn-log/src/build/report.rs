@@ -46,9 +46,10 @@ pub struct LogBuildReport {
     /// and the stated values the log contradicts ([`crate::calib`]).
     #[serde(default)]
     pub calibration: crate::calib::CalibrationReport,
-    /// The fusion rule the map was built with: the config's, the colour labels'
-    /// false-alarm rate measured from the log where its lidar sampled dry ground
-    /// (`labels.colour.false_alarms`, [`crate::grid::Fusion::measured`]).
+    /// The fusion rule the map was built with: the config's, the colour and SWIR labels'
+    /// false-alarm rates measured from the log where its lidar sampled dry ground
+    /// (`labels.colour.false_alarms`, `labels.swir.false_alarms`,
+    /// [`crate::grid::Fusion::measured`]).
     #[serde(default)]
     pub fusion: crate::grid::Fusion,
     /// What happened to the lidar points, summed over frames.
