@@ -48,7 +48,7 @@ use crate::classify::{Label, LabelImage, MonoImage};
 use crate::cues::ScanSurface;
 use crate::error::{Error, Result};
 use crate::geom::{pose_is_finite, CameraModel, PointCloud, Pose};
-use crate::grid::{CellKey, Cue, Evidence, FalseAlarms, LabelFalseAlarms, RollingGrid};
+use crate::grid::{CellKey, Cue, Evidence, LabelFalseAlarms, RollingGrid};
 use crate::sensor::{Frame, Pixels, SensorImage};
 use colour_check::{false_alarms_at, ColourCheck};
 use place::{sampled_rows, tighten_hole_levels, Hit, Placer};
@@ -129,8 +129,8 @@ pub struct FrameLabels {
     raster: Vec<f32>,
     /// What the log's range sensors said of the ground under each colour so far.
     colour_check: ColourCheck,
-    /// The SWIR labels' false alarms on the lidar's dry ground so far.
-    swir_alarms: FalseAlarms,
+    /// The colour and SWIR labels' false alarms so far.
+    alarms: LabelFalseAlarms,
     /// Per-pixel storage of the last frame, reused.
     bufs: PixelBuffers,
     /// The z-buffer sampler's storage ([`Sampler::Zbuffer`]).
@@ -212,7 +212,7 @@ impl FrameLabels {
             touched: Vec::new(),
             raster: Vec::new(),
             colour_check: ColourCheck::default(),
-            swir_alarms: FalseAlarms::default(),
+            alarms: LabelFalseAlarms::default(),
             bufs: PixelBuffers::default(),
             zbuf: ZBuffer::default(),
             pending: [Vec::new(), Vec::new()],
@@ -224,10 +224,7 @@ impl FrameLabels {
     /// over every frame so far ([`LabelFalseAlarms`]; none for the colour labels without
     /// the colour check, none for either without the lidar's samples).
     pub fn false_alarms(&self) -> LabelFalseAlarms {
-        LabelFalseAlarms {
-            colour: self.colour_check.alarms(),
-            swir: self.swir_alarms,
-        }
+        self.alarms
     }
 
     /// Bytes allocated per window cell between frames (capacities): the vote tally, the
@@ -333,8 +330,13 @@ impl FrameLabels {
                             &mut st,
                         )?,
                     };
+                    let px = match &img.image.pixels {
+                        Pixels::Rgb8(px) => Some(&px[..]),
+                        _ => None,
+                    };
                     rep.dropped += self.run(
-                        cue, labels, cam, &pose, stereo, ground_z, &surface, samples, grid, &mut st,
+                        cue, labels, px, cam, &pose, stereo, ground_z, &surface, samples, grid,
+                        &mut st,
                     )?;
                 }
             }
@@ -360,9 +362,11 @@ impl FrameLabels {
                 rep.dropped += add_cell_votes(votes, cue, &surface, grid, st);
             }
         }
-        if let Some(st) = &rep.swir {
-            self.swir_alarms.merge(&st.false_alarms);
-        }
+        let of = |s: &Option<SensorLabelStats>| s.map(|s| s.false_alarms).unwrap_or_default();
+        self.alarms.merge(&LabelFalseAlarms {
+            colour: of(&rep.colour),
+            swir: of(&rep.swir),
+        });
         self.raster = surface.into_raster();
         Ok(rep)
     }
@@ -376,6 +380,7 @@ impl FrameLabels {
         &mut self,
         cue: ImageCue,
         labels: LabelImage,
+        px: Option<&[[u8; 3]]>,
         camera: &CameraModel,
         cam_to_map: &Pose,
         stereo: Option<&PointCloud>,
@@ -390,6 +395,7 @@ impl FrameLabels {
             caches,
             tally,
             touched,
+            colour_check,
             bufs,
             zbuf,
             pending,
@@ -445,6 +451,10 @@ impl FrameLabels {
         };
         if let Some(other) = other {
             let n = (nr * nc).min(buf.hits.len());
+            if let Some(px) = px.filter(|_| cue == ImageCue::Colour) {
+                let sampled = (&buf.rows[..], &buf.cols[..]);
+                colour_check.count_swir(&labels, px, &buf.hits[..n], sampled, other);
+            }
             // SWIR's "other" bounds colour water physically; colour's does not bound SWIR's.
             st.cross_vetoed += seen_check(&mut buf.hits[..n], other, cue == ImageCue::Colour);
         }
@@ -622,6 +632,9 @@ impl FrameLabels {
             );
             st.colour_check_vetoed += vetoed;
             st.false_alarms.merge(&alarms);
+        } else {
+            // The colours the SWIR camera found on dry ground in earlier frames.
+            st.colour_check_vetoed += colour_check.veto(&mut l, px);
         }
         Ok(l)
     }

@@ -2,6 +2,8 @@
 
 use nalgebra::Point3;
 
+use super::place::Hit;
+use super::Seen;
 use crate::classify::{Label, LabelImage};
 use crate::cues::{ScanSurface, StereoSeen};
 use crate::geom::{CameraModel, PointCloud, Pose};
@@ -43,9 +45,10 @@ fn inside_water(labels: &LabelImage, u: usize, v: usize) -> bool {
 /// point at the local ground level within its own vertical noise is a dry one, a
 /// reflection (the mirror image well below the level) one against. A missing
 /// match counts for neither: still water mirroring the sky gives none, and neither do snow
-/// and pale concrete without texture, the colours the check is for. Without either
-/// sensor nothing is counted and nothing vetoed: the check says nothing where it cannot
-/// tell.
+/// and pale concrete without texture, the colours the check is for. A SWIR camera's
+/// verdicts at the placed colour water pixels count too ([`ColourCheck::count_swir`]), one
+/// frame late, with or without range sensors. Without any of these sensors nothing is
+/// counted and nothing vetoed: the check says nothing where it cannot tell.
 ///
 /// The lidar's dry samples also measure the labels' false-alarm rate after the veto
 /// ([`FalseAlarms`]), which the fusion rule reads in place of a stated one. A sample is
@@ -61,8 +64,6 @@ pub(super) struct ColourCheck {
     /// Per bin: lidar samples on dry ground and on water whose pixel is colour water.
     dry: Vec<u32>,
     wet: Vec<u32>,
-    /// The false alarms of every frame so far.
-    alarms: FalseAlarms,
 }
 
 impl ColourCheck {
@@ -91,9 +92,9 @@ impl ColourCheck {
 
     /// Counts the frame's lidar `samples`, and the verdicts of the stereo `(cloud, k)`
     /// registered to the image at `1/k` of its resolution, that land on colour water, then
-    /// takes the water label from pixels of vetoed colours. Returns the pixels vetoed and
-    /// the frame's false alarms, after the veto, over the map cells (`resolution` m) its
-    /// lidar dry samples lie in.
+    /// takes the water label from pixels of vetoed colours ([`Self::veto`]). Returns the
+    /// pixels vetoed and the frame's false alarms, after the veto, over the map cells
+    /// (`resolution` m) its lidar dry samples lie in.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn run(
         &mut self,
@@ -105,9 +106,7 @@ impl ColourCheck {
         stereo: Option<(&PointCloud, usize)>,
         resolution: f64,
     ) -> (u64, FalseAlarms) {
-        let bins = 1 << (3 * CHECK_BITS);
-        self.dry.resize(bins, 0);
-        self.wet.resize(bins, 0);
+        self.bins();
         let (w, h) = (labels.width, labels.height);
         if let Some((cloud, k)) = stereo.filter(|(c, _)| c.len() == samples.stereo.len()) {
             let half = (k - 1) / 2;
@@ -141,6 +140,59 @@ impl ColourCheck {
                 self.count(px[v * w + u], dry);
             }
         }
+        let vetoed = self.veto(labels, px);
+        let alarms = false_alarms_at(labels, camera, cam_to_map, &samples.dry, resolution);
+        (vetoed, alarms)
+    }
+
+    /// Counts what the SWIR camera of the same frame (`swir`: its labels, camera and pose)
+    /// says at the colour water pixels placed on the map (`hits` of the sampled `rows` ×
+    /// `cols`, row-major), inside the water's edge: brighter than any reflection (SWIR
+    /// "other", a physical bound) is a dry sample of the pixel's colour, a sky reflection
+    /// (SWIR water) a wet one. So a colour that SWIR sees on dry ground more often than on
+    /// water is vetoed from the next frame on, in the whole image: on a rig without range
+    /// sensors, where the SWIR camera does not see as well as where it does.
+    pub(super) fn count_swir(
+        &mut self,
+        labels: &LabelImage,
+        px: &[[u8; 3]],
+        hits: &[Option<Hit>],
+        (rows, cols): (&[usize], &[usize]),
+        swir: &Seen,
+    ) {
+        self.bins();
+        let (sl, camera, cam_to_map) = swir;
+        let to_cam = cam_to_map.inverse();
+        let w = labels.width;
+        for (k, h) in hits.iter().enumerate() {
+            let Some(h) = h.filter(|h| h.wet) else {
+                continue;
+            };
+            let (x, y) = (cols[k % cols.len()], rows[k / cols.len()]);
+            if !inside_water(labels, x, y) {
+                continue;
+            }
+            let Some([u, v]) = camera.project(&(to_cam * h.p)) else {
+                continue;
+            };
+            let (u, v) = (u.round(), v.round());
+            if !(u >= 0.0 && v >= 0.0 && u < sl.width as f64 && v < sl.height as f64) {
+                continue;
+            }
+            match sl.data[v as usize * sl.width + u as usize] {
+                Label::Other | Label::SnowIce => self.count(px[y * w + x], true),
+                Label::Water => self.count(px[y * w + x], false),
+                Label::Sky | Label::Unknown => {}
+            }
+        }
+    }
+
+    /// Takes the water label from pixels of vetoed colours: those found on dry ground more
+    /// often than on water so far. Returns the pixels vetoed.
+    pub(super) fn veto(&self, labels: &mut LabelImage, px: &[[u8; 3]]) -> u64 {
+        if self.dry.is_empty() {
+            return 0;
+        }
         let mut vetoed = 0;
         for (l, &c) in labels.data.iter_mut().zip(px) {
             if *l == Label::Water && self.vetoed(Self::bin(c)) {
@@ -148,14 +200,13 @@ impl ColourCheck {
                 vetoed += 1;
             }
         }
-        let alarms = false_alarms_at(labels, camera, cam_to_map, &samples.dry, resolution);
-        self.alarms.merge(&alarms);
-        (vetoed, alarms)
+        vetoed
     }
 
-    /// The false alarms of every frame so far.
-    pub(super) fn alarms(&self) -> FalseAlarms {
-        self.alarms
+    fn bins(&mut self) {
+        let bins = 1 << (3 * CHECK_BITS);
+        self.dry.resize(bins, 0);
+        self.wet.resize(bins, 0);
     }
 }
 

@@ -848,7 +848,6 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
             stereo: Vec::new(),
         };
         let (n, alarms) = check.run(&mut labels, &px, &cam, &pose, &lidar, None, 0.1);
-        assert_eq!(check.alarms(), alarms);
         (n, alarms, labels)
     };
     // Three dry samples and none wet: the sign test cannot rule yet, and the cells they
@@ -1072,4 +1071,62 @@ fn seen_check_turns_colour_water_dry_and_drops_swir_water() {
         assert_eq!(seen_check(&mut hits, &seen, dry), 0);
         assert!(hits[0].as_ref().is_some_and(|h| h.wet));
     }
+}
+
+/// The SWIR camera checks the colour labels as the lidar does: colour water placed where
+/// SWIR sees brighter than any reflection is a dry sample of its colour, where SWIR sees a
+/// sky reflection a wet one; a colour found dry four times and never wet is vetoed in the
+/// whole image (the next frame's), as far as either camera sees.
+#[test]
+fn swir_verdicts_at_placed_colour_water_veto_its_colour() {
+    let (cam, pose) = camera();
+    let (w, h) = (cam.width, cam.height);
+    let px = pale_left_half(w, h);
+    let ground_at = |u: usize, v: usize| {
+        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
+        let t = pose.translation.z / -r.z;
+        Point3::from(pose.translation.vector + r * t)
+    };
+    let labels = LabelImage::filled(w, h, Label::Water);
+    // Sampled pixels on the pale half, one row; each placed on the ground it sees.
+    let (rows, cols) = (vec![h - 5], (5..11).collect::<Vec<_>>());
+    let hits: Vec<Option<Hit>> = cols
+        .iter()
+        .map(|&x| Some(Hit::at(ground_at(x, h - 5), true)))
+        .collect();
+    let run = |swir: Label, n: usize, wet_too: usize| -> LabelImage {
+        let mut check = ColourCheck::default();
+        let seen: Seen = (LabelImage::filled(w, h, swir), cam.clone(), pose);
+        check.count_swir(&labels, &px, &hits[..n], (&rows, &cols), &seen);
+        if wet_too > 0 {
+            let wet: Seen = (LabelImage::filled(w, h, Label::Water), cam.clone(), pose);
+            check.count_swir(&labels, &px, &hits[..wet_too], (&rows, &cols), &wet);
+        }
+        let mut out = labels.clone();
+        check.veto(&mut out, &px);
+        out
+    };
+    let vetoed = |l: &LabelImage| l.data.iter().filter(|&&l| l == Label::Unknown).count();
+    assert_eq!(
+        vetoed(&run(Label::Other, 3, 0)),
+        0,
+        "three samples cannot rule"
+    );
+    let l = run(Label::Other, 4, 0);
+    assert_eq!(vetoed(&l), w / 2 * h);
+    assert!((0..w * h).all(|i| (l.data[i] == Label::Unknown) == (i % w < w / 2)));
+    // Seen as often a sky reflection, or unknown to SWIR: the colour keeps its votes.
+    assert_eq!(vetoed(&run(Label::Other, 6, 6)), 0);
+    assert_eq!(vetoed(&run(Label::Unknown, 6, 0)), 0);
+    // Colour other, or placed nowhere, is no sample.
+    let mut check = ColourCheck::default();
+    let seen: Seen = (LabelImage::filled(w, h, Label::Other), cam.clone(), pose);
+    let dry: Vec<Option<Hit>> = hits
+        .iter()
+        .map(|h| h.map(|h| Hit { wet: false, ..h }))
+        .collect();
+    check.count_swir(&labels, &px, &dry, (&rows, &cols), &seen);
+    check.count_swir(&labels, &px, &[None; 6], (&rows, &cols), &seen);
+    let mut out = labels.clone();
+    assert_eq!(check.veto(&mut out, &px), 0);
 }
