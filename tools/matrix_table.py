@@ -289,8 +289,9 @@ def rates():
             w, d = tot(rig, key)
             if sum(w) + sum(d) == 0:
                 continue
-            if key == "colour":
-                # Measured per log: the rule's ratio is the stated one's, the range beside.
+            if key in ("colour", "swir"):
+                # Measured per log where a lidar samples dry ground: the rule's ratio is the
+                # stated one's, the rates the builds used beside.
                 print(f"| {name} ({what}) | {rig} | {w[0]:,} / {w[1]:,} | {pct(ratio(w[0], sum(w)))} | {d[0]:,} / {d[1]:,} | {pct(ratio(d[0], sum(d)), 2)} | {top(rig, lambda r: r[key]['dry'][0] / sum(r[key]['dry']) if sum(r[key]['dry']) >= 1000 else None)} | {lr(ratio(w[0], sum(w)), ratio(d[0], sum(d)))} | {rpw:.2f}, {used(rig, pd_name)} | measured per log |")
                 continue
             pw, pd = ratio(w[0], sum(w)), ratio(d[0], sum(d))
