@@ -295,6 +295,17 @@ impl RollingGrid {
         })
     }
 
+    /// The in-window key of buffer index `i` (the inverse of [`RollingGrid::index`]).
+    #[inline]
+    pub(crate) fn key_at(&self, i: usize) -> CellKey {
+        let n = self.n as i64;
+        let (bx, by) = ((i % self.n) as i64, (i / self.n) as i64);
+        CellKey::new(
+            self.origin.x + (bx - self.origin.x).rem_euclid(n),
+            self.origin.y + (by - self.origin.y).rem_euclid(n),
+        )
+    }
+
     /// Statistics of a cell, if it is inside the window.
     pub fn cell(&self, k: CellKey) -> Option<CellStats> {
         self.index(k).map(|i| self.layers.get(i))
@@ -397,7 +408,9 @@ impl RollingGrid {
 
     /// The window clipped to each tile, as `(x range, y range)`, in the order of
     /// [`TileMap::observed`].
-    fn tile_ranges(&self) -> impl Iterator<Item = (std::ops::Range<i64>, std::ops::Range<i64>)> {
+    pub(crate) fn tile_ranges(
+        &self,
+    ) -> impl Iterator<Item = (std::ops::Range<i64>, std::ops::Range<i64>)> {
         let t = tiles::TILE_CELLS;
         let n = self.n as i64;
         let (x0, y0) = (self.origin.x, self.origin.y);

@@ -18,11 +18,11 @@ use crate::water::{bodies_from, seeds_body, CellInfos, Info};
 /// only meaningful within one call.
 #[derive(Debug, Default)]
 pub(crate) struct WindowScratch {
-    /// Observed cells of the window in tile order, with their buffer index.
-    seen: Vec<(Seen, u32)>,
-    /// Dry terrain over the whole window, row by row from its lower-left cell: the
-    /// storage of a dense [`DryCells`].
-    dry: Vec<Dry>,
+    /// Observed cells of the window in tile order: buffer index and water probability
+    /// (the rest of a cell's record is read from the layers when it is written).
+    seen: Vec<(u32, f32)>,
+    /// Observed cells of each tile (in the order of [`RollingGrid::map_by_tile`]).
+    per_tile: Vec<usize>,
     /// Cells that seed a body.
     seeds: Vec<CellKey>,
     /// Storage for the next map's cells (an earlier map's, once nothing else held it).
@@ -30,12 +30,13 @@ pub(crate) struct WindowScratch {
 }
 
 impl WindowScratch {
-    /// Bytes allocated (capacities): observed cells, dry raster, seeds, map cells.
+    /// Bytes allocated (capacities): observed cells, their count per tile, seeds, map
+    /// cells.
     pub(crate) fn heap_bytes(&self) -> usize {
         fn b<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
         }
-        b(&self.seen) + b(&self.dry) + b(&self.seeds) + b(&self.cells)
+        b(&self.seen) + b(&self.per_tile) + b(&self.seeds) + b(&self.cells)
     }
 
     /// Keeps the storage of a map nobody reads any more for the next map.
@@ -46,13 +47,12 @@ impl WindowScratch {
     }
 }
 
-/// What the water stage reads from one tile of the window: its observed cells (with their
-/// buffer index), the cells that seed a body, and the dry terrain (by raster index).
+/// What the water stage reads from one tile of the window: its observed cells (buffer
+/// index and water probability) and the cells that seed a body.
 #[derive(Default)]
 struct TileCells {
-    seen: Vec<(Seen, u32)>,
+    seen: Vec<(u32, f32)>,
     seeds: Vec<CellKey>,
-    dry: Vec<(usize, Dry)>,
 }
 
 /// The observed cells of a window, looked up in its layers.
@@ -83,10 +83,56 @@ impl CellInfos for WindowInfos<'_> {
     }
 }
 
+/// How far the step, slope and σ rules read around a cell (its 5 × 5 window).
+const REACH: i64 = 2;
+
+/// The dry terrain ([`dry_terrain`]) of the window's cells within [`REACH`] of the tile
+/// `xs` × `ys`, water cells and cells outside the window not dry: all that the rules of
+/// the tile's cells read.
+fn tile_dry(
+    grid: &RollingGrid,
+    water: &CellMap<(f64, f32)>,
+    (xs, ys): (&std::ops::Range<i64>, &std::ops::Range<i64>),
+) -> DryCells {
+    let (z_ref, l) = (grid.config().z_ref, &grid.layers);
+    let lo = CellKey::new(xs.start - REACH, ys.start - REACH);
+    let (width, height) = (xs.end - xs.start + 2 * REACH, ys.end - ys.start + 2 * REACH);
+    let mut cells: Vec<Dry> = vec![NOT_DRY; (width * height) as usize];
+    for dy in 0..height {
+        for dx in 0..width {
+            let k = CellKey::new(lo.x + dx, lo.y + dy);
+            let Some(i) = grid.index(k) else { continue };
+            if l.is_empty_at(i) {
+                continue;
+            }
+            if let Some(t) = dry_terrain(&l.elevation_stats(i), z_ref) {
+                cells[(dy * width + dx) as usize] = t;
+            }
+        }
+    }
+    let hi = CellKey::new(lo.x + width, lo.y + height);
+    for &k in water.keys() {
+        if k.x >= lo.x && k.y >= lo.y && k.x < hi.x && k.y < hi.y {
+            cells[((k.y - lo.y) * width + (k.x - lo.x)) as usize] = NOT_DRY;
+        }
+    }
+    DryCells::Dense {
+        lo,
+        width,
+        height,
+        cells,
+    }
+}
+
 impl HazardMap {
     /// [`HazardMap::from_cells_after`] of the window's observed cells in tile order (as
     /// [`RollingGrid::observed_by_tile`] lists them), with the grid's resolution and
     /// reference height: the same map, bit for bit.
+    ///
+    /// No buffer spans the window: the dry terrain the step, slope and σ rules read is
+    /// gathered tile by tile (with the two cells around it the rules reach), and an
+    /// observed cell is kept as its buffer index and water probability until its record
+    /// is written.
     pub(crate) fn from_window_after(
         grid: &RollingGrid,
         cfg: &HazardConfig,
@@ -95,42 +141,32 @@ impl HazardMap {
     ) -> Result<Self> {
         cfg.validate()?;
         let (res, z_ref) = (grid.resolution(), grid.config().z_ref);
-        let (n, o) = (grid.size(), grid.origin());
-        let at = |k: CellKey| ((k.y - o.y) as usize) * n + (k.x - o.x) as usize;
         let l = &grid.layers;
         let WindowScratch {
             seen,
-            dry,
+            per_tile,
             seeds,
             cells,
         } = scratch;
         seen.clear();
         seeds.clear();
+        per_tile.clear();
         let logs = cfg.fusion.logs();
-        // Per tile, in parallel: the observed cells, the seeds, and the dry terrain.
-        let per_tile = grid.map_by_tile(|key, i, acc: &mut TileCells| {
+        // Per tile, in parallel: the observed cells and the seeds.
+        let tiles = grid.map_by_tile(|key, i, acc: &mut TileCells| {
             if l.is_empty_at(i) {
                 return;
             }
-            let c = l.elevation_stats(i);
             let p = l.get_ev(i).water_probability_in(&logs);
             if seeds_body(p, &cfg.water) {
                 acc.seeds.push(key);
             }
-            if let Some(t) = dry_terrain(&c, z_ref) {
-                acc.dry.push((at(key), t));
-            }
-            acc.seen.push((Seen::of(key, &c, p as f32), i as u32));
+            acc.seen.push((i as u32, p as f32));
         });
-        // No dry terrain but where an observed cell has some (a sequential fill).
-        dry.clear();
-        dry.resize(n * n, NOT_DRY);
-        for t in per_tile {
+        for t in tiles {
             seen.extend_from_slice(&t.seen);
             seeds.extend_from_slice(&t.seeds);
-            for (j, v) in t.dry {
-                dry[j] = v;
-            }
+            per_tile.push(t.seen.len());
         }
         seeds.sort_unstable();
         let infos = WindowInfos {
@@ -139,39 +175,44 @@ impl HazardMap {
         };
         let (bodies, void) = bodies_from(&infos, seeds.iter().copied(), res, &cfg.water, previous);
         let water = water_surface(&bodies, res);
-        for &k in water.keys() {
-            if grid.contains(k) {
-                dry[at(k)] = NOT_DRY;
-            }
+        // Each tile's observed cells: a slice of `seen`.
+        let mut tiles = Vec::with_capacity(per_tile.len());
+        let mut rest: &[(u32, f32)] = seen;
+        for (range, &k) in grid.tile_ranges().zip(per_tile.iter()) {
+            let (now, next) = rest.split_at(k);
+            tiles.push((range, now));
+            rest = next;
         }
-        let dry_cells = DryCells::Dense {
-            lo: o,
-            width: n as i64,
-            height: n as i64,
-            cells: std::mem::take(dry),
-        };
-        let rule = CellRule::new(cfg, res, z_ref, &water, &dry_cells);
         let mut out = std::mem::take(cells);
         out.clear();
         out.reserve(seen.len());
-        // In parallel; a parallel extend keeps the order of `seen`.
-        out.par_extend(seen.par_iter().filter_map(|&(s, i)| {
-            let ev = || l.get_ev(i as usize);
-            // A cell whose bottom returns the water stage voided: see `voided_water`.
-            let s = if void.contains(&s.key) {
-                let w = voided_water(s.key, &ev(), &logs, &void, &water);
-                Seen {
-                    water: w.unwrap_or(s.water),
-                    ..s
-                }
-            } else {
-                s
-            };
-            rule.record(s, || ev().level_mm())
+        // Tiles in parallel; a parallel extend keeps their order.
+        out.par_extend(tiles.into_par_iter().flat_map_iter(|((xs, ys), now)| {
+            let dry = tile_dry(grid, &water, (&xs, &ys));
+            let rule = CellRule::new(cfg, res, z_ref, &water, &dry);
+            let records: Vec<MapCell> = now
+                .iter()
+                .filter_map(|&(i, p)| {
+                    let i = i as usize;
+                    let key = grid.key_at(i);
+                    let ev = || l.get_ev(i);
+                    let s = Seen::of(key, &l.elevation_stats(i), p);
+                    // A cell whose bottom returns the water stage voided: see
+                    // `voided_water`.
+                    let s = if void.contains(&key) {
+                        let w = voided_water(key, &ev(), &logs, &void, &water);
+                        Seen {
+                            water: w.unwrap_or(s.water),
+                            ..s
+                        }
+                    } else {
+                        s
+                    };
+                    rule.record(s, || ev().level_mm())
+                })
+                .collect();
+            records
         }));
-        if let DryCells::Dense { cells, .. } = dry_cells {
-            *dry = cells;
-        }
         Ok(HazardMap {
             resolution: res,
             cells: out,
