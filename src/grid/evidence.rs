@@ -100,8 +100,11 @@ pub struct Evidence {
 /// Number of `u16` event counts in [`Evidence`] (see [`Evidence::counts`]).
 pub(crate) const EVIDENCE_COUNTS: usize = 11;
 
-/// Bytes of evidence storage per cell in the window's structure-of-arrays layers.
-pub(crate) const EVIDENCE_BYTES_PER_CELL: usize = EVIDENCE_COUNTS * 2 + 4 + 8 + 4 + 4 + 4 + 8;
+/// Bytes of evidence storage per cell in the window's structure-of-arrays layers: the
+/// lidar's, the reflections' and the colour camera's event counts and the slot of the
+/// cell's level and depth evidence. Stored apart: the level and depth evidence, which few
+/// cells have, and the infrared cameras' counts (8 bytes a cell once one votes).
+pub(crate) const EVIDENCE_BYTES_PER_CELL: usize = super::layers::DENSE_COUNTS * 2 + 4;
 
 impl Evidence {
     /// Whether the cell has no evidence at all.
@@ -649,9 +652,9 @@ mod tests {
 
     #[test]
     fn storage_per_cell() {
-        assert_eq!(EVIDENCE_BYTES_PER_CELL, 54);
+        assert_eq!(EVIDENCE_BYTES_PER_CELL, 18);
         // Occupancy, the elevation record (one cache line), evidence.
-        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 1 + 64 + 54);
+        assert_eq!(crate::grid::RollingGrid::bytes_per_cell(), 1 + 64 + 18);
         let mut e = Evidence::default();
         let c: [u16; EVIDENCE_COUNTS] = std::array::from_fn(|i| i as u16 + 1);
         e.set_counts(c);

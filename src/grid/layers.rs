@@ -1,7 +1,15 @@
-//! The storage of a grid's cells: one 64-byte elevation record a cell ([`Elev`]) and the
-//! evidence as structure-of-arrays ([`Layers`]).
+//! The storage of a grid's cells: one 64-byte elevation record a cell ([`Elev`]), the
+//! evidence's event counts as a layer, and the level and depth evidence that few cells have
+//! in slots apart ([`Layers`]).
 
 use super::{CellStats, Evidence, EVIDENCE_BYTES_PER_CELL, EVIDENCE_COUNTS};
+
+/// Event counts in the dense layer: the lidar's, the reflections' and the colour camera's
+/// (the first of [`Evidence::counts`]).
+pub(crate) const DENSE_COUNTS: usize = 7;
+/// Event counts of the infrared cameras (SWIR dark/lit, MWIR water/dry: the rest of
+/// [`Evidence::counts`]), in a layer allocated when one first votes.
+const IR_COUNTS: usize = EVIDENCE_COUNTS - DENSE_COUNTS;
 
 /// The elevation statistics of one cell ([`CellStats`] without its evidence), laid out
 /// in exactly one 64-byte cache line: everything ingest reads and writes for a cell (the
@@ -96,22 +104,73 @@ impl Elev {
     }
 }
 
+/// The evidence few cells get (water-level samples, bottom returns): stored apart from
+/// the window's layers, in a slot of [`Layers::rare`] for each cell that has any.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Rare {
+    level_sum: i64,
+    depth_gain_level: i64,
+    level_n: u32,
+    /// Depth count, Σ depth mm, Σ gain.
+    depth: [u32; 3],
+}
+
+impl Rare {
+    #[inline]
+    fn of(e: &Evidence) -> Self {
+        Rare {
+            level_sum: e.level_sum_mm,
+            depth_gain_level: e.depth_gain_level_sum,
+            level_n: e.level_n,
+            depth: [e.depth_n, e.depth_sum_mm, e.depth_gain_sum],
+        }
+    }
+
+    #[inline]
+    fn write_to(&self, e: &mut Evidence) {
+        e.level_n = self.level_n;
+        e.level_sum_mm = self.level_sum;
+        [e.depth_n, e.depth_sum_mm, e.depth_gain_sum] = self.depth;
+        e.depth_gain_level_sum = self.depth_gain_level;
+    }
+}
+
+/// [`Layers::rare_slot`] of a cell without level or depth evidence.
+const NO_RARE: u32 = u32::MAX;
+
 /// Storage of [`CellStats`]: the elevation statistics as one record a cell, the evidence
-/// as structure-of-arrays.
-#[derive(Debug, Clone, PartialEq)]
+/// event counts as a layer, the level and depth evidence of the few cells that have any
+/// in slots.
+#[derive(Debug, Clone)]
 pub(crate) struct Layers {
     /// Whether the cell holds anything (`!CellStats::is_empty`), kept by every writer: the
     /// water stage asks it of every cell of the window every frame, and one byte a cell is
     /// read far faster than the records it stands for.
     pub(super) occupied: Vec<bool>,
     pub elev: Vec<Elev>,
-    /// Evidence event counts in [`Evidence::counts`] order.
-    pub ev_counts: Vec<[u16; EVIDENCE_COUNTS]>,
-    pub ev_level_n: Vec<u32>,
-    pub ev_level_sum: Vec<i64>,
-    /// Evidence: depth count, Σ depth mm, Σ gain; Σ gain · level.
-    pub ev_depth: Vec<[u32; 3]>,
-    pub ev_depth_gain_level: Vec<i64>,
+    /// Evidence event counts in [`Evidence::counts`] order, the first [`DENSE_COUNTS`].
+    pub ev_counts: Vec<[u16; DENSE_COUNTS]>,
+    /// The infrared cameras' counts (the rest): empty until a SWIR or MWIR camera first
+    /// votes (most rigs have none), then one a cell.
+    ev_ir: Vec<[u16; IR_COUNTS]>,
+    /// The slot in `rare` of each cell's level and depth evidence; [`NO_RARE`] without any.
+    rare_slot: Vec<u32>,
+    /// Level and depth evidence of the cells that have any (water cells, reflections,
+    /// bottom returns): a few percent of a window.
+    rare: Vec<Rare>,
+    /// Slots of `rare` that no cell holds.
+    free: Vec<u32>,
+}
+
+impl PartialEq for Layers {
+    /// The same cells (whatever slots their level and depth evidence is in).
+    fn eq(&self, o: &Self) -> bool {
+        self.occupied == o.occupied
+            && self.elev == o.elev
+            && self.ev_counts == o.ev_counts
+            && (0..self.ev_counts.len()).all(|i| self.ir_at(i) == o.ir_at(i))
+            && (0..self.rare_slot.len()).all(|i| self.rare_at(i) == o.rare_at(i))
+    }
 }
 
 impl Layers {
@@ -119,20 +178,22 @@ impl Layers {
         Layers {
             occupied: vec![false; n],
             elev: vec![Elev::default(); n],
-            ev_counts: vec![[0; EVIDENCE_COUNTS]; n],
-            ev_level_n: vec![0; n],
-            ev_level_sum: vec![0; n],
-            ev_depth: vec![[0; 3]; n],
-            ev_depth_gain_level: vec![0; n],
+            ev_counts: vec![[0; DENSE_COUNTS]; n],
+            ev_ir: Vec::new(),
+            rare_slot: vec![NO_RARE; n],
+            rare: Vec::new(),
+            free: Vec::new(),
         }
     }
 
-    /// Bytes of layer storage per cell: 1 for occupancy, 64 for the elevation record, the
-    /// rest evidence.
+    /// Bytes of the dense layers per cell: 1 for occupancy, 64 for the elevation record,
+    /// the rest evidence (the level and depth evidence in slots comes on top,
+    /// [`Layers::heap_bytes`]).
     pub(crate) const BYTES_PER_CELL: usize =
         1 + std::mem::size_of::<Elev>() + EVIDENCE_BYTES_PER_CELL;
 
-    /// Bytes allocated by the layers (their capacities).
+    /// Bytes allocated by the layers (their capacities), the slots of level and depth
+    /// evidence included.
     pub(super) fn heap_bytes(&self) -> usize {
         fn b<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
@@ -140,36 +201,74 @@ impl Layers {
         b(&self.occupied)
             + b(&self.elev)
             + b(&self.ev_counts)
-            + b(&self.ev_level_n)
-            + b(&self.ev_level_sum)
-            + b(&self.ev_depth)
-            + b(&self.ev_depth_gain_level)
+            + b(&self.ev_ir)
+            + b(&self.rare_slot)
+            + b(&self.rare)
+            + b(&self.free)
+    }
+
+    /// The infrared cameras' counts of cell `i` (zero before any voted).
+    #[inline]
+    fn ir_at(&self, i: usize) -> [u16; IR_COUNTS] {
+        self.ev_ir.get(i).copied().unwrap_or_default()
+    }
+
+    /// The level and depth evidence of cell `i` (empty without any).
+    #[inline]
+    fn rare_at(&self, i: usize) -> Rare {
+        match self.rare_slot[i] {
+            NO_RARE => Rare::default(),
+            s => self.rare[s as usize],
+        }
     }
 
     #[inline]
     pub(crate) fn get_ev(&self, i: usize) -> Evidence {
-        let d = self.ev_depth[i];
-        let mut e = Evidence {
-            level_n: self.ev_level_n[i],
-            level_sum_mm: self.ev_level_sum[i],
-            depth_n: d[0],
-            depth_sum_mm: d[1],
-            depth_gain_sum: d[2],
-            depth_gain_level_sum: self.ev_depth_gain_level[i],
-            ..Evidence::default()
-        };
-        e.set_counts(self.ev_counts[i]);
+        let mut e = Evidence::default();
+        let mut c = [0; EVIDENCE_COUNTS];
+        c[..DENSE_COUNTS].copy_from_slice(&self.ev_counts[i]);
+        c[DENSE_COUNTS..].copy_from_slice(&self.ir_at(i));
+        e.set_counts(c);
+        let s = self.rare_slot[i];
+        if s != NO_RARE {
+            self.rare[s as usize].write_to(&mut e);
+        }
         e
     }
 
     #[inline]
     pub(crate) fn set_ev(&mut self, i: usize, e: &Evidence) {
         self.occupied[i] = !self.elev[i].no_points() || !e.is_empty();
-        self.ev_counts[i] = e.counts();
-        self.ev_level_n[i] = e.level_n;
-        self.ev_level_sum[i] = e.level_sum_mm;
-        self.ev_depth[i] = [e.depth_n, e.depth_sum_mm, e.depth_gain_sum];
-        self.ev_depth_gain_level[i] = e.depth_gain_level_sum;
+        let c = e.counts();
+        let (dense, ir) = c.split_at(DENSE_COUNTS);
+        self.ev_counts[i] = dense.try_into().expect("DENSE_COUNTS counts");
+        let ir: [u16; IR_COUNTS] = ir.try_into().expect("IR_COUNTS counts");
+        if self.ev_ir.is_empty() && ir != [0; IR_COUNTS] {
+            self.ev_ir = vec![[0; IR_COUNTS]; self.ev_counts.len()];
+        }
+        if let Some(v) = self.ev_ir.get_mut(i) {
+            *v = ir;
+        }
+        let r = Rare::of(e);
+        let s = self.rare_slot[i];
+        if r == Rare::default() {
+            if s != NO_RARE {
+                self.free.push(s);
+                self.rare_slot[i] = NO_RARE;
+            }
+        } else if s != NO_RARE {
+            self.rare[s as usize] = r;
+        } else {
+            let s = match self.free.pop() {
+                Some(s) => s,
+                None => {
+                    self.rare.push(Rare::default());
+                    (self.rare.len() - 1) as u32
+                }
+            };
+            self.rare[s as usize] = r;
+            self.rare_slot[i] = s;
+        }
     }
 
     /// The elevation statistics of cell `i` only (no evidence, no extremes): all that

@@ -631,3 +631,57 @@ fn elevation_std_follows_the_vertical_part_of_range_noise() {
     assert!((0.58..0.78).contains(&f1), "{f1} within 1σ");
     assert!(f3 >= 0.98, "{f3} within 3σ");
 }
+
+#[test]
+fn key_at_is_the_inverse_of_index_wherever_the_window_moved() {
+    let mut g = grid(7);
+    for o in [(0, 0), (3, -5), (-11, 9), (100, 2)] {
+        g.move_origin(CellKey::new(o.0, o.1), &mut DiscardSink);
+        let o = g.origin();
+        for y in o.y..o.y + 7 {
+            for x in o.x..o.x + 7 {
+                let k = CellKey::new(x, y);
+                assert_eq!(g.key_at(g.index(k).unwrap()), k);
+            }
+        }
+    }
+}
+
+proptest! {
+    /// The layers give back the evidence last set in each cell, whichever slots its level
+    /// and depth evidence went to and whether an infrared camera voted, and layers holding
+    /// the same cells are equal whatever order the cells were written in.
+    #[test]
+    fn layers_keep_every_cells_evidence(
+        writes in prop::collection::vec(
+            (0usize..40, 0u16..3, 0u32..3, 0u32..2, any::<i64>(), 0u16..2), 0..120),
+    ) {
+        let mut l = Layers::new(40);
+        let mut truth = vec![Evidence::default(); 40];
+        for &(i, noret, level_n, depth_n, sum, swir) in &writes {
+            let e = Evidence {
+                noret,
+                colour_dry: noret,
+                level_n,
+                level_sum_mm: if level_n > 0 { sum } else { 0 },
+                depth_n,
+                depth_sum_mm: depth_n * 7,
+                depth_gain_level_sum: sum.wrapping_mul(depth_n as i64),
+                swir_dark: swir,
+                mwir_dry: swir,
+                ..Evidence::default()
+            };
+            l.set_ev(i, &e);
+            truth[i] = e;
+            for (j, t) in truth.iter().enumerate() {
+                prop_assert_eq!(l.get_ev(j), *t);
+            }
+        }
+        // The same cells written in the other order.
+        let mut r = Layers::new(40);
+        for (i, t) in truth.iter().enumerate().rev() {
+            r.set_ev(i, t);
+        }
+        prop_assert!(l == r);
+    }
+}
