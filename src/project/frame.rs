@@ -7,7 +7,8 @@
 //! a lookahead),
 //! find each pixel's map cell (through the stereo point of the pixel where the colour camera
 //! has one, else by marching the pixel ray over the grid's elevations, [`GridSurface`]),
-//! tally the frame's pixels per cell in a dense raster over the window, and add **one vote
+//! tally the frame's pixels per cell (a slot per window cell into the counts of the cells
+//! the frame's pixels fell in), and add **one vote
 //! per cell and frame** — the majority of its pixels, water or not — to the cell's
 //! [`Evidence`] (`colour_water`/`colour_dry`, `swir_dark`/`swir_lit`,
 //! `mwir_water`/`mwir_dry`), with the mean of the water pixels' levels as a water level
@@ -122,9 +123,8 @@ pub struct FrameLabels {
     /// Which sensors label, and how.
     pub cfg: FrameLabelConfig,
     caches: [Option<RayCache>; 3],
-    /// Per raster cell: water pixels, other pixels, Σ z of the water pixels' hits.
-    tally: Vec<(u32, u32, f64)>,
-    touched: Vec<u32>,
+    /// The frame's pixels per cell.
+    tally: Tally,
     /// The storage of the last frame's elevation raster.
     raster: Vec<f32>,
     /// What the log's range sensors said of the ground under each colour so far.
@@ -208,8 +208,7 @@ impl FrameLabels {
         Ok(FrameLabels {
             cfg,
             caches: [None, None, None],
-            tally: Vec::new(),
-            touched: Vec::new(),
+            tally: Tally::default(),
             raster: Vec::new(),
             colour_check: ColourCheck::default(),
             alarms: LabelFalseAlarms::default(),
@@ -230,8 +229,10 @@ impl FrameLabels {
     /// Bytes allocated per window cell between frames (capacities): the vote tally, the
     /// cells it touched and the elevation raster.
     pub fn heap_bytes(&self) -> usize {
-        self.tally.capacity() * std::mem::size_of::<(u32, u32, f64)>()
-            + self.touched.capacity() * std::mem::size_of::<u32>()
+        let t = &self.tally;
+        t.slot.capacity() * std::mem::size_of::<u32>()
+            + t.counts.capacity() * std::mem::size_of::<(u32, u32, f64)>()
+            + t.touched.capacity() * std::mem::size_of::<u32>()
             + self.raster.capacity() * std::mem::size_of::<f32>()
             + self.zbuf.heap_bytes()
     }
@@ -252,8 +253,8 @@ impl FrameLabels {
         let raster = std::mem::take(&mut self.raster);
         let surface = GridSurface::from_grid_gated_in(grid, self.cfg.surface_max_std, raster);
         let nn = surface.size() * surface.size();
-        if self.tally.len() != nn {
-            self.tally = vec![(0, 0, 0.0); nn];
+        if self.tally.slot.len() != nn {
+            self.tally.slot = vec![NO_SLOT; nn];
         }
         let base = frame.base_to_map.translation.vector;
         let ground_z = match surface.elevation(base.x, base.y) {
@@ -394,7 +395,6 @@ impl FrameLabels {
             cfg,
             caches,
             tally,
-            touched,
             colour_check,
             bufs,
             zbuf,
@@ -477,15 +477,15 @@ impl FrameLabels {
                 _ => {}
             }
         }
-        tally_votes(tally, touched, &buf.votes[..nr]);
+        tally_votes(tally, &buf.votes[..nr]);
         let dropped = match cue {
             ImageCue::Colour | ImageCue::Swir => {
-                cell_votes(tally, touched, &mut pending[cue as usize]);
+                cell_votes(tally, &mut pending[cue as usize]);
                 0
             }
             ImageCue::Mwir => {
                 let mut votes = Vec::new();
-                cell_votes(tally, touched, &mut votes);
+                cell_votes(tally, &mut votes);
                 add_cell_votes(&votes, cue, surface, grid, st)
             }
         };
@@ -668,19 +668,40 @@ struct SensorView<'a> {
     resolution: f64,
 }
 
+/// [`Tally::slot`] of a cell no pixel of the frame fell in.
+const NO_SLOT: u32 = u32::MAX;
+
+/// A frame's pixels per cell: a slot per raster cell into the counts of the cells that got
+/// any, so that the counts take 4 bytes a window cell and 20 a cell the frame's pixels
+/// fell in (a dense tally took 16 a window cell).
+#[derive(Debug, Clone, Default)]
+struct Tally {
+    /// Per raster cell: its slot in `counts` and `touched`, [`NO_SLOT`] before its first
+    /// pixel of the frame.
+    slot: Vec<u32>,
+    /// Per touched cell: water pixels, other pixels, Σ z of the water pixels' hits.
+    counts: Vec<(u32, u32, f64)>,
+    /// Per touched cell: its raster index.
+    touched: Vec<u32>,
+}
+
 /// Adds the rows' `votes` to the per-cell `tally` (water pixels, other pixels, Σ level of
-/// the water pixels), noting in `touched` each cell as it gets its first vote.
-fn tally_votes(
-    tally: &mut [(u32, u32, f64)],
-    touched: &mut Vec<u32>,
-    votes: &[Vec<(u32, bool, f32)>],
-) {
+/// the water pixels), giving each cell its slot as it gets its first vote.
+fn tally_votes(tally: &mut Tally, votes: &[Vec<(u32, bool, f32)>]) {
+    let Tally {
+        slot,
+        counts,
+        touched,
+    } = tally;
     for out in votes {
         for &(j, water, z) in out {
-            let t = &mut tally[j as usize];
-            if t.0 == 0 && t.1 == 0 {
+            let s = &mut slot[j as usize];
+            if *s == NO_SLOT {
+                *s = counts.len() as u32;
+                counts.push((0, 0, 0.0));
                 touched.push(j);
             }
+            let t = &mut counts[*s as usize];
             if water {
                 t.0 += 1;
                 t.2 += z as f64;
@@ -691,14 +712,20 @@ fn tally_votes(
     }
 }
 
-/// One vote per `touched` cell of the `tally` (both emptied), into `out`, in raster order:
-/// the majority of its pixels, a tie no vote, water with the mean of its levels.
-fn cell_votes(tally: &mut [(u32, u32, f64)], touched: &mut Vec<u32>, out: &mut Vec<CellVote>) {
+/// One vote per touched cell of the `tally` (emptied), into `out`, in raster order: the
+/// majority of its pixels, a tie no vote, water with the mean of its levels.
+fn cell_votes(tally: &mut Tally, out: &mut Vec<CellVote>) {
+    let Tally {
+        slot,
+        counts,
+        touched,
+    } = tally;
     // Cells in raster order: deterministic whatever the thread count.
     touched.sort_unstable();
     out.clear();
     for &j in touched.iter() {
-        let (wn, dn, zs) = std::mem::take(&mut tally[j as usize]);
+        let s = std::mem::replace(&mut slot[j as usize], NO_SLOT);
+        let (wn, dn, zs) = counts[s as usize];
         let water = match wn.cmp(&dn) {
             std::cmp::Ordering::Greater => true,
             std::cmp::Ordering::Less => false,
@@ -712,6 +739,7 @@ fn cell_votes(tally: &mut [(u32, u32, f64)], touched: &mut Vec<u32>, out: &mut V
         });
     }
     touched.clear();
+    counts.clear();
 }
 
 /// One camera's water pixels checked against the other camera's labels of the same frame
