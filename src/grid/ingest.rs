@@ -114,8 +114,10 @@ pub(crate) fn weight_of(sigma_m: f64) -> u32 {
 pub(crate) struct Scratch {
     /// One per chunk of points.
     binned: Vec<Binned>,
-    /// The batch's samples sorted by cell, bucket after bucket (dense buckets excepted).
-    sorted: Vec<Sample>,
+    /// One per task of pass 2: the samples of the bucket it fuses, sorted by cell (dense
+    /// buckets excepted, so at most `BUCKET_CELLS * DENSE` of them: 256 KiB a task, where a
+    /// buffer for the whole batch took 16 bytes a point).
+    sorted: Vec<Vec<Sample>>,
     /// One per task of pass 2: the accumulators of the dense bucket it fuses (`BUCKET_CELLS`
     /// of them, allocated when a task first meets a dense bucket), all default between
     /// buckets.
@@ -138,7 +140,12 @@ impl Scratch {
             .sum();
         self.binned.capacity() * std::mem::size_of::<Binned>()
             + buckets
-            + self.sorted.capacity() * std::mem::size_of::<Sample>()
+            + self.sorted.capacity() * std::mem::size_of::<Vec<Sample>>()
+            + self
+                .sorted
+                .iter()
+                .map(|v| v.capacity() * std::mem::size_of::<Sample>())
+                .sum::<usize>()
             + self.acc.capacity() * std::mem::size_of::<Dense>()
             + self
                 .acc
@@ -210,8 +217,8 @@ impl RollingGrid {
         }
         let binned = &scratch.binned[..chunks];
 
-        // Pass 2, in parallel over buckets (each owns its cells' records and its part of
-        // the sort buffer): sort the bucket's samples by cell, then walk the cells in
+        // Pass 2, in parallel over buckets (each owns its cells' records; a task sorts its
+        // buckets one after another in its own buffer): sort the bucket's samples by cell, then walk the cells in
         // buffer order, each read and written once: gate its samples against the prior
         // surface, accumulate, and merge, or split its batch points at height gaps. All
         // sums are exact integers, so neither the chunking nor the order of the samples
@@ -221,27 +228,34 @@ impl RollingGrid {
             .collect();
         let dense = |c: usize| c >= BUCKET_CELLS * DENSE;
         let sorted_len = |c: usize| if dense(c) { 0 } else { c };
-        let total: usize = counts.iter().map(|&c| sorted_len(c)).sum();
-        if scratch.sorted.len() < total {
-            scratch.sorted.resize(total, Sample::ZERO);
-        }
         // Buckets are dealt to `chunks` tasks in turn (bucket `bi` to task `bi % chunks`),
-        // each with its own dense accumulators; a bucket's result does not depend on which
-        // task fuses it.
+        // each with its own sort buffer and dense accumulators; a bucket's result does not
+        // depend on which task fuses it.
         if scratch.acc.len() < chunks {
             scratch.acc.resize_with(chunks, Dense::default);
         }
-        let mut rest = &mut scratch.sorted[..total];
+        if scratch.sorted.len() < chunks {
+            scratch.sorted.resize_with(chunks, Vec::new);
+        }
+        for (t, buf) in scratch.sorted[..chunks].iter_mut().enumerate() {
+            let most = (t..nbuckets)
+                .step_by(chunks)
+                .map(|bi| sorted_len(counts[bi]))
+                .max()
+                .unwrap_or(0);
+            if buf.len() < most {
+                buf.resize(most, Sample::ZERO);
+            }
+        }
         let mut tasks: Vec<Task> = (0..chunks).map(|_| Vec::new()).collect();
-        for (bi, (lay, &c)) in split_buckets(layers).into_iter().zip(&counts).enumerate() {
-            let (out, r) = std::mem::take(&mut rest).split_at_mut(sorted_len(c));
-            rest = r;
-            tasks[bi % chunks].push((bi, lay, out));
+        for (bi, lay) in split_buckets(layers).into_iter().enumerate() {
+            tasks[bi % chunks].push((bi, lay));
         }
         let add = |a: (u64, u64), b: (u64, u64)| (a.0 + b.0, a.1 + b.1);
-        let run = |(task, acc): (Task, &mut Dense)| {
+        let run = |((task, acc), buf): ((Task, &mut Dense), &mut Vec<Sample>)| {
             let mut sum = (0, 0);
-            for (bi, mut lay, out) in task {
+            for (bi, mut lay) in task {
+                let out = &mut buf[..sorted_len(counts[bi])];
                 let r = if dense(counts[bi]) {
                     if acc.cells.is_empty() {
                         acc.cells = vec![Acc::default(); BUCKET_CELLS];
@@ -257,13 +271,20 @@ impl RollingGrid {
             sum
         };
         let pool = &mut scratch.acc[..chunks];
+        let bufs = &mut scratch.sorted[..chunks];
         let (fused, below) = if chunks == 1 {
             // A batch too small to split into chunks is fused on this thread too.
-            tasks.into_iter().zip(pool).map(run).fold((0, 0), add)
+            tasks
+                .into_iter()
+                .zip(pool)
+                .zip(bufs)
+                .map(run)
+                .fold((0, 0), add)
         } else {
             tasks
                 .into_par_iter()
                 .zip(pool.par_iter_mut())
+                .zip(bufs.par_iter_mut())
                 .map(run)
                 .reduce(|| (0, 0), add)
         };

@@ -7,9 +7,8 @@ use super::sample::Sample;
 use super::{Binned, BUCKET_CELLS};
 use crate::grid::{Elev, Layers};
 
-/// The buckets one task of pass 2 fuses: each with its index, its cells' records and its
-/// part of the sort buffer.
-pub(super) type Task<'a> = Vec<(usize, ElevMut<'a>, &'a mut [Sample])>;
+/// The buckets one task of pass 2 fuses: each with its index and its cells' records.
+pub(super) type Task<'a> = Vec<(usize, ElevMut<'a>)>;
 
 /// The elevation records of one bucket's cells (indices local to the bucket).
 pub(super) struct ElevMut<'a> {
