@@ -822,16 +822,19 @@ fn pale_left_half(w: usize, h: usize) -> Vec<[u8; 3]> {
         .collect()
 }
 
+/// Where pixel `(u, v)` of `cam` at `pose` sees the level ground z = 0.
+fn ground_seen(cam: &CameraModel, pose: &Pose, u: usize, v: usize) -> Point3<f64> {
+    let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
+    let t = pose.translation.z / -r.z;
+    Point3::from(pose.translation.vector + r * t)
+}
+
 #[test]
 fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
     let (cam, pose) = camera();
     let (w, h) = (cam.width, cam.height);
     let px = pale_left_half(w, h);
-    let ground_at = |u: usize, v: usize| {
-        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
-        let t = pose.translation.z / -r.z;
-        Point3::from(pose.translation.vector + r * t)
-    };
+    let ground_at = |u: usize, v: usize| ground_seen(&cam, &pose, u, v);
     // Ground under pale pixels near the bottom of the image, and a point behind the
     // camera, which no pixel sees.
     let on_pale: Vec<Point3<f64>> = (0..6).map(|k| ground_at(5 + k, h - 5)).collect();
@@ -884,11 +887,7 @@ fn colour_check_vetoes_a_colour_the_lidar_finds_on_dry_ground() {
 fn false_alarms_are_counted_per_cell_by_majority() {
     let (cam, pose) = camera();
     let (w, h) = (cam.width, cam.height);
-    let ground_at = |u: usize, v: usize| {
-        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
-        let t = pose.translation.z / -r.z;
-        Point3::from(pose.translation.vector + r * t)
-    };
+    let ground_at = |u: usize, v: usize| ground_seen(&cam, &pose, u, v);
     // Labels: water in the bottom ten rows, sky in the top four, other between.
     let mut labels = LabelImage::filled(w, h, Label::Other);
     for (i, l) in labels.data.iter_mut().enumerate() {
@@ -936,11 +935,7 @@ fn colour_check_ignores_lidar_points_on_the_waters_edge() {
     let (w, h) = (cam.width, cam.height);
     assert!(w / 2 > 20);
     let px = pale_left_half(w, h);
-    let ground_at = |u: usize, v: usize| {
-        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
-        let t = pose.translation.z / -r.z;
-        Point3::from(pose.translation.vector + r * t)
-    };
+    let ground_at = |u: usize, v: usize| ground_seen(&cam, &pose, u, v);
     let strip = 10..20;
     let run = |u: usize| -> u64 {
         let mut labels = LabelImage::filled(w, h, Label::Other);
@@ -1082,11 +1077,7 @@ fn swir_verdicts_at_placed_colour_water_veto_its_colour() {
     let (cam, pose) = camera();
     let (w, h) = (cam.width, cam.height);
     let px = pale_left_half(w, h);
-    let ground_at = |u: usize, v: usize| {
-        let r = pose.rotation * cam.pixel_ray(u as f64, v as f64).unwrap();
-        let t = pose.translation.z / -r.z;
-        Point3::from(pose.translation.vector + r * t)
-    };
+    let ground_at = |u: usize, v: usize| ground_seen(&cam, &pose, u, v);
     let labels = LabelImage::filled(w, h, Label::Water);
     // Sampled pixels on the pale half, one row; each placed on the ground it sees.
     let (rows, cols) = (vec![h - 5], (5..11).collect::<Vec<_>>());
