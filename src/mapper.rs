@@ -50,7 +50,7 @@ use std::time::Instant;
 use crate::calib::{Calibration, CalibrationReport, Source, Sourced};
 use crate::cues::{estimate_sensor_height, FrameCues, WaterPrior};
 use crate::error::{Error, Result};
-use crate::grid::{GridConfig, LabelFalseAlarms, RangeNoise, RollingGrid, TileMap};
+use crate::grid::{GridConfig, RangeNoise, RollingGrid, TileMap};
 use crate::hazard::{HazardConfig, HazardMap};
 use crate::sensor::Frame;
 
@@ -500,13 +500,7 @@ impl Mapper {
         let t = Instant::now();
         if let Some(fl) = self.labels.as_mut() {
             let labels = fl.apply(frame, grid, surface.as_ref())?;
-            let of = |s: &Option<crate::project::SensorLabelStats>| {
-                s.map(|s| s.false_alarms).unwrap_or_default()
-            };
-            self.global.add_false_alarms(&LabelFalseAlarms {
-                colour: of(&labels.colour),
-                swir: of(&labels.swir),
-            });
+            self.global.add_false_alarms(&labels.false_alarms());
             rep.labels = Some(labels);
         }
         times.labels = t.elapsed().as_secs_f64();

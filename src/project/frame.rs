@@ -363,11 +363,7 @@ impl FrameLabels {
                 rep.dropped += add_cell_votes(votes, cue, &surface, grid, st);
             }
         }
-        let of = |s: &Option<SensorLabelStats>| s.map(|s| s.false_alarms).unwrap_or_default();
-        self.alarms.merge(&LabelFalseAlarms {
-            colour: of(&rep.colour),
-            swir: of(&rep.swir),
-        });
+        self.alarms.merge(&rep.false_alarms());
         self.raster = surface.into_raster();
         Ok(rep)
     }

@@ -21,6 +21,17 @@ enum Ground {
     Dark(f32),
 }
 
+impl Ground {
+    /// Water where `wet`, else terrain.
+    fn water_if(wet: bool) -> Ground {
+        if wet {
+            Ground::Water
+        } else {
+            Ground::Terrain
+        }
+    }
+}
+
 /// A 160 × 120 camera `h` m up, pitched `pitch_deg` down (hfov about 60°), its geometry,
 /// its rays in the map frame.
 fn camera(
@@ -121,13 +132,7 @@ fn fresnel_of_water_at_1_55_um() {
 fn water_mirroring_the_sky_at_grazing_incidence_is_water() {
     let (_, g, rays) = camera(1.55, 8.0);
     let pond = |i: usize| (40..120).contains(&(i % 160)) && (80.0..88.0).contains(&deg(&g, i));
-    let img = render(&g, &rays, 60.0, 100.0, 0..0, |i| {
-        if pond(i) {
-            Ground::Water
-        } else {
-            Ground::Terrain
-        }
-    });
+    let img = render(&g, &rays, 60.0, 100.0, 0..0, |i| Ground::water_if(pond(i)));
     let l = classify_swir(&img, &g, None, &SwirConfig::default()).unwrap();
     let (mut n, mut water) = (0, 0);
     for i in 0..l.data.len() {
@@ -181,11 +186,7 @@ fn water_mirroring_bright_trees_is_unknown() {
     let pond = |i: usize| (20..140).contains(&(i % 160)) && (82.0..88.0).contains(&deg(&g, i));
     let trees = 90..160;
     let img = render(&g, &rays, 60.0, 100.0, trees.clone(), |i| {
-        if pond(i) {
-            Ground::Water
-        } else {
-            Ground::Terrain
-        }
+        Ground::water_if(pond(i))
     });
     let l = classify_swir(&img, &g, None, &SwirConfig::default()).unwrap();
     let mut under_trees = 0;
@@ -267,13 +268,7 @@ fn night_decides_nothing() {
 fn snow_needs_bright_visible() {
     let (_, g, rays) = camera(1.55, 8.0);
     let pond = |i: usize| (20..140).contains(&(i % 160)) && (80.0..86.0).contains(&deg(&g, i));
-    let img = render(&g, &rays, 60.0, 100.0, 0..0, |i| {
-        if pond(i) {
-            Ground::Water
-        } else {
-            Ground::Terrain
-        }
-    });
+    let img = render(&g, &rays, 60.0, 100.0, 0..0, |i| Ground::water_if(pond(i)));
     let vis = MonoImage::new(
         160,
         120,
@@ -304,9 +299,7 @@ proptest! {
     ) {
         let (_, g, rays) = camera(h, pitch);
         let pond = |i: usize| (40..120).contains(&(i % 160)) && (80.0..88.0).contains(&deg(&g, i));
-        let img = render(&g, &rays, scale, (terrain * scale) as f32, 0..0, |i| {
-            if pond(i) { Ground::Water } else { Ground::Terrain }
-        });
+        let img = render(&g, &rays, scale, (terrain * scale) as f32, 0..0, |i| Ground::water_if(pond(i)));
         let l = classify_swir(&img, &g, None, &SwirConfig::default()).unwrap();
         let (mut n, mut water) = (0, 0);
         for i in 0..l.data.len() {

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::grid::FalseAlarms;
+use crate::grid::{FalseAlarms, LabelFalseAlarms};
 
 /// What one sensor contributed in one frame (or, summed, over a log).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -90,6 +90,15 @@ pub struct FrameLabelsReport {
 }
 
 impl FrameLabelsReport {
+    /// The colour and SWIR labels' false alarms the frame (or log) measured.
+    pub fn false_alarms(&self) -> LabelFalseAlarms {
+        let of = |s: &Option<SensorLabelStats>| s.map(|s| s.false_alarms).unwrap_or_default();
+        LabelFalseAlarms {
+            colour: of(&self.colour),
+            swir: of(&self.swir),
+        }
+    }
+
     /// Adds another frame's counts, sensor by sensor.
     pub fn merge(&mut self, o: &FrameLabelsReport) {
         for (a, b) in [
